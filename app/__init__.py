@@ -1,0 +1,1 @@
+"""The user-facing shells: the `roachplan` command line and the viser browser app."""

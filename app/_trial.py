@@ -1,0 +1,150 @@
+"""One trial, as the report's performance evaluator runs it: plan with OMPL, drive in PyBullet."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from planning import PlannerConfig, PlanResult, plan_path
+from scenes import World, route_of
+from sim import DriveResult, Frame, Simulation, drive_path
+
+TrialOutcome = Literal["success", "fell", "timeout", "no_path"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrialResult:
+    """Everything recorded about one plan-and-drive trial."""
+
+    scene: str
+    seed: int
+    """Seed of every random choice in the trial."""
+    planner: str
+    path_found: bool
+    outcome: TrialOutcome
+    reason: str
+    """Why the trial ended as it did."""
+    route: str
+    """Which of the scene's named regions the path crosses ("other" if none, "" if no path)."""
+    drive_time: float
+    """Simulated time of the drive [s] (0 without a path)."""
+    energy: float
+    """Energy the leg motors spent [J] (Tong 2018, section 3.4)."""
+    plan_time: float
+    """Wall time spent planning [s]."""
+    drive_wall_time: float
+    """Wall time spent simulating the drive [s]."""
+    start: tuple[float, float, float]
+    """x [m], y [m], yaw [rad]."""
+    goal: tuple[float, float, float]
+    path: tuple[tuple[float, float, float], ...]
+    """Planned waypoints x, y, z [m] (z on the terrain surface)."""
+    trajectory: tuple[tuple[float, float, float, float], ...]
+    """Driven body positions t [s], x, y, z [m]."""
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["path"] = [list(p) for p in self.path]
+        d["trajectory"] = [list(p) for p in self.trajectory]
+        return d
+
+
+def plan(
+    world: World,
+    *,
+    seed: int,
+    start: tuple[float, float, float] | None = None,
+    goal: tuple[float, float, float] | None = None,
+    planner: PlannerConfig | None = None,
+) -> PlanResult:
+    """Plan from start to goal (default: the scene's) over the world's terrain."""
+    scene = world.scene
+    return plan_path(
+        world.heightfield,
+        world.footprint,
+        start or scene.start,
+        goal or scene.goal,
+        bounds=scene.bounds,
+        cfg=planner or scene.planner,
+        seed=seed,
+    )
+
+
+def drive(
+    world: World,
+    path_xyz: np.ndarray,
+    *,
+    start: tuple[float, float, float] | None = None,
+    on_frame: Callable[[Frame], None] | None = None,
+) -> DriveResult:
+    """Drop the robot at start (default: the scene's) and drive it along path_xyz."""
+    scene = world.scene
+    x, y, yaw = start or scene.start
+    with Simulation(
+        world.mesh.vertices,
+        world.mesh.faces,
+        ground_height=scene.ground,
+        robot=world.robot,
+        cfg=scene.sim,
+    ) as sim:
+        sim.reset(x, y, yaw)
+        return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
+
+
+def run_trial(
+    world: World,
+    *,
+    seed: int,
+    planner: PlannerConfig | None = None,
+    start: tuple[float, float, float] | None = None,
+    goal: tuple[float, float, float] | None = None,
+    on_frame: Callable[[Frame], None] | None = None,
+) -> TrialResult:
+    """Plan, then drive the plan; 'no_path' when the planner gives up."""
+    scene = world.scene
+    start, goal = start or scene.start, goal or scene.goal
+    planned = plan(world, seed=seed, start=start, goal=goal, planner=planner)
+    return finish_trial(world, planned, start=start, goal=goal, on_frame=on_frame)
+
+
+def finish_trial(
+    world: World,
+    planned: PlanResult,
+    *,
+    start: tuple[float, float, float],
+    goal: tuple[float, float, float],
+    on_frame: Callable[[Frame], None] | None = None,
+) -> TrialResult:
+    """Drive an existing plan and record the trial."""
+    common = dict(
+        scene=world.scene.name,
+        seed=planned.seed,
+        planner=planned.planner,
+        path_found=planned.found,
+        plan_time=planned.plan_time,
+        start=tuple(start),
+        goal=tuple(goal),
+    )
+    if not planned.found:
+        return TrialResult(
+            **common, outcome="no_path", reason=planned.message, route="", drive_time=0.0,
+            energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
+        )  # fmt: skip
+    t0 = time.perf_counter()
+    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame)
+    return TrialResult(
+        **common,
+        outcome=driven.outcome,
+        reason=driven.reason,
+        route=route_of(world.scene, planned.path_xyz[:, :2]),
+        drive_time=driven.drive_time,
+        energy=driven.energy,
+        drive_wall_time=time.perf_counter() - t0,
+        path=tuple(tuple(p) for p in planned.path_xyz.tolist()),
+        trajectory=driven.trajectory,
+    )

@@ -1,0 +1,94 @@
+"""`roachplan`: the command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from planning import PLANNER_NAMES, PlanningError
+from scenes import SceneError, list_scenes
+from sim import SimError
+
+USER_ERRORS = (SceneError, PlanningError, SimError)
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from ._server import serve  # viser only when serving
+
+    serve(scene=args.scene, host=args.host, port=args.port)
+    return 0
+
+
+def _cmd_trial(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from scenes import build_world, load_scene
+
+    from ._trial import run_trial
+
+    scene = load_scene(args.scene)
+    world = build_world(scene)
+    planner = scene.planner
+    if args.planner:
+        planner = dataclasses.replace(planner, name=args.planner)
+    seed = scene.seed if args.seed is None else args.seed
+    result = run_trial(world, seed=seed, planner=planner)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(
+            f"scene {result.scene}  seed {result.seed}  planner {result.planner}\n"
+            f"outcome {result.outcome} ({result.reason})  route {result.route or '-'}\n"
+            f"drive time {result.drive_time:.2f} s  energy {result.energy:.4f} J  "
+            f"plan {result.plan_time:.2f} s  simulate {result.drive_wall_time:.2f} s wall"
+        )
+    return 0
+
+
+def _cmd_scene_list(args: argparse.Namespace) -> int:
+    from scenes import load_scene
+
+    for name in list_scenes():
+        print(f"{name:24s} {load_scene(name).description}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="roachplan",
+        description="Plan a small hexapod's path across terrain with OMPL and test it in PyBullet.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("serve", help="start the browser app")
+    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default: loopback only)")
+    p.add_argument("--port", type=int, default=8080)
+    p.set_defaults(func=_cmd_serve)
+
+    p = sub.add_parser("trial", help="one headless plan-and-drive trial")
+    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--seed", type=int, default=None, help="trial seed (default: the scene's)")
+    p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd_trial)
+
+    p = sub.add_parser("scene", help="the scene library")
+    scene_sub = p.add_subparsers(dest="scene_command", required=True)
+    q = scene_sub.add_parser("list", help="list library scenes")
+    q.set_defaults(func=_cmd_scene_list)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except USER_ERRORS as exc:
+        print(f"roachplan: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

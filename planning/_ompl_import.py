@@ -1,0 +1,18 @@
+"""Import OMPL's bindings once, safely.
+
+The ompl 1.7.0 wheel ships libompl twice: the copy auditwheel vendored under ompl.libs/ (which the
+extension modules link to) and a stray site-packages/libompl.so that ompl.util's `dll_loader`
+loads with RTLD_GLOBAL. With both loaded, their static destructors run twice and every process
+that imported OMPL dies at exit (SIGSEGV / "free(): invalid pointer"). The vendored copy is
+loaded by the extensions themselves, so we skip the loader.
+"""
+
+import ompl
+
+ompl.dll_loader = lambda lib, path: None
+
+from ompl import base as ob  # noqa: E402
+from ompl import geometric as og  # noqa: E402
+from ompl import util as ou  # noqa: E402
+
+__all__ = ["ob", "og", "ou"]

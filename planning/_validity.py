@@ -1,0 +1,133 @@
+"""Which (x, y, yaw) states the robot may occupy on a terrain (Tong 2018, section 4.4).
+
+A state is projected onto the terrain: a plane is fitted to the surface under the six feet, and
+the body rests on that plane. The state is valid when
+  (1) the body does not collide with the terrain,
+  (2) the body is close to the ground (no pit under it),
+  (3) every foot has ground within a tolerance below it (no leg over a pit or off an edge),
+  (4) the support plane is no steeper than a limit,
+and all sample points lie on the map.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._heightfield import HeightField
+
+VALID, COLLISION, BODY_HEIGHT, FOOT, SLOPE, OFF_MAP = range(6)
+CONDITION_NAMES = {
+    VALID: "valid",
+    COLLISION: "body collides with the terrain",
+    BODY_HEIGHT: "body too far above the ground",
+    FOOT: "a foot has no ground under it",
+    SLOPE: "ground too steep",
+    OFF_MAP: "off the map",
+}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Footprint:
+    """The robot as the planner sees it: feet and the underside of its body, body frame [m]."""
+
+    feet_xy: np.ndarray
+    """(F, 2) foot positions, body frame [m]."""
+    foot_names: tuple[str, ...]
+    """(F,) names of the feet, for error messages."""
+    body_length: float
+    """Body extent along x [m]."""
+    body_width: float
+    """Body extent along y [m]."""
+    body_clearance: float
+    """Height of the body's underside above the support plane [m]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ValidityConfig:
+    """Tolerances of the four validity conditions."""
+
+    foot_tolerance: float = 0.02
+    """Condition 3: the ground under a foot may lie at most this far below the support plane [m]."""
+    body_band: float = 0.03
+    """Condition 2: the ground under the body centre may lie at most this far below the
+    support plane [m]."""
+    collision_margin: float = 0.002
+    """Condition 1: the terrain may rise this far into the body's underside before it counts
+    as a collision [m] (absorbs interpolation error)."""
+    max_slope_deg: float = 25.0
+    """Condition 4: steepest allowed support plane [deg]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class StateCheck:
+    """Result of checking a batch of states."""
+
+    code: np.ndarray
+    """(N,) int: VALID or the first failed condition (COLLISION, BODY_HEIGHT, FOOT, SLOPE, OFF_MAP)."""
+    worst_foot: np.ndarray
+    """(N,) int: index of the foot with the least ground under it."""
+    z_surface: np.ndarray
+    """(N,) support-plane height under the body centre [m]."""
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.code == VALID
+
+
+def _body_samples(fp: Footprint, n_x: int = 5, n_y: int = 3) -> np.ndarray:
+    u = np.linspace(-fp.body_length / 2, fp.body_length / 2, n_x)
+    v = np.linspace(-fp.body_width / 2, fp.body_width / 2, n_y)
+    return np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
+
+
+def check_states(
+    hf: HeightField, fp: Footprint, cfg: ValidityConfig, states: np.ndarray
+) -> StateCheck:
+    """Check states ((N, 3) x [m], y [m], yaw [rad]) against the four conditions, vectorised."""
+    states = np.atleast_2d(np.asarray(states, dtype=np.float64))
+    if states.shape[-1] != 3:
+        raise ValueError(f"states must be (N, 3) x, y, yaw; got {states.shape}")
+    body = _body_samples(fp)
+    local = np.concatenate([fp.feet_xy, body])  # (P, 2) body frame
+    c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
+    wx = states[:, None, 0] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
+    wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
+    h = hf.sample(np.stack([wx, wy], axis=-1))  # (N, P)
+    n_feet = len(fp.feet_xy)
+    h_feet, h_body = h[:, :n_feet], h[:, n_feet:]
+    # Support plane z = a + b u + c v in body coordinates (u, v): a least-squares fit through
+    # the ground under the feet; its pseudo-inverse is the same for every state.
+    design = np.column_stack([np.ones(n_feet), fp.feet_xy])
+    coef = np.nan_to_num(h_feet) @ np.linalg.pinv(design).T  # (N, 3)
+    plane_feet = coef @ design.T
+    body_design = np.column_stack([np.ones(len(body)), body])
+    plane_body = coef @ body_design.T
+    residual = h_feet - plane_feet  # < 0: ground below where the foot would be
+    worst_foot = np.argmin(np.nan_to_num(residual, nan=-np.inf), axis=1)
+
+    code = np.full(len(states), VALID)
+    slope = np.degrees(np.arctan(np.hypot(coef[:, 1], coef[:, 2])))
+    centre = len(body) // 2  # the middle body sample is the body centre
+    checks = (
+        (OFF_MAP, np.isnan(h).any(axis=1)),
+        (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin).any(axis=1)),
+        (FOOT, (residual < -cfg.foot_tolerance).any(axis=1)),
+        (SLOPE, slope > cfg.max_slope_deg),
+        (BODY_HEIGHT, plane_body[:, centre] - h_body[:, centre] > cfg.body_band),
+    )
+    # Later conditions only fill states no earlier condition has claimed.
+    for cond, failed in checks:
+        code = np.where((code == VALID) & failed, cond, code)
+    return StateCheck(code=code, worst_foot=worst_foot, z_surface=coef[:, 0])
+
+
+def describe_state(hf: HeightField, fp: Footprint, cfg: ValidityConfig, state: np.ndarray) -> str:
+    """Human-readable verdict for one state, naming the failed condition and foot."""
+    r = check_states(hf, fp, cfg, np.asarray(state, dtype=float)[None])
+    code = int(r.code[0])
+    text = CONDITION_NAMES[code]
+    if code == FOOT:
+        text += f" (leg {fp.foot_names[int(r.worst_foot[0])]})"
+    return text

@@ -1,0 +1,15 @@
+"""Worlds to plan and drive in: scene files, OpenSCAD terrains, meshes and the scene library."""
+
+from ._errors import SceneError as SceneError
+from ._openscad import render_scad as render_scad
+from ._scene import LIBRARY as LIBRARY
+from ._scene import Scene as Scene
+from ._scene import TerrainObject as TerrainObject
+from ._scene import list_scenes as list_scenes
+from ._scene import load_scene as load_scene
+from ._scene import resolve_scene as resolve_scene
+from ._world import World as World
+from ._world import build_terrain_mesh as build_terrain_mesh
+from ._world import build_world as build_world
+from ._world import footprint_of as footprint_of
+from ._world import route_of as route_of

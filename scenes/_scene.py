@@ -1,0 +1,254 @@
+"""Scene files: YAML in the spirit of Tong 2018, appendix B, validated at one boundary.
+
+A scene places terrain objects (OpenSCAD models or mesh files), a ground plane, the robot's start
+pose and the goal, and may carry planner, simulation and driver settings and a seed. Everything a
+user can get wrong is reported as a SceneError naming the file, the key and what is accepted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from planning import PlannerConfig
+from sim import DriverConfig, SimConfig
+
+from ._errors import SceneError
+
+LIBRARY = Path(__file__).parent / "library"
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TerrainObject:
+    """One terrain piece placed in the world."""
+
+    source: Path
+    """Absolute path of the .scad model or mesh file."""
+    params: tuple[tuple[str, float | int | bool | str], ...] = ()
+    """OpenSCAD `-D` overrides, sorted by name."""
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Translation of the object's origin [m]."""
+    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    """Rotation as a unit quaternion, xyzw (the report's order)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """A world to plan and drive in."""
+
+    name: str
+    """Scene name (the file's stem)."""
+    path: Path
+    """The scene file."""
+    description: str = ""
+    """One line for people."""
+    terrain: tuple[TerrainObject, ...]
+    """Terrain objects, in world frame."""
+    ground: float | None = 0.0
+    """Height of an endless ground plane [m], or None for no ground."""
+    start: tuple[float, float, float]
+    """Robot start pose: x [m], y [m], yaw [rad]."""
+    goal: tuple[float, float, float]
+    """Goal pose: x [m], y [m], yaw [rad] (the yaw only guides the planner)."""
+    bounds: tuple[tuple[float, float], tuple[float, float]]
+    """((xmin, ymin), (xmax, ymax)) the robot's centre may plan in [m]."""
+    routes: tuple[tuple[str, tuple[tuple[float, float], tuple[float, float]]], ...] = ()
+    """Named regions ((xmin, ymin), (xmax, ymax)) a path may cross, used to label it."""
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    driver: DriverConfig = field(default_factory=DriverConfig)
+    seed: int = 0
+    """Seed of the first trial; trial k uses seed + k."""
+
+
+def list_scenes() -> list[str]:
+    """Names of the scenes in the library."""
+    return sorted(p.stem for p in LIBRARY.glob("*.yaml"))
+
+
+def resolve_scene(name_or_path: str | Path) -> Path:
+    """A library scene name or a path to a scene file -> the scene file's path."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise SceneError(f"{p}: no such scene file")
+        return p.resolve()
+    lib = LIBRARY / f"{name_or_path}.yaml"
+    if lib.is_file():
+        return lib
+    raise SceneError(
+        f"unknown scene {str(name_or_path)!r}: give a scene file (.yaml) or one of "
+        f"{', '.join(list_scenes())}"
+    )
+
+
+# -- validation helpers ------------------------------------------------------------------------
+
+
+class _Ctx:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, msg: str) -> SceneError:
+        return SceneError(f"{self.path}: {key}: {msg}")
+
+    def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required=()) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(key, f"expected a mapping with keys {', '.join(allowed)}, got {value!r}")
+        unknown = [k for k in value if k not in allowed]
+        if unknown:
+            raise self.fail(
+                f"{key}.{unknown[0]}" if key else str(unknown[0]),
+                f"unknown key; accepted keys: {', '.join(allowed)}",
+            )
+        for k in required:
+            if k not in value:
+                raise self.fail(f"{key}.{k}" if key else k, "missing (required)")
+        return value
+
+    def number(self, value: Any, key: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self.fail(key, f"expected a finite number, got {value!r}")
+        return float(value)
+
+    def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]:
+        if not isinstance(value, list | tuple) or len(value) != n:
+            raise self.fail(key, f"expected a list of {n} numbers, got {value!r}")
+        return tuple(self.number(v, f"{key}[{i}]") for i, v in enumerate(value))
+
+    def box(self, value: Any, key: str) -> tuple[tuple[float, float], tuple[float, float]]:
+        if not isinstance(value, list | tuple) or len(value) != 2:
+            raise self.fail(key, f"expected [[xmin, ymin], [xmax, ymax]], got {value!r}")
+        lo, hi = self.vector(value[0], f"{key}[0]", 2), self.vector(value[1], f"{key}[1]", 2)
+        if not (lo[0] < hi[0] and lo[1] < hi[1]):
+            raise self.fail(key, f"min {lo} must be below max {hi} in x and y")
+        return (lo, hi)  # type: ignore[return-value]
+
+    def config(self, cls: type, value: Any, key: str) -> Any:
+        """Build a frozen config dataclass from a mapping: known keys, right types, in range."""
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        data = self.mapping(value, key, tuple(fields))
+        hints = typing.get_type_hints(cls)
+        kwargs = {}
+        for k, v in data.items():
+            hint = hints[k]
+            if dataclasses.is_dataclass(hint):
+                kwargs[k] = self.config(hint, v, f"{key}.{k}")
+            elif typing.get_origin(hint) is Literal:
+                options = typing.get_args(hint)
+                if v not in options:
+                    raise self.fail(f"{key}.{k}", f"{v!r} is not one of {', '.join(map(str, options))}")
+                kwargs[k] = v
+            elif hint is bool:
+                if not isinstance(v, bool):
+                    raise self.fail(f"{key}.{k}", f"expected true or false, got {v!r}")
+                kwargs[k] = v
+            elif hint is int:
+                if isinstance(v, bool) or not isinstance(v, int):
+                    raise self.fail(f"{key}.{k}", f"expected an integer, got {v!r}")
+                kwargs[k] = v
+            elif hint is float:
+                kwargs[k] = self.number(v, f"{key}.{k}")
+            else:  # pragma: no cover - a config field type this loader does not know
+                raise self.fail(f"{key}.{k}", f"unsupported setting type {hint}")
+            if isinstance(kwargs[k], float | int) and not isinstance(kwargs[k], bool):
+                if kwargs[k] <= 0:
+                    raise self.fail(f"{key}.{k}", f"must be positive, got {v!r}")
+        return cls(**kwargs)
+
+
+def _pose(ctx: _Ctx, value: Any, key: str) -> tuple[float, float, float]:
+    """[x, y] or [x, y, yaw_deg] -> (x, y, yaw_rad)."""
+    if isinstance(value, list | tuple) and len(value) == 2:
+        value = [*value, 90.0]
+    x, y, yaw = ctx.vector(value, key, 3)
+    return (x, y, math.radians(yaw))
+
+
+def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
+    data = ctx.mapping(value, key, ("scad", "mesh", "params", "position", "orientation"))
+    kinds = [k for k in ("scad", "mesh") if k in data]
+    if len(kinds) != 1:
+        raise ctx.fail(key, "give exactly one of `scad: FILE.scad` or `mesh: FILE.stl|obj|ply|glb`")
+    kind = kinds[0]
+    if not isinstance(data[kind], str):
+        raise ctx.fail(f"{key}.{kind}", f"expected a file name, got {data[kind]!r}")
+    source = (ctx.path.parent / data[kind]).resolve()
+    if not source.is_file():
+        raise ctx.fail(f"{key}.{kind}", f"file {source} does not exist")
+    allowed = (".scad",) if kind == "scad" else MESH_SUFFIXES
+    if source.suffix.lower() not in allowed:
+        raise ctx.fail(f"{key}.{kind}", f"{source.name}: expected a {' or '.join(allowed)} file")
+    params = data.get("params") or {}
+    if not isinstance(params, dict) or (params and kind != "scad"):
+        raise ctx.fail(f"{key}.params", "expected a mapping of OpenSCAD variable overrides (scad only)")
+    for name, v in params.items():
+        if not isinstance(v, int | float | bool | str) or not str(name).isidentifier():
+            raise ctx.fail(f"{key}.params.{name}", f"expected a number, boolean or string, got {v!r}")
+    position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
+    q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
+    norm = math.sqrt(sum(c * c for c in q))
+    if abs(norm - 1.0) > 1e-3:
+        raise ctx.fail(
+            f"{key}.orientation",
+            f"quaternion {list(q)} has norm {norm:.4f}; expected a unit quaternion [x, y, z, w]",
+        )
+    return TerrainObject(
+        source=source,
+        params=tuple(sorted(params.items())),
+        position=position,  # type: ignore[arg-type]
+        orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
+    )
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Read and validate a scene file (or a library scene by name)."""
+    path = resolve_scene(name_or_path)
+    ctx = _Ctx(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise SceneError(f"{path}: not valid YAML: {exc}") from None
+    keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
+            "planner", "sim", "driver", "seed")  # fmt: skip
+    data = ctx.mapping(raw, "", keys, required=("terrain", "robot", "goal", "bounds"))
+    terrain = data["terrain"]
+    if not isinstance(terrain, list) or not terrain:
+        raise ctx.fail("terrain", "expected a non-empty list of terrain objects")
+    robot = ctx.mapping(data["robot"], "robot", ("start",), required=("start",))
+    ground = data.get("ground", 0.0)
+    routes = ctx.mapping(data.get("routes") or {}, "routes", tuple(data.get("routes") or {}))
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ctx.fail("seed", f"expected a non-negative integer, got {seed!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ctx.fail("description", f"expected a string, got {description!r}")
+    scene = Scene(
+        name=path.stem,
+        path=path,
+        description=description,
+        terrain=tuple(_terrain_object(ctx, t, f"terrain[{i}]") for i, t in enumerate(terrain)),
+        ground=None if ground is None else ctx.number(ground, "ground"),
+        start=_pose(ctx, robot["start"], "robot.start"),
+        goal=_pose(ctx, data["goal"], "goal"),
+        bounds=ctx.box(data["bounds"], "bounds"),
+        routes=tuple((str(k), ctx.box(v, f"routes.{k}")) for k, v in routes.items()),
+        planner=ctx.config(PlannerConfig, data.get("planner") or {}, "planner"),
+        sim=ctx.config(SimConfig, data.get("sim") or {}, "sim"),
+        driver=ctx.config(DriverConfig, data.get("driver") or {}, "driver"),
+        seed=seed,
+    )
+    (lo, hi) = scene.bounds
+    for label, pose in (("robot.start", scene.start), ("goal", scene.goal)):
+        if not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
+            raise ctx.fail(label, f"({pose[0]}, {pose[1]}) lies outside bounds {list(lo)}..{list(hi)}")
+    return scene
+

@@ -1,0 +1,44 @@
+"""Settings of the physics world and of the path-following driver."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimConfig:
+    """Physics settings of one simulated world."""
+
+    timestep: float = 1.0 / 500.0
+    """Fixed physics step [s]."""
+    solver_iterations: int = 30
+    """Constraint-solver iterations per step."""
+    friction: float = 0.9
+    """Coulomb friction coefficient of feet, body and terrain [-]."""
+    settle_time: float = 0.3
+    """Time the robot stands still after being dropped at its start pose [s]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriverConfig:
+    """Path follower (Tong 2018, algorithm 1) and differential-drive P-controller (algorithm 2)."""
+
+    omega0: float = 20.0
+    """Base leg speed of both sides [rad/s]."""
+    gain: float = 1.2
+    """P gain p: the faster side turns at omega0 * exp(|p * theta|) [1/rad]."""
+    max_ratio: float = 3.0
+    """Cap on the fast side's speed relative to omega0 [-]: the exponential of algorithm 2 grows
+    without bound, a real motor does not."""
+    r_path: float = 0.1
+    """Radius within which an intermediate waypoint counts as reached [m]."""
+    r_end: float = 0.05
+    """Radius within which the goal counts as reached [m] (Tong 2018, chapter 7: 5 cm)."""
+    time_limit: float = 60.0
+    """Simulated time allowed to reach the goal [s] (Tong 2018, chapter 7: 60 s)."""
+    control_period: float = 0.02
+    """Time between two controller updates [s]."""
+    fall_drop: float = 0.08
+    """A body this far below the planned surface under it has fallen off that surface [m]."""
+    frame_period: float = 1.0 / 30.0
+    """Simulated time between two recorded trajectory samples [s]."""

@@ -1,0 +1,230 @@
+"""The one stateful shell around PyBullet: a static terrain and one roach."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import sys
+from collections.abc import Iterator
+
+import numpy as np
+import pybullet as p
+from pybullet_utils.bullet_client import BulletClient
+
+from ._config import SimConfig
+from ._robot import RobotConfig
+
+
+@contextlib.contextmanager
+def _c_stdout_silenced() -> Iterator[None]:
+    """PyBullet's C code prints "argv[0]=" to stdout on connect, which would corrupt JSON
+    written to stdout; send the C-level stdout to /dev/null meanwhile."""
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        libc.fflush(None)
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+class SimError(ValueError):
+    """The simulation cannot be built from what it was given."""
+
+
+class Simulation:
+    """Owns one headless PyBullet client holding a terrain and a roach.
+
+    Never sleeps or reads the clock: `step()` advances exactly `cfg.timestep` seconds.
+    Legs are commanded per side (differential drive); the three legs of a side follow one
+    motor phase, as the real robot's linkage makes them.
+    """
+
+    def __init__(
+        self,
+        terrain_vertices: np.ndarray,
+        terrain_faces: np.ndarray,
+        *,
+        ground_height: float | None,
+        robot: RobotConfig,
+        cfg: SimConfig,
+    ) -> None:
+        """terrain_vertices: (V, 3) float world frame [m]; terrain_faces: (F, 3) int."""
+        terrain_vertices = np.asarray(terrain_vertices, dtype=np.float64)
+        terrain_faces = np.asarray(terrain_faces, dtype=np.int64)
+        if terrain_vertices.ndim != 2 or terrain_vertices.shape[1] != 3:
+            raise SimError(f"terrain vertices must be (V, 3), got {terrain_vertices.shape}")
+        if terrain_faces.ndim != 2 or terrain_faces.shape[1] != 3 or len(terrain_faces) == 0:
+            raise SimError(f"terrain faces must be (F>0, 3), got {terrain_faces.shape}")
+        self.robot = robot
+        self.cfg = cfg
+        with _c_stdout_silenced():
+            self._bc = BulletClient(connection_mode=p.DIRECT)
+        bc = self._bc
+        bc.setGravity(0, 0, -9.81)
+        bc.setPhysicsEngineParameter(
+            fixedTimeStep=cfg.timestep, numSolverIterations=cfg.solver_iterations, numSubSteps=0
+        )
+        # Static terrain: one concave triangle mesh on a mass-0 body.
+        shape = bc.createCollisionShape(
+            p.GEOM_MESH,
+            vertices=terrain_vertices.tolist(),
+            indices=terrain_faces.reshape(-1).tolist(),
+            flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+        )
+        self.terrain_id = bc.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
+        bc.changeDynamics(self.terrain_id, -1, lateralFriction=cfg.friction, restitution=0.0)
+        self.ground_id = None
+        if ground_height is not None:
+            plane = bc.createCollisionShape(p.GEOM_PLANE)
+            self.ground_id = bc.createMultiBody(
+                baseMass=0, baseCollisionShapeIndex=plane, basePosition=(0, 0, ground_height)
+            )
+            bc.changeDynamics(self.ground_id, -1, lateralFriction=cfg.friction, restitution=0.0)
+        self.robot_id = self._create_robot()
+        self._joints = list(range(6))
+        self._sides = robot.leg_sides
+        self._offsets = robot.leg_phase_offsets
+        self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
+        self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
+        self.time = 0.0
+        self.energy_per_leg = np.zeros(6)
+
+    # -- construction -------------------------------------------------------------------------
+
+    def _create_robot(self) -> int:
+        bc, r = self._bc, self.robot
+        half = (r.body_length / 2, r.body_width / 2, r.body_height / 2)
+        body = bc.createCollisionShape(p.GEOM_BOX, halfExtents=half)
+        # Capsule along the link's z axis, centred half a leg below the hip: the leg points
+        # down at q = 0 and its rounded tip is the foot.
+        leg = bc.createCollisionShape(
+            p.GEOM_CAPSULE,
+            radius=r.leg_radius,
+            height=r.leg_length,
+            collisionFramePosition=(0, 0, -r.leg_length / 2),
+        )
+        hips = r.hip_positions
+        robot_id = bc.createMultiBody(
+            baseMass=r.body_mass,
+            baseCollisionShapeIndex=body,
+            basePosition=(0, 0, -1000.0),
+            linkMasses=[r.leg_mass] * 6,
+            linkCollisionShapeIndices=[leg] * 6,
+            linkVisualShapeIndices=[-1] * 6,
+            linkPositions=hips.tolist(),
+            linkOrientations=[(0, 0, 0, 1)] * 6,
+            linkInertialFramePositions=[(0, 0, -r.leg_length / 2)] * 6,
+            linkInertialFrameOrientations=[(0, 0, 0, 1)] * 6,
+            linkParentIndices=[0] * 6,
+            linkJointTypes=[p.JOINT_REVOLUTE] * 6,
+            linkJointAxis=[(0, 1, 0)] * 6,
+        )
+        for link in range(-1, 6):
+            bc.changeDynamics(
+                robot_id,
+                link,
+                lateralFriction=self.cfg.friction,
+                restitution=0.0,
+                linearDamping=0.0,
+                angularDamping=0.0,
+            )
+        for j in range(6):
+            # Continuous joints: no limits; disable the default velocity motor.
+            bc.changeDynamics(robot_id, j, jointLowerLimit=1.0, jointUpperLimit=-1.0)
+            bc.setJointMotorControl2(robot_id, j, p.VELOCITY_CONTROL, force=0.0)
+        return robot_id
+
+    # -- state ----------------------------------------------------------------------------------
+
+    def surface_height(self, x: float, y: float) -> float:
+        """Height of the highest terrain or ground surface at (x, y) [m], -inf if none."""
+        hit = self._bc.rayTest((x, y, 50.0), (x, y, -50.0))[0]
+        return hit[3][2] if hit[0] >= 0 else -np.inf
+
+    def reset(self, x: float, y: float, yaw: float) -> None:
+        """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle."""
+        bc, r = self._bc, self.robot
+        # Park the robot out of the ray's way before looking for the ground under the start.
+        bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
+        z0 = self.surface_height(x, y)
+        if not np.isfinite(z0):
+            raise SimError(f"no terrain under the start position ({x:.3f}, {y:.3f})")
+        quat = bc.getQuaternionFromEuler((0.0, 0.0, yaw))
+        bc.resetBasePositionAndOrientation(
+            self.robot_id, (x, y, z0 + r.standing_height + 0.004), quat
+        )
+        bc.resetBaseVelocity(self.robot_id, (0, 0, 0), (0, 0, 0))
+        self._phase[:] = 0.0
+        self._omega[:] = 0.0
+        q0, _ = r.leg_angle(self._offsets)
+        for j in self._joints:
+            bc.resetJointState(self.robot_id, j, float(q0[j]), 0.0)
+        for _ in range(round(self.cfg.settle_time / self.cfg.timestep)):
+            self._apply_motors()
+            bc.stepSimulation()
+        self.time = 0.0
+        self.energy_per_leg[:] = 0.0
+
+    def set_leg_speeds(self, left: float, right: float) -> None:
+        """Command the left and right motors [rad/s], clipped to the motor's speed limit."""
+        lim = self.robot.max_motor_speed
+        self._omega[:] = np.clip((left, right), -lim, lim)
+
+    def step(self) -> None:
+        """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
+        dt = self.cfg.timestep
+        self._phase += self._omega * dt
+        self._apply_motors()
+        self._bc.stepSimulation()
+        self.time += dt
+        states = self._bc.getJointStates(self.robot_id, self._joints)
+        for j, (_, speed, _, torque) in enumerate(states):
+            self.energy_per_leg[j] += abs(speed * torque) * dt
+
+    def _apply_motors(self) -> None:
+        # Position control on each leg's share of its side's motor phase: the legs of a side
+        # stay locked in phase like the real linkage, and PyBullet reports the torque applied.
+        q, dq_dphase = self.robot.leg_angle(self._phase[self._sides] + self._offsets)
+        self._bc.setJointMotorControlArray(
+            self.robot_id,
+            self._joints,
+            p.POSITION_CONTROL,
+            targetPositions=q.tolist(),
+            targetVelocities=(dq_dphase * self._omega[self._sides]).tolist(),
+            forces=[self.robot.max_motor_torque] * 6,
+            positionGains=[0.2] * 6,
+            velocityGains=[1.0] * 6,
+        )
+
+    def body_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(p_world_body (3,) [m], quat_world_body (4,) xyzw)."""
+        pos, quat = self._bc.getBasePositionAndOrientation(self.robot_id)
+        return np.array(pos), np.array(quat)
+
+    def joint_angles(self) -> np.ndarray:
+        """(6,) leg angles [rad], hip order L1 L2 L3 R1 R2 R3."""
+        return np.array([s[0] for s in self._bc.getJointStates(self.robot_id, self._joints)])
+
+    @property
+    def energy(self) -> float:
+        """Energy spent by all leg motors since reset [J]."""
+        return float(self.energy_per_leg.sum())
+
+    def close(self) -> None:
+        """Disconnect the PyBullet client."""
+        if self._bc is not None:
+            self._bc.disconnect()
+            self._bc = None
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
