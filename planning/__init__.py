@@ -15,3 +15,9 @@ from ._validity import StateCheck as StateCheck
 from ._validity import ValidityConfig as ValidityConfig
 from ._validity import check_states as check_states
 from ._validity import describe_state as describe_state
+from ._validity import BODY_HEIGHT as BODY_HEIGHT
+from ._validity import COLLISION as COLLISION
+from ._validity import FOOT as FOOT
+from ._validity import OFF_MAP as OFF_MAP
+from ._validity import SLOPE as SLOPE
+from ._validity import VALID as VALID

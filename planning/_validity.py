@@ -105,19 +105,28 @@ def check_states(
     body_design = np.column_stack([np.ones(len(body)), body])
     plane_body = coef @ body_design.T
     residual = h_feet - plane_feet  # < 0: ground below where the foot would be
-    worst_foot = np.argmin(np.nan_to_num(residual, nan=-np.inf), axis=1)
+    residual = np.nan_to_num(residual, nan=-np.inf)
+    unsupported = residual < -cfg.foot_tolerance
+    # A plane fit cannot tell "front too high" from "rear too low"; among the feet that fail,
+    # the one over the lowest ground is the one over the pit.
+    worst_foot = np.where(
+        unsupported.any(axis=1),
+        np.argmin(np.where(unsupported, np.nan_to_num(h_feet, nan=-np.inf), np.inf), axis=1),
+        np.argmin(residual, axis=1),
+    )
 
     code = np.full(len(states), VALID)
     slope = np.degrees(np.arctan(np.hypot(coef[:, 1], coef[:, 2])))
     centre = len(body) // 2  # the middle body sample is the body centre
     checks = (
         (OFF_MAP, np.isnan(h).any(axis=1)),
+        (FOOT, unsupported.any(axis=1)),
         (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin).any(axis=1)),
-        (FOOT, (residual < -cfg.foot_tolerance).any(axis=1)),
         (SLOPE, slope > cfg.max_slope_deg),
         (BODY_HEIGHT, plane_body[:, centre] - h_body[:, centre] > cfg.body_band),
     )
-    # Later conditions only fill states no earlier condition has claimed.
+    # Later conditions only fill states no earlier condition has claimed: a foot over a pit
+    # also tilts the support plane into the body, and the foot is the better explanation.
     for cond, failed in checks:
         code = np.where((code == VALID) & failed, cond, code)
     return StateCheck(code=code, worst_foot=worst_foot, z_surface=coef[:, 0])

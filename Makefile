@@ -1,0 +1,35 @@
+# roachplan: `make run` sets everything up and starts the app; `make test` sets up and tests.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+SCENE  ?= double_bridge
+HOST   ?= 127.0.0.1
+PORT   ?= 8080
+
+RUN_DEBS  := openscad libusb-1.0-0
+TEST_DEBS := $(RUN_DEBS) chromium
+
+.PHONY: setup run test bench lint clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[test]'
+	touch $(STAMP)
+
+setup: $(STAMP)
+	@scripts/install-system-deps.sh $(RUN_DEBS)
+
+run: setup
+	$(BIN)/roachplan serve --scene $(SCENE) --host $(HOST) --port $(PORT)
+
+test: $(STAMP)
+	@scripts/install-system-deps.sh $(TEST_DEBS)
+	$(BIN)/python -m pytest
+
+bench: setup
+	$(BIN)/python benchmarks/bench_trial.py
+
+clean:
+	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

@@ -1,0 +1,67 @@
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+ARTIFACTS = ROOT / "test-artifacts"
+ROACHPLAN = [sys.executable, "-m", "app.cli"]
+
+
+@pytest.fixture(scope="session")
+def world():
+    from scenes import build_world, load_scene
+
+    return build_world(load_scene("double_bridge"))
+
+
+@pytest.fixture(scope="session")
+def artifacts() -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    return ARTIFACTS
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def server_url():
+    """Start `roachplan serve` on a free port; yield its URL; stop it."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [*ROACHPLAN, "serve", "--port", str(port)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    url = None
+    deadline = time.monotonic() + 60
+    lines = []
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if line.startswith("roachplan: serving"):
+            url = line.rsplit(" at ", 1)[1].strip()
+            break
+    if url is None:
+        proc.kill()
+        pytest.fail("server did not start:\n" + "".join(lines))
+    yield url
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
