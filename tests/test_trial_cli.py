@@ -7,7 +7,6 @@ import subprocess
 
 import numpy as np
 import pytest
-
 from conftest import ROACHPLAN, ROOT
 
 GAP_HALF_WIDTH = 0.5  # table C.1: bridges 1.0 m apart, centred on x = 0
