@@ -115,6 +115,8 @@ class RoachApp:
         self.commands: queue.Queue[Command] = queue.Queue()
         self.trials: list[TrialResult] = []
         self.planned: PlanResult | None = None
+        self.planned_endpoints: tuple[tuple, tuple] | None = None
+        """(start, goal) poses the current plan was made for."""
         self._next_seed = world.scene.seed
         self._build_scene()
         self._build_gui()

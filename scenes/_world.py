@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 
 from planning import Footprint, HeightField, heightfield_from_mesh
-from sim import LEG_NAMES, RobotConfig
+from sim import LEG_NAMES, RobotConfig, quat_to_matrix
 
 from ._errors import SceneError
 from ._openscad import render_scad
@@ -47,17 +47,6 @@ def footprint_of(robot: RobotConfig) -> Footprint:
     )
 
 
-def _quat_xyzw_to_matrix(q: tuple[float, float, float, float]) -> np.ndarray:
-    x, y, z, w = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def load_terrain_object(obj: TerrainObject) -> trimesh.Trimesh:
     """One terrain object's mesh, placed in the world frame."""
     source = obj.source
@@ -72,7 +61,7 @@ def load_terrain_object(obj: TerrainObject) -> trimesh.Trimesh:
     if not np.all(np.isfinite(mesh.vertices)):
         raise SceneError(f"{obj.source}: the mesh has non-finite vertex coordinates")
     transform = np.eye(4)
-    transform[:3, :3] = _quat_xyzw_to_matrix(obj.orientation)
+    transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position
     mesh.apply_transform(transform)
     return mesh
