@@ -187,17 +187,17 @@ class RoachApp:
         x, y, z = self._on_surface(start)
         r = self.world.robot
         q0, _ = r.leg_angle(r.leg_phase_offsets)
-        with self.server.atomic():
-            self.robot_node.position = (x, y, z + r.standing_height)
-            self.robot_node.wxyz = _yaw_wxyz(start[2])
-            for node, q in zip(self.hip_nodes, q0, strict=True):
-                node.wxyz = (math.cos(q / 2), 0.0, math.sin(q / 2), 0.0)
+        self._show_robot((x, y, z + r.standing_height), _yaw_wxyz(start[2]), q0)
 
     def _show_frame(self, f: Frame) -> None:
+        self._show_robot(f.p_world_body, wxyz_from_xyzw(f.quat_world_body), f.leg_angles)
+
+    def _show_robot(self, position, wxyz, leg_angles) -> None:
+        """Body pose (world frame, wxyz) and leg angles [rad] (rotations about body +y)."""
         with self.server.atomic():
-            self.robot_node.position = f.p_world_body
-            self.robot_node.wxyz = wxyz_from_xyzw(f.quat_world_body)
-            for node, q in zip(self.hip_nodes, f.leg_angles, strict=True):
+            self.robot_node.position = position
+            self.robot_node.wxyz = wxyz
+            for node, q in zip(self.hip_nodes, leg_angles, strict=True):
                 node.wxyz = (math.cos(q / 2), 0.0, math.sin(q / 2), 0.0)
 
     # gui ---------------------------------------------------------------------------------
