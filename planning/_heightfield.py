@@ -39,6 +39,15 @@ class HeightField:
             self.y0 + (ny - 1) * self.resolution,
         )
 
+    def covered_bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((xmin, ymin), (xmax, ymax)) of the grid points that have a surface [m]."""
+        j, i = np.nonzero(np.isfinite(self.heights))
+        if len(i) == 0:
+            return ((np.nan, np.nan), (np.nan, np.nan))
+        r = self.resolution
+        return ((self.x0 + i.min() * r, self.y0 + j.min() * r),
+                (self.x0 + i.max() * r, self.y0 + j.max() * r))  # fmt: skip
+
     def sample(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear surface height at xy ((..., 2) [m]); NaN off the grid or next to a NaN cell."""
         xy = np.asarray(xy, dtype=np.float64)
@@ -84,28 +93,42 @@ def heightfield_from_mesh(
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed xy area
-    # Vertical faces cover no area from above; tiny ones are sliver noise. Both orientations
-    # count: the top surface is the highest one whatever the winding.
-    keep = np.abs(det) > 1e-12
-    for t, d in zip(tri[keep], det[keep], strict=True):
-        lo = np.maximum(np.ceil((t[:, :2].min(0) - xy_min) / resolution - 1e-9), 0).astype(int)
-        hi = np.minimum(
-            np.floor((t[:, :2].max(0) - xy_min) / resolution + 1e-9), (nx - 1, ny - 1)
-        ).astype(int)
-        if np.any(hi < lo):
-            continue
-        gx = xy_min[0] + np.arange(lo[0], hi[0] + 1) * resolution
-        gy = xy_min[1] + np.arange(lo[1], hi[1] + 1) * resolution
-        px, py = np.meshgrid(gx - t[0, 0], gy - t[0, 1])
-        a = (px * (t[2, 1] - t[0, 1]) - py * (t[2, 0] - t[0, 0])) / d
-        b = (py * (t[1, 0] - t[0, 0]) - px * (t[1, 1] - t[0, 1])) / d
-        eps = 1e-9
-        inside = (a >= -eps) & (b >= -eps) & (a + b <= 1 + eps)
-        if not inside.any():
-            continue
-        z = t[0, 2] + a * (t[1, 2] - t[0, 2]) + b * (t[2, 2] - t[0, 2])
-        block = top[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
-        np.maximum(block, np.where(inside, z, -np.inf), out=block)
+    # Only triangles facing up (counter-clockwise seen from above) can be the top surface:
+    # vertical faces cover no area from above, tiny ones are sliver noise, and downward faces
+    # are undersides (of a closed mesh, or of a surface wound outward/upward as the scene
+    # loader leaves every mesh) -- skipping them also skips a closed mesh's large bottom.
+    keep = det > 1e-12
+    tri, det = tri[keep], det[keep]
+    xy0 = np.asarray(xy_min, dtype=np.float64)
+    lo = np.maximum(np.ceil((tri[:, :, :2].min(1) - xy0) / resolution - 1e-9), 0).astype(np.int64)
+    hi = np.minimum(
+        np.floor((tri[:, :, :2].max(1) - xy0) / resolution + 1e-9), (nx - 1, ny - 1)
+    ).astype(np.int64)
+    span = np.max(hi - lo + 1, axis=1)  # cells per side of each triangle's bounding square
+    on_grid = np.all(hi >= lo, axis=1)
+    # Vectorised over triangles of similar size: each bucket tests a side x side block of grid
+    # points per triangle, side the next power of two of its triangles' bounding boxes.
+    side = 1 << np.ceil(np.log2(np.maximum(span, 1))).astype(np.int64)
+    flat = top.reshape(-1)
+    for b in np.unique(side[on_grid]):
+        idx = np.flatnonzero(on_grid & (side == b))
+        off = np.stack(np.meshgrid(np.arange(b), np.arange(b)), axis=-1).reshape(-1, 2)  # (b*b, 2)
+        chunk = max(1, 2_000_000 // (b * b))  # bound the temporaries to ~2M grid points
+        for k in range(0, len(idx), chunk):
+            sel = idx[k : k + chunk]
+            t, d = tri[sel], det[sel]
+            cell = lo[sel, None, :] + off[None]  # (n, b*b, 2) grid indices (i, j)
+            o = t[:, None, 0]  # (n, 1, 3) first corner; e1, e2 the edges from it
+            e1, e2 = (t[:, None, 1] - o), (t[:, None, 2] - o)
+            px = xy0[0] + cell[..., 0] * resolution - o[..., 0]
+            py = xy0[1] + cell[..., 1] * resolution - o[..., 1]
+            a = (px * e2[..., 1] - py * e2[..., 0]) / d[:, None]  # barycentric along e1
+            c = (py * e1[..., 0] - px * e1[..., 1]) / d[:, None]  # barycentric along e2
+            eps = 1e-9
+            inside = (a >= -eps) & (c >= -eps) & (a + c <= 1 + eps)
+            inside &= np.all(cell <= hi[sel, None, :], axis=-1)
+            z = o[..., 2] + a * e1[..., 2] + c * e2[..., 2]
+            np.maximum.at(flat, (cell[..., 1] * nx + cell[..., 0])[inside], z[inside])
     if ground_height is not None:
         top = np.maximum(top, ground_height)
     top[~np.isfinite(top)] = np.nan

@@ -252,7 +252,9 @@ def plan_path(
     si = ob.SpaceInformation(space)
 
     def is_valid(s) -> bool:
-        return bool(check_states(hf, fp, vcfg, np.array([[s.getX(), s.getY(), s.getYaw()]])).valid[0])
+        return bool(
+            check_states(hf, fp, vcfg, np.array([[s.getX(), s.getY(), s.getYaw()]])).valid[0]
+        )
 
     si.setStateValidityChecker(ob.StateValidityCheckerFn(is_valid))
     motion_validator = _BatchMotionValidator(si, hf, fp, vcfg, cfg.check_resolution)

@@ -6,7 +6,8 @@ the body rests on that plane. The state is valid when
   (2) the body is close to the ground (no pit under it),
   (3) every foot has ground within a tolerance below it (no leg over a pit or off an edge),
   (4) the support plane is no steeper than a limit,
-and all sample points lie on the map.
+and all sample points lie on the planner's height field (the scene's bounds plus a margin).
+Where the terrain has no surface at all (no ground plane), a foot finds no ground (3).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ CONDITION_NAMES = {
     BODY_HEIGHT: "body too far above the ground",
     FOOT: "a foot has no ground under it",
     SLOPE: "ground too steep",
-    OFF_MAP: "off the map",
+    OFF_MAP: "outside the planning area",
 }
 
 
@@ -94,7 +95,9 @@ def check_states(
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
     wx = states[:, None, 0] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
     wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
-    h = hf.sample(np.stack([wx, wy], axis=-1))  # (N, P)
+    h = hf.sample(np.stack([wx, wy], axis=-1))  # (N, P), NaN where there is no surface
+    x0, x1, y0, y1 = hf.extent
+    off_map = ((wx < x0) | (wx > x1) | (wy < y0) | (wy > y1)).any(axis=1)
     n_feet = len(fp.feet_xy)
     h_feet, h_body = h[:, :n_feet], h[:, n_feet:]
     # Support plane z = a + b u + c v in body coordinates (u, v): a least-squares fit through
@@ -119,11 +122,14 @@ def check_states(
     slope = np.degrees(np.arctan(np.hypot(coef[:, 1], coef[:, 2])))
     centre = len(body) // 2  # the middle body sample is the body centre
     checks = (
-        (OFF_MAP, np.isnan(h).any(axis=1)),
+        (OFF_MAP, off_map),
         (FOOT, unsupported.any(axis=1)),
         (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin).any(axis=1)),
         (SLOPE, slope > cfg.max_slope_deg),
-        (BODY_HEIGHT, plane_body[:, centre] - h_body[:, centre] > cfg.body_band),
+        (
+            BODY_HEIGHT,
+            plane_body[:, centre] - np.nan_to_num(h_body[:, centre], nan=-np.inf) > cfg.body_band,
+        ),
     )
     # Later conditions only fill states no earlier condition has claimed: a foot over a pit
     # also tilts the support plane into the body, and the foot is the better explanation.

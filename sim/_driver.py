@@ -70,9 +70,7 @@ def heading_error(p_world_body: np.ndarray, R_world_body: np.ndarray, target: np
     return float(np.arctan2(d @ R_world_body[:2, 1], d @ R_world_body[:2, 0]))
 
 
-def motor_speeds(
-    theta: float, omega0: float, gain: float, omega_max: float
-) -> tuple[float, float]:
+def motor_speeds(theta: float, omega0: float, gain: float, omega_max: float) -> tuple[float, float]:
     """(left, right) motor speeds [rad/s] of algorithm 2: one side at omega0, the other at
     omega0 * exp(|p theta|); the faster side is the one away from the turn, and it is capped
     at omega_max."""

@@ -9,29 +9,37 @@ import sys
 from collections.abc import Iterator
 
 import numpy as np
-import pybullet as p
-from pybullet_utils.bullet_client import BulletClient
 
 from ._config import SimConfig
 from ._robot import RobotConfig
 
 
 @contextlib.contextmanager
-def _c_stdout_silenced() -> Iterator[None]:
+def _c_stdout_silenced(fds: tuple[int, ...] = (1,)) -> Iterator[None]:
     """PyBullet's C code prints "argv[0]=" to stdout on connect, which would corrupt JSON
-    written to stdout; send the C-level stdout to /dev/null meanwhile."""
+    written to stdout; send the C-level output on fds to /dev/null meanwhile."""
     libc = ctypes.CDLL(None)
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = [os.dup(fd) for fd in fds]
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        os.dup2(devnull, 1)
+        for fd in fds:
+            os.dup2(devnull, fd)
         yield
     finally:
         libc.fflush(None)
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, s in zip(fds, saved, strict=True):
+            os.dup2(s, fd)
+            os.close(s)
         os.close(devnull)
+
+
+# On import PyBullet prints "pybullet build time: ..." (to stdout, or to stderr once OMPL is
+# loaded): noise on every command line.
+with _c_stdout_silenced((1, 2)):
+    import pybullet as p
+    from pybullet_utils.bullet_client import BulletClient
 
 
 class SimError(ValueError):
@@ -60,8 +68,10 @@ class Simulation:
         terrain_faces = np.asarray(terrain_faces, dtype=np.int64)
         if terrain_vertices.ndim != 2 or terrain_vertices.shape[1] != 3:
             raise SimError(f"terrain vertices must be (V, 3), got {terrain_vertices.shape}")
-        if terrain_faces.ndim != 2 or terrain_faces.shape[1] != 3 or len(terrain_faces) == 0:
-            raise SimError(f"terrain faces must be (F>0, 3), got {terrain_faces.shape}")
+        if terrain_faces.ndim != 2 or terrain_faces.shape[1] != 3:
+            raise SimError(f"terrain faces must be (F, 3), got {terrain_faces.shape}")
+        if len(terrain_faces) == 0 and ground_height is None:
+            raise SimError("a world needs terrain triangles or a ground plane; it has neither")
         self.robot = robot
         self.cfg = cfg
         with _c_stdout_silenced():
@@ -72,14 +82,16 @@ class Simulation:
             fixedTimeStep=cfg.timestep, numSolverIterations=cfg.solver_iterations, numSubSteps=0
         )
         # Static terrain: one concave triangle mesh on a mass-0 body.
-        shape = bc.createCollisionShape(
-            p.GEOM_MESH,
-            vertices=terrain_vertices.tolist(),
-            indices=terrain_faces.reshape(-1).tolist(),
-            flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
-        )
-        self.terrain_id = bc.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
-        bc.changeDynamics(self.terrain_id, -1, lateralFriction=cfg.friction, restitution=0.0)
+        self.terrain_id = None
+        if len(terrain_faces):
+            shape = bc.createCollisionShape(
+                p.GEOM_MESH,
+                vertices=terrain_vertices.tolist(),
+                indices=terrain_faces.reshape(-1).tolist(),
+                flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+            )
+            self.terrain_id = bc.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
+            bc.changeDynamics(self.terrain_id, -1, lateralFriction=cfg.friction, restitution=0.0)
         self.ground_id = None
         if ground_height is not None:
             plane = bc.createCollisionShape(p.GEOM_PLANE)
