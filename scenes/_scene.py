@@ -20,6 +20,7 @@ from planning import PlannerConfig
 from sim import DriverConfig, SimConfig
 
 from ._errors import SceneError
+from ._openscad import DEFAULT_TIMEOUT, scad_variables
 
 LIBRARY = Path(__file__).parent / "library"
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
@@ -37,6 +38,14 @@ class TerrainObject:
     """Translation of the object's origin [m]."""
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     """Rotation as a unit quaternion, xyzw (the report's order)."""
+    timeout: float = DEFAULT_TIMEOUT
+    """Time limit of the OpenSCAD render [s] (scad only)."""
+    key: str = "terrain[0]"
+    """Where the object sits in its scene file, for error messages."""
+
+    @property
+    def kind(self) -> Literal["scad", "mesh"]:
+        return "scad" if self.source.suffix.lower() == ".scad" else "mesh"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -101,7 +110,9 @@ class _Ctx:
 
     def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required=()) -> dict:
         if not isinstance(value, dict):
-            raise self.fail(key, f"expected a mapping with keys {', '.join(allowed)}, got {value!r}")
+            raise self.fail(
+                key, f"expected a mapping with keys {', '.join(allowed)}, got {value!r}"
+            )
         unknown = [k for k in value if k not in allowed]
         if unknown:
             raise self.fail(
@@ -114,7 +125,11 @@ class _Ctx:
         return value
 
     def number(self, value: Any, key: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
             raise self.fail(key, f"expected a finite number, got {value!r}")
         return float(value)
 
@@ -144,7 +159,9 @@ class _Ctx:
             elif typing.get_origin(hint) is Literal:
                 options = typing.get_args(hint)
                 if v not in options:
-                    raise self.fail(f"{key}.{k}", f"{v!r} is not one of {', '.join(map(str, options))}")
+                    raise self.fail(
+                        f"{key}.{k}", f"{v!r} is not one of {', '.join(map(str, options))}"
+                    )
                 kwargs[k] = v
             elif hint is bool:
                 if not isinstance(v, bool):
@@ -173,7 +190,7 @@ def _pose(ctx: _Ctx, value: Any, key: str) -> tuple[float, float, float]:
 
 
 def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
-    data = ctx.mapping(value, key, ("scad", "mesh", "params", "position", "orientation"))
+    data = ctx.mapping(value, key, ("scad", "mesh", "params", "timeout", "position", "orientation"))
     kinds = [k for k in ("scad", "mesh") if k in data]
     if len(kinds) != 1:
         raise ctx.fail(key, "give exactly one of `scad: FILE.scad` or `mesh: FILE.stl|obj|ply|glb`")
@@ -187,11 +204,28 @@ def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
     if source.suffix.lower() not in allowed:
         raise ctx.fail(f"{key}.{kind}", f"{source.name}: expected a {' or '.join(allowed)} file")
     params = data.get("params") or {}
-    if not isinstance(params, dict) or (params and kind != "scad"):
-        raise ctx.fail(f"{key}.params", "expected a mapping of OpenSCAD variable overrides (scad only)")
+    if kind != "scad" and ("params" in data or "timeout" in data):
+        raise ctx.fail(
+            f"{key}.{'params' if 'params' in data else 'timeout'}", "only a scad object takes this"
+        )
+    if not isinstance(params, dict):
+        raise ctx.fail(
+            f"{key}.params", f"expected a mapping of OpenSCAD variable overrides, got {params!r}"
+        )
+    variables = scad_variables(source) if kind == "scad" else set()
     for name, v in params.items():
-        if not isinstance(v, int | float | bool | str) or not str(name).isidentifier():
-            raise ctx.fail(f"{key}.params.{name}", f"expected a number, boolean or string, got {v!r}")
+        if not isinstance(v, int | float | bool | str):
+            raise ctx.fail(
+                f"{key}.params.{name}", f"expected a number, boolean or string, got {v!r}"
+            )
+        if name not in variables:
+            raise ctx.fail(
+                f"{key}.params.{name}",
+                f"{source.name} has no such variable; its variables: {', '.join(sorted(variables))}",
+            )
+    timeout = ctx.number(data.get("timeout", DEFAULT_TIMEOUT), f"{key}.timeout")
+    if timeout <= 0:
+        raise ctx.fail(f"{key}.timeout", f"expected a positive number of seconds, got {timeout!r}")
     position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
     norm = math.sqrt(sum(c * c for c in q))
@@ -205,6 +239,8 @@ def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
         params=tuple(sorted(params.items())),
         position=position,  # type: ignore[arg-type]
         orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
+        timeout=timeout,
+        key=key,
     )
 
 
@@ -216,14 +252,18 @@ def load_scene(name_or_path: str | Path) -> Scene:
         raw = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise SceneError(f"{path}: not valid YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
     keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
             "planner", "sim", "driver", "seed")  # fmt: skip
     data = ctx.mapping(raw, "", keys, required=("terrain", "robot", "goal", "bounds"))
     terrain = data["terrain"]
-    if not isinstance(terrain, list) or not terrain:
-        raise ctx.fail("terrain", "expected a non-empty list of terrain objects")
-    robot = ctx.mapping(data["robot"], "robot", ("start",), required=("start",))
     ground = data.get("ground", 0.0)
+    if not isinstance(terrain, list) or (not terrain and ground is None):
+        raise ctx.fail(
+            "terrain", "expected a list of terrain objects (it may be empty only with a ground)"
+        )
+    robot = ctx.mapping(data["robot"], "robot", ("start",), required=("start",))
     routes = ctx.mapping(data.get("routes") or {}, "routes", tuple(data.get("routes") or {}))
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -249,6 +289,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     (lo, hi) = scene.bounds
     for label, pose in (("robot.start", scene.start), ("goal", scene.goal)):
         if not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
-            raise ctx.fail(label, f"({pose[0]}, {pose[1]}) lies outside bounds {list(lo)}..{list(hi)}")
+            raise ctx.fail(
+                label, f"({pose[0]}, {pose[1]}) lies outside bounds {list(lo)}..{list(hi)}"
+            )
     return scene
-

@@ -7,17 +7,23 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from planning import Footprint, HeightField, heightfield_from_mesh
+from planning import (
+    VALID,
+    Footprint,
+    HeightField,
+    check_states,
+    describe_state,
+    heightfield_from_mesh,
+)
 from sim import LEG_NAMES, RobotConfig, quat_to_matrix
 
 from ._errors import SceneError
+from ._mesh import clean_terrain_mesh, read_mesh
 from ._openscad import render_scad
 from ._scene import Scene, TerrainObject
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
-MAX_TERRAIN_EXTENT = 50.0
-"""A terrain wider than this [m] is almost certainly in millimetres, not metres."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,19 +53,16 @@ def footprint_of(robot: RobotConfig) -> Footprint:
     )
 
 
-def load_terrain_object(obj: TerrainObject) -> trimesh.Trimesh:
-    """One terrain object's mesh, placed in the world frame."""
+def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
+    """One terrain object's mesh, cleaned and placed in the world frame [m]."""
+    label = f"{scene_path}: {obj.key}.{obj.kind}"
     source = obj.source
-    if source.suffix.lower() == ".scad":
-        source = render_scad(source, dict(obj.params))
-    try:
-        mesh = trimesh.load(source, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        raise SceneError(f"{obj.source}: cannot read as a mesh: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise SceneError(f"{obj.source}: the mesh has no triangles")
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise SceneError(f"{obj.source}: the mesh has non-finite vertex coordinates")
+    if obj.kind == "scad":
+        try:
+            source = render_scad(source, dict(obj.params), timeout=obj.timeout)
+        except SceneError as exc:
+            raise SceneError(f"{label}: {exc}") from None
+    mesh = clean_terrain_mesh(read_mesh(source, label), label)
     transform = np.eye(4)
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position
@@ -68,17 +71,11 @@ def load_terrain_object(obj: TerrainObject) -> trimesh.Trimesh:
 
 
 def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
-    """All terrain objects of a scene merged into one cleaned mesh, world frame [m]."""
-    mesh = trimesh.util.concatenate([load_terrain_object(o) for o in scene.terrain])
+    """All terrain objects of a scene merged into one mesh, world frame [m] (maybe empty)."""
+    if not scene.terrain:
+        return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    mesh = trimesh.util.concatenate([load_terrain_object(o, scene.path) for o in scene.terrain])
     mesh.merge_vertices()
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.remove_unreferenced_vertices()
-    extent = float(np.max(mesh.extents))
-    if extent > MAX_TERRAIN_EXTENT:
-        raise SceneError(
-            f"{scene.path}: the terrain is {extent:.0f} m across; scenes are in metres, so this "
-            f"is most likely a model in millimetres (scale it by 0.001)"
-        )
     return mesh
 
 
@@ -96,7 +93,31 @@ def build_world(scene: Scene, robot: RobotConfig | None = None) -> World:
         resolution=HEIGHTFIELD_RESOLUTION,
         ground_height=scene.ground,
     )
-    return World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
+    world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
+    for key, pose in (("robot.start", scene.start), ("goal", scene.goal)):
+        problem = pose_problem(world, pose)
+        if problem:
+            raise SceneError(f"{scene.path}: {key}: {problem}")
+    return world
+
+
+def pose_problem(world: World, pose: tuple[float, float, float]) -> str:
+    """Why the robot cannot stand at pose (x [m], y [m], yaw [rad]), or "" if it can."""
+    xy = np.asarray(pose[:2], dtype=np.float64)
+    if not np.isfinite(world.heightfield.sample(xy)):
+        (x0, y0), (x1, y1) = world.heightfield.covered_bounds()
+        return (
+            f"({xy[0]:g}, {xy[1]:g}) is off the terrain: nothing to stand on there; the terrain "
+            f"covers x in [{x0:.2f}, {x1:.2f}], y in [{y0:.2f}, {y1:.2f}]"
+        )
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    state = np.asarray(pose, dtype=np.float64)
+    if check_states(hf, fp, cfg, state[None]).code[0] == VALID:
+        return ""
+    return (
+        f"the robot cannot stand at ({xy[0]:g}, {xy[1]:g}, {np.degrees(pose[2]):g} deg): "
+        f"{describe_state(hf, fp, cfg, state)}"
+    )
 
 
 def route_of(scene: Scene, path_xy: np.ndarray) -> str:

@@ -1,0 +1,69 @@
+"""Terrain meshes from files: read with trimesh, cleaned, and refused when absurd."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ._errors import SceneError
+
+MAX_TERRAIN_EXTENT = 50.0
+"""A terrain piece wider than this [m] is almost certainly in millimetres, not metres."""
+
+
+def read_mesh(path, label: str) -> trimesh.Trimesh:
+    """Read a mesh file (STL/OBJ/PLY/GLB; a multi-mesh scene is flattened) without processing.
+
+    label names the source in errors, e.g. "scene.yaml: terrain[0].mesh".
+    """
+    if Path(path).stat().st_size == 0:
+        raise SceneError(f"{label}: {path} is an empty file")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise SceneError(f"{label}: {path} cannot be read as a mesh: {exc}") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        kind = Path(path).suffix.lstrip(".").upper()
+        raise SceneError(
+            f"{label}: {path} contains no triangles: it is not a valid {kind} file, or an empty one"
+        )
+    return loaded
+
+
+def clean_terrain_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
+    """A copy with non-finite vertices, duplicate vertices and degenerate faces removed and the
+    faces wound consistently with normals outward (closed meshes) or upward (open surfaces).
+
+    Raises SceneError naming `label` when nothing usable is left or the size is absurd.
+    """
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    finite = np.all(np.isfinite(vertices), axis=1)
+    faces = faces[np.all(finite[faces], axis=1)]
+    if len(faces) == 0:
+        raise SceneError(f"{label}: the mesh has no triangles with finite coordinates")
+    out = trimesh.Trimesh(vertices, faces, process=False)
+    out.remove_unreferenced_vertices()  # drops the non-finite ones before they are compared
+    out.merge_vertices()
+    out.update_faces(out.nondegenerate_faces())
+    out.update_faces(out.unique_faces())
+    out.remove_unreferenced_vertices()
+    if len(out.faces) == 0:
+        raise SceneError(f"{label}: every triangle of the mesh is degenerate (zero area)")
+    extent = float(np.max(out.extents))
+    if extent > MAX_TERRAIN_EXTENT:
+        raise SceneError(
+            f"{label}: the mesh is {extent:.0f} m across; scenes are in metres, so this is "
+            f"most likely a model in millimetres (scale it by 0.001)"
+        )
+    if out.is_watertight:
+        trimesh.repair.fix_normals(out)  # consistent winding, outward (may flip all)
+    else:
+        # An open surface (a capture, a height map patch): wind it consistently, then turn it
+        # so its normals face up on the whole, as the top of a terrain does.
+        trimesh.repair.fix_winding(out)
+        if float((out.face_normals[:, 2] * out.area_faces).sum()) < 0:
+            out.invert()
+    return out
