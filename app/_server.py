@@ -134,13 +134,17 @@ class RoachApp:
         s, w, r = self.server.scene, self.world, self.world.robot
         scene = w.scene
         s.set_up_direction("+z")
-        s.add_mesh_simple(
-            "/terrain/mesh", w.mesh.vertices, w.mesh.faces, color=(196, 164, 120), flat_shading=True
-        )
+        if len(w.mesh.faces):
+            s.add_mesh_simple(
+                "/terrain/mesh", w.mesh.vertices, w.mesh.faces, color=(196, 164, 120),
+                flat_shading=True,
+            )  # fmt: skip
         if scene.ground is not None:
+            (lo, hi) = np.asarray(scene.bounds)
+            size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
             s.add_grid(
-                "/terrain/ground", width=6.0, height=6.0, cell_size=0.25,
-                position=(0.0, 0.0, scene.ground),
+                "/terrain/ground", width=float(size[0]), height=float(size[1]), cell_size=0.25,
+                position=(*((lo + hi) / 2), scene.ground),
             )  # fmt: skip
         self.robot_node = s.add_box(
             "/robot", color=(60, 60, 70),

@@ -54,6 +54,50 @@ def _cmd_scene_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_scene_check(args: argparse.Namespace) -> int:
+    from scenes import build_world, load_scene
+
+    failed = 0
+    for name in args.files:
+        try:
+            world = build_world(load_scene(name))
+        except SceneError as exc:
+            print(f"FAIL {name}: {exc}")
+            failed += 1
+            continue
+        m, sc = world.mesh, world.scene
+        size = "x".join(f"{v:.2f}" for v in m.extents) if len(m.faces) else "-"
+        print(
+            f"ok   {name}: {len(sc.terrain)} terrain object(s), {len(m.faces)} triangles, "
+            f"{size} m, ground {'none' if sc.ground is None else f'{sc.ground:g} m'}; "
+            f"start and goal stand on the terrain"
+        )
+    if failed:
+        print(f"{failed} of {len(args.files)} scene file(s) failed", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _cmd_scene_build(args: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from scenes import build_terrain_mesh, load_scene
+
+    out = Path(args.output)
+    formats = (".stl", ".obj", ".ply", ".glb")
+    if out.suffix.lower() not in formats:
+        raise SceneError(f"{out}: the output must end in one of {', '.join(formats)}")
+    mesh = build_terrain_mesh(load_scene(args.scene))
+    if len(mesh.faces) == 0:
+        raise SceneError(f"scene {args.scene!r} has no terrain objects, only a ground plane")
+    # Write beside the target and rename, so a failure leaves no half-written file.
+    tmp = out.with_name(f".{out.name}.part")
+    mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
+    os.replace(tmp, out)
+    print(f"wrote {out}: {len(mesh.faces)} triangles, bounds {mesh.bounds.round(4).tolist()} m")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="roachplan",
@@ -78,6 +122,15 @@ def build_parser() -> argparse.ArgumentParser:
     scene_sub = p.add_subparsers(dest="scene_command", required=True)
     q = scene_sub.add_parser("list", help="list library scenes")
     q.set_defaults(func=_cmd_scene_list)
+    q = scene_sub.add_parser(
+        "check", help="validate scene files: load, render, and check start and goal"
+    )
+    q.add_argument("files", nargs="+", metavar="FILE", help="scene .yaml files or library names")
+    q.set_defaults(func=_cmd_scene_check)
+    q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
+    q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
+    q.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj, .ply or .glb")
+    q.set_defaults(func=_cmd_scene_build)
     return parser
 
 

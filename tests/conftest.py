@@ -14,6 +14,13 @@ ARTIFACTS = ROOT / "test-artifacts"
 ROACHPLAN = [sys.executable, "-m", "app.cli"]
 
 
+def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run the `roachplan` command line from the repository root; never raises on failure."""
+    return subprocess.run(
+        [*ROACHPLAN, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False
+    )
+
+
 @pytest.fixture(scope="session")
 def world():
     from scenes import build_world, load_scene

@@ -41,7 +41,13 @@ def test_openscad_render_is_cached_and_parameters_render_anew():
 
 @pytest.mark.parametrize(
     ("xy", "z"),
-    [((0.0, -1.6), 0.0), ((0.0, -1.0), 0.1), ((0.75, 0.0), 0.2), ((0.0, 0.0), 0.0), ((0.3, 1.25), 0.05)],
+    [
+        ((0.0, -1.6), 0.0),
+        ((0.0, -1.0), 0.1),
+        ((0.75, 0.0), 0.2),
+        ((0.0, 0.0), 0.0),
+        ((0.3, 1.25), 0.05),
+    ],
 )
 def test_heightfield_follows_the_surface(world, xy, z):
     assert world.heightfield.sample(np.array(xy)) == pytest.approx(z, abs=2e-3)

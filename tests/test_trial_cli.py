@@ -3,21 +3,18 @@
 from __future__ import annotations
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
-from conftest import ROACHPLAN, ROOT
+from conftest import roachplan
 
 GAP_HALF_WIDTH = 0.5  # table C.1: bridges 1.0 m apart, centred on x = 0
 BRIDGE_HALF_LENGTH = 0.5
 
 
 def run_trial(seed: int, *extra: str) -> dict:
-    out = subprocess.run(
-        [*ROACHPLAN, "trial", "--scene", "double_bridge", "--seed", str(seed), "--json", *extra],
-        cwd=ROOT, capture_output=True, text=True, timeout=300, check=True,
-    )  # fmt: skip
+    out = roachplan("trial", "--scene", "double_bridge", "--seed", str(seed), "--json", *extra)
+    assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)
 
 
@@ -83,10 +80,7 @@ def test_another_seed_gives_another_path(trial_seed3):
 
 
 def test_unknown_scene_is_a_clear_error():
-    out = subprocess.run(
-        [*ROACHPLAN, "trial", "--scene", "no_such_scene", "--seed", "1"],
-        cwd=ROOT, capture_output=True, text=True, timeout=60, check=False,
-    )  # fmt: skip
+    out = roachplan("trial", "--scene", "no_such_scene", "--seed", "1")
     assert out.returncode == 2
     assert "unknown scene 'no_such_scene'" in out.stderr and "double_bridge" in out.stderr
     assert "Traceback" not in out.stderr

@@ -1,0 +1,220 @@
+"""The real OpenSCAD pipeline: the rough bridge's bumps, the cache, the confinement, the limit."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from scenes import SceneError, build_world, load_scene, render_scad
+from scenes._openscad import _sandbox_available, confined
+
+LIBRARY = Path(__file__).resolve().parent.parent / "scenes" / "library"
+
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch) -> Path:
+    """An empty render cache, so OpenSCAD really runs."""
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("ROACHPLAN_CACHE", str(cache))
+    return cache
+
+
+def rough_params(**changes) -> dict:
+    params = dict(load_scene("double_bridge_rough").terrain[0].params)
+    return {**params, **changes}
+
+
+def peaks(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
+    """Bump peaks (x, y, height above the bridge top [m]) per bridge."""
+    v = np.unique(mesh.vertices.round(9), axis=0)
+    on_bridge = (np.abs(v[:, 1]) < 0.5) & (np.abs(v[:, 0]) > 0.5) & (v[:, 2] > 0.2 + 1e-9)
+    p = v[on_bridge] - (0, 0, 0.2)
+    return {"left": p[p[:, 0] < 0], "right": p[p[:, 0] > 0]}
+
+
+def test_rough_bridge_bumps_follow_appendix_c2():
+    mesh = trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params()))
+    assert mesh.is_watertight
+    bumps = peaks(mesh)
+    for side, max_height in (("left", 0.015), ("right", 0.010)):
+        p = bumps[side]
+        # One peak per 2.5 cm cell of the 20 x 40 grid (a draw of exactly 0 would merge away).
+        assert len(p) >= 795
+        assert len(np.unique(p[:, 0].round(5))) == 20 and len(np.unique(p[:, 1].round(5))) == 40
+        assert np.allclose(np.diff(np.unique(p[:, 0].round(5))), 0.025)
+        assert np.all(p[:, 2] > 0) and np.all(p[:, 2] < max_height)
+        # Uniform on [0, max): the tallest of 800 draws is close to max, the mean near max / 2.
+        assert p[:, 2].max() > 0.97 * max_height
+        assert p[:, 2].mean() == pytest.approx(max_height / 2, rel=0.08)
+    assert bumps["left"][:, 2].mean() > bumps["right"][:, 2].mean() + 0.001
+
+
+def test_rough_bridge_renders_the_same_for_a_seed_and_differently_for_another(
+    tmp_path, monkeypatch
+):
+    meshes = []
+    for run, seed in enumerate((0, 0, 7)):
+        monkeypatch.setenv("ROACHPLAN_CACHE", str(tmp_path / f"cache{run}"))
+        meshes.append(
+            trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed)))
+        )
+    same, other = peaks(meshes[1]), peaks(meshes[2])
+    first = peaks(meshes[0])
+    for side in ("left", "right"):
+        np.testing.assert_array_equal(first[side], same[side])
+        a = {(round(x, 4), round(y, 4)): h for x, y, h in first[side]}
+        b = {(round(x, 4), round(y, 4)): h for x, y, h in other[side]}
+        equal = sum(abs(a[k] - b[k]) < 1e-9 for k in a.keys() & b.keys())
+        assert equal < 0.01 * len(a), f"{equal} of {len(a)} bumps unchanged by another seed"
+    np.testing.assert_array_equal(meshes[0].vertices, meshes[1].vertices)
+
+
+def test_the_cache_covers_files_the_model_reads(tmp_path, fresh_cache):
+    for name in ("heightmap.scad", "heightmap.dat"):
+        shutil.copy(LIBRARY / name, tmp_path / name)
+    first = render_scad(tmp_path / "heightmap.scad")
+    assert render_scad(tmp_path / "heightmap.scad") == first
+    dat = tmp_path / "heightmap.dat"
+    dat.write_text(dat.read_text().replace("2.500", "9.000"))
+    second = render_scad(tmp_path / "heightmap.scad")
+    assert second != first
+    assert trimesh.load(second).bounds[1][2] > trimesh.load(first).bounds[1][2]
+
+
+def test_the_heightmap_scene_is_a_surface_height_map():
+    mesh = trimesh.load(render_scad(LIBRARY / "heightmap.scad"))
+    # 81 rows x 61 columns 5 cm apart: 3 x 4 m, heights up to 14.5 cm, solid down to -1 cm.
+    np.testing.assert_allclose(mesh.bounds[:, :2], [[-1.5, -2.0], [1.5, 2.0]], atol=1e-9)
+    assert mesh.bounds[0][2] == pytest.approx(-0.01)
+    assert 0.12 < mesh.bounds[1][2] < 0.15
+
+
+@pytest.mark.parametrize(
+    ("files", "expected"),
+    [
+        (
+            {"m.scad": 'surface(file = "../outside.dat");'},
+            r"m\.scad, line 1: surface '\.\./outside\.dat': a model may only read files in its own folder",
+        ),
+        (
+            {"m.scad": 'import("/etc/passwd");'},
+            r"line 1: import '/etc/passwd': a model may only read files",
+        ),
+        ({"m.scad": "cube(1);\ninclude </etc/x.scad>"}, r"line 2: include '/etc/x\.scad'"),
+        (
+            {"m.scad": 'p = "/etc";\nimport(str(p, "/passwd"));'},
+            r"line 2: import: the file must be a literal string",
+        ),
+        ({"m.scad": 'linear_extrude(height = 1, file = "~/x.dxf");'}, r"linear_extrude '~/x\.dxf'"),
+        (
+            {"m.scad": "use <lib.scad>\ncube(1);", "lib.scad": 'import("sub/../../outside.dat");'},
+            r"lib\.scad, line 1: import 'sub/\.\./\.\./outside\.dat'",
+        ),
+        (
+            {"m.scad": 'surface(file = "link.dat");', "link.dat": "->outside.dat"},
+            r"surface 'link\.dat' leads outside the model's folder",
+        ),
+        (
+            {"m.scad": "include <MCAD/units.scad>\ncube(1);"},
+            r"include 'MCAD/units\.scad': no such file .*library includes",
+        ),
+    ],
+    ids=[
+        "dotdot",
+        "absolute",
+        "include-absolute",
+        "computed",
+        "home",
+        "via-use",
+        "symlink",
+        "system-library",
+    ],
+)
+def test_a_model_may_not_read_outside_its_folder(tmp_path, fresh_cache, files, expected):
+    (tmp_path / "outside.dat").write_text("1 2\n3 4\n")
+    model = tmp_path / "model"
+    model.mkdir()
+    for name, text in files.items():
+        if text.startswith("->"):
+            (model / name).symlink_to(tmp_path / text[2:])
+        else:
+            (model / name).write_text(text)
+    with pytest.raises(SceneError, match=expected):
+        render_scad(model / "m.scad")
+    assert not list(fresh_cache.glob("*.stl"))
+
+
+def test_openscad_errors_are_passed_through(tmp_path, fresh_cache):
+    (tmp_path / "bad.scad").write_text("cube(1);\nsphere(;\n")
+    with pytest.raises(
+        SceneError,
+        match=r"bad\.scad: OpenSCAD failed:\nERROR: Parser error: syntax error in file bad\.scad, line 2",
+    ):
+        render_scad(tmp_path / "bad.scad")
+
+
+def test_an_unknown_parameter_names_the_models_variables():
+    with pytest.raises(
+        SceneError,
+        match=r"parameter 'seperation' is not a variable of the model; its variables: .*separation",
+    ):
+        render_scad(LIBRARY / "double_bridge.scad", {"seperation": 0.8})
+
+
+def test_a_render_past_its_time_limit_is_killed(tmp_path, fresh_cache):
+    # A billion loop iterations: OpenSCAD would need minutes.
+    scad = tmp_path / "slow.scad"
+    scad.write_text(
+        "x = [for (i = [0:999]) for (j = [0:999]) for (k = [0:999]) if (i < 0) i];\ncube(1);\n"
+    )
+    with pytest.raises(
+        SceneError, match=r"slow\.scad: OpenSCAD did not finish within its time limit of 1 s"
+    ):
+        render_scad(scad, timeout=1.0)
+    running = subprocess.run(
+        ["pgrep", "-f", str(scad)], capture_output=True, text=True, check=False
+    )
+    assert running.stdout == ""
+    assert not list(fresh_cache.rglob("*.stl"))
+
+
+@pytest.mark.skipif(not _sandbox_available(), reason="no unprivileged user namespaces here")
+def test_the_sandbox_shows_the_model_folder_and_hides_the_rest():
+    # Belt and braces behind the static check: inside, only the model's folder is readable.
+    with (
+        tempfile.TemporaryDirectory(dir=Path.home()) as home_dir,
+        tempfile.TemporaryDirectory() as tmp_dir,
+    ):
+        model, work = Path(home_dir) / "model", Path(tmp_dir)
+        model.mkdir()
+        (model / "m.scad").write_text("cube(1);")
+        (Path(home_dir) / "secret.txt").write_text("secret")
+        (work / "secret.txt").write_text("secret")
+        argv = ["sh", "-c", f"cat m.scad; cat {home_dir}/secret.txt {tmp_dir}/secret.txt"]
+        out = subprocess.run(
+            confined(argv, model, work), capture_output=True, text=True, cwd=model, check=False
+        )
+    assert out.stdout == "cube(1);"
+    assert "No such file" in out.stderr
+
+
+def test_the_heightmap_worlds_height_field_reproduces_the_data_file():
+    world = build_world(load_scene("heightmap"))
+    rows = [
+        [float(v) for v in line.split()]
+        for line in (LIBRARY / "heightmap.dat").read_text().splitlines()
+        if line and not line.startswith("#")
+    ]
+    data = np.array(rows) / 100  # [m]; row 0 at y = -2, column 0 at x = -1.5
+    ys, xs = np.meshgrid(np.linspace(-2, 2, 81), np.linspace(-1.5, 1.5, 61), indexing="ij")
+    (x0, y0), (x1, y1) = world.heightfield.covered_bounds()
+    on = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)
+    xy = np.stack([xs[on], ys[on]], axis=-1)
+    assert on.sum() > 4000
+    np.testing.assert_allclose(world.heightfield.sample(xy), data[on], atol=1e-6)

@@ -1,0 +1,241 @@
+"""Scene files, the mesh pipeline and the scene library, against the real OpenSCAD and PyBullet."""
+
+from __future__ import annotations
+
+import copy
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+from conftest import roachplan
+
+from scenes import LIBRARY, SceneError, build_world, list_scenes, load_scene
+from sim import Simulation
+
+# -- every scene in the library -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list_scenes())
+def test_library_scene_loads_settles_and_walks_one_second(name):
+    world = build_world(load_scene(name))
+    scene = world.scene
+    x, y, yaw = scene.start
+    with Simulation(
+        world.mesh.vertices, world.mesh.faces, ground_height=scene.ground, robot=world.robot,
+        cfg=scene.sim,
+    ) as sim:  # fmt: skip
+        sim.reset(x, y, yaw)
+        pos, _ = sim.body_pose()
+        ground = float(world.heightfield.sample(pos[:2]))
+        # Settled on the surface under the start: standing on its legs, not hovering or sunk.
+        assert (
+            0.5 * world.robot.standing_height < pos[2] - ground < 1.5 * world.robot.standing_height
+        )
+        sim.set_leg_speeds(scene.driver.omega0, scene.driver.omega0)
+        lowest = np.inf
+        for _ in range(round(1.0 / scene.sim.timestep)):
+            sim.step()
+            pos, quat = sim.body_pose()
+            assert np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))
+            lowest = min(lowest, pos[2] - float(world.heightfield.sample(pos[:2])))
+    assert lowest > 0.0, "the body went below the terrain surface"
+    walked = np.dot(pos[:2] - (x, y), (np.cos(yaw), np.sin(yaw)))
+    assert walked > 0.05, f"walked only {walked:.3f} m forward in 1 s"
+
+
+# -- bad scene files -----------------------------------------------------------------------------
+
+
+@pytest.fixture
+def box_stl(tmp_path) -> Path:
+    """A 1 x 1 x 0.1 m block, its top at z = 0.1."""
+    path = tmp_path / "block.stl"
+    box = trimesh.creation.box((1.0, 1.0, 0.1))
+    box.apply_translation((0, 0, 0.05))
+    box.export(path)
+    return path
+
+
+VALID = {
+    "terrain": [{"mesh": "block.stl", "position": [0, 0, 0], "orientation": [0, 0, 0, 1]}],
+    "ground": None,
+    "robot": {"start": [0.0, -0.3, 90]},
+    "goal": [0.0, 0.3, 90],
+    "bounds": [[-0.3, -0.35], [0.3, 0.35]],
+    "planner": {"name": "rrtconnect"},
+}
+
+
+def write_scene(tmp_path: Path, data: dict) -> Path:
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def edited(**changes) -> dict:
+    data = copy.deepcopy(VALID)
+    for dotted, value in changes.items():
+        *parents, last = dotted.split("__")
+        node = data
+        for k in parents:
+            node = node[int(k)] if isinstance(node, list) else node[k]
+        if value is KeyError:
+            del node[last]
+        else:
+            node[int(last) if isinstance(node, list) else last] = value
+    return data
+
+
+def test_the_valid_example_loads(tmp_path, box_stl):
+    world = build_world(load_scene(write_scene(tmp_path, VALID)))
+    assert world.mesh.bounds[1][2] == pytest.approx(0.1)
+    assert world.scene.planner.name == "rrtconnect"
+
+
+@pytest.mark.parametrize(
+    ("data", "expected"),
+    [
+        (edited(colour="red"), ["colour", "unknown key", "terrain", "robot"]),
+        (edited(planner={"name": "rrt", "time_limt": 3}), ["planner.time_limt", "time_limit"]),
+        (edited(planner={"name": "dijkstra"}), ["planner.name", "'dijkstra'", "prm", "bitstar"]),
+        (edited(sim={"timestep": -0.001}), ["sim.timestep", "positive"]),
+        (edited(sim={"solver_iterations": 2.5}), ["sim.solver_iterations", "integer"]),
+        (edited(seed="zero"), ["seed", "non-negative integer", "'zero'"]),
+        (edited(goal=[0.0, "north"]), ["goal[1]", "number", "'north'"]),
+        (edited(robot__start=KeyError), ["robot.start", "missing"]),
+        (
+            edited(terrain__0__mesh="nothere.stl"),
+            ["terrain[0].mesh", "nothere.stl", "does not exist"],
+        ),
+        (
+            edited(terrain__0__mesh="scene.yaml"),
+            ["terrain[0].mesh", ".stl or .obj or .ply or .glb"],
+        ),
+        (
+            edited(terrain__0__orientation=[0, 0, 0, 2]),
+            ["terrain[0].orientation", "norm 2", "unit quaternion"],
+        ),
+        (edited(terrain__0__params={"h": 1}), ["terrain[0].params", "only a scad object"]),
+        (edited(terrain=[]), ["terrain", "empty only with a ground"]),
+        (edited(bounds=[[1, 1], [0, 0]]), ["bounds", "below max"]),
+        (edited(goal=[0.0, 2.0, 90]), ["goal", "outside bounds"]),
+    ],
+    ids=lambda v: v[0] if isinstance(v, list) else None,
+)
+def test_bad_scene_files_are_refused_with_the_key_and_what_is_accepted(
+    tmp_path, box_stl, data, expected
+):
+    path = write_scene(tmp_path, data)
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    message = str(err.value)
+    assert message.startswith(str(path))
+    for fragment in expected:
+        assert fragment in message
+
+
+def test_a_start_off_the_terrain_is_refused(tmp_path, box_stl):
+    data = edited(robot__start=[0.0, -0.6, 90], bounds=[[-0.3, -0.7], [0.3, 0.7]])
+    with pytest.raises(
+        SceneError, match=r"robot\.start: \(0, -0\.6\) is off the terrain.*covers x in"
+    ):
+        build_world(load_scene(write_scene(tmp_path, data)))
+
+
+def test_a_start_where_the_robot_cannot_stand_names_the_condition_and_leg(tmp_path, box_stl):
+    # Facing +x at the block's edge: the rear legs hang over nothing.
+    data = edited(robot__start=[-0.47, 0.0, 0], bounds=[[-0.5, -0.35], [0.3, 0.35]])
+    with pytest.raises(
+        SceneError, match=r"robot\.start: the robot cannot stand at .*\(leg [LR]3\)"
+    ):
+        build_world(load_scene(write_scene(tmp_path, data)))
+
+
+def test_a_mesh_in_millimetres_is_called_a_unit_error(tmp_path):
+    big = trimesh.creation.box((1000.0, 1000.0, 100.0))
+    big.export(tmp_path / "block.stl")
+    with pytest.raises(
+        SceneError, match=r"terrain\[0\]\.mesh: the mesh is 1000 m across.*millimetres"
+    ):
+        build_world(load_scene(write_scene(tmp_path, VALID)))
+
+
+@pytest.mark.parametrize(
+    ("content", "expected"),
+    [
+        (b"", "is an empty file"),
+        (b"solid x\nthis is not an stl\n", "contains no triangles: it is not a valid STL file"),
+    ],
+)
+def test_an_unreadable_mesh_file_is_refused(tmp_path, content, expected):
+    (tmp_path / "block.stl").write_bytes(content)
+    with pytest.raises(SceneError, match=rf"terrain\[0\]\.mesh: .*block\.stl {expected}"):
+        build_world(load_scene(write_scene(tmp_path, VALID)))
+
+
+def test_meshes_are_cleaned_and_turned_to_face_up(tmp_path):
+    # An open 2 x 2 quad grid, wound downward, with a duplicated corner, a degenerate face and
+    # a triangle on a NaN vertex: cleaning keeps exactly the 8 real triangles, facing up.
+    g = np.array([[x, y, 0.0] for y in (-0.5, 0, 0.5) for x in (-0.5, 0, 0.5)])
+    faces = []
+    for j in range(2):
+        for i in range(2):
+            a, b, c, d = 3 * j + i, 3 * j + i + 1, 3 * j + i + 4, 3 * j + i + 3
+            faces += [[a, c, b], [a, d, c]]  # clockwise from above: normals down
+    vertices = np.vstack([g, g[4], [np.nan, 0, 0]])  # 9 = copy of the centre, 10 = NaN
+    faces += [[0, 1, 1], [0, 10, 1]]
+    faces[0] = [0, 9, 1]  # was [0, 4, 1]: now on the duplicate of the centre
+    trimesh.Trimesh(vertices, faces, process=False).export(tmp_path / "block.ply")
+    data = edited(terrain__0__mesh="block.ply", robot__start=[0.0, -0.2, 90], goal=[0.0, 0.2, 90],
+                  bounds=[[-0.1, -0.3], [0.1, 0.3]], ground=-1.0)  # fmt: skip
+    mesh = build_world(load_scene(write_scene(tmp_path, data))).mesh
+    assert len(mesh.faces) == 8 and len(mesh.vertices) == 9
+    assert np.all(mesh.face_normals[:, 2] > 0.99)
+
+
+# -- the command line ------------------------------------------------------------------------------
+
+
+def test_scene_check_reports_each_file_and_fails_on_a_bad_one(tmp_path, box_stl):
+    bad = write_scene(tmp_path, edited(terrain__0__orientation=[0, 0, 1, 1]))
+    out = roachplan("scene", "check", "double_bridge", str(bad), "flat")
+    assert out.returncode == 1
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("ok   double_bridge: 1 terrain object(s), 32 triangles")
+    assert lines[1].startswith(f"FAIL {bad}: {bad}: terrain[0].orientation: quaternion")
+    assert lines[2].startswith("ok   flat: 0 terrain object(s)")
+    assert "Traceback" not in out.stderr
+
+
+def test_scene_build_exports_the_assembled_terrain(tmp_path):
+    out = roachplan("scene", "build", "double_bridge", "-o", str(tmp_path / "bridge.obj"))
+    assert out.returncode == 0, out.stderr
+    mesh = trimesh.load(tmp_path / "bridge.obj", force="mesh")
+    np.testing.assert_allclose(mesh.bounds, [[-1.0, -1.5, 0.0], [1.0, 1.5, 0.2]], atol=1e-6)
+    assert mesh.is_watertight
+
+
+def test_trial_takes_a_scene_file_path(tmp_path, box_stl):
+    out = roachplan("trial", "--scene", str(write_scene(tmp_path, VALID)), "--json")
+    assert out.returncode == 0, out.stderr
+    assert '"scene": "scene"' in out.stdout and '"outcome": "success"' in out.stdout
+
+
+def test_the_readme_example_is_a_valid_scene(tmp_path):
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    example = readme.split("## Scene files", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "example.yaml").write_text(example)
+    shutil.copy(LIBRARY / "double_bridge.scad", tmp_path)
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box((0.1, 0.1, 0.05)).export(tmp_path / "meshes" / "rock.stl")
+    world = build_world(load_scene(tmp_path / "example.yaml"))
+    assert [o.kind for o in world.scene.terrain] == ["scad", "mesh"]
+    assert dict(world.scene.terrain[0].params) == {"separation": 0.8, "left_bump_height": 0.015}
+    assert world.scene.planner.validity.max_slope_deg == 25.0
+    # The bridges moved 0.1 m closer to the middle; the 5 cm rock, centred on z = 0, at (0.8, 1.7).
+    hf = world.heightfield
+    assert hf.sample(np.array([-0.45, 0.0])) > 0.199 and hf.sample(np.array([-0.35, 0.0])) == 0.0
+    assert hf.sample(np.array([0.8, 1.7])) == pytest.approx(0.025)
