@@ -222,12 +222,12 @@ class RoachApp:
 
     def _table_markdown(self) -> str:
         head = (
-            "| # | seed | route | outcome | drive time [s] | energy [J] |\n"
-            "|---|---|---|---|---|---|\n"
+            "| # | seed | route | outcome | drive time [s] | energy [J] | rel. energy |\n"
+            "|---|---|---|---|---|---|---|\n"
         )
         rows = "".join(
             f"| {k + 1} | {t.seed} | {t.route or '-'} | {t.outcome} | {t.drive_time:.2f} "
-            f"| {t.energy:.3f} |\n"
+            f"| {t.energy:.3f} | {t.relative_energy:.2f} |\n"
             for k, t in enumerate(self.trials)
         )
         return "**Trials**\n\n" + head + (rows or "| | | | | | |\n")
@@ -328,7 +328,8 @@ class RoachApp:
         self.table.content = self._table_markdown()
         self.status.content = (
             f"Trial {len(self.trials)}: **{result.outcome}** ({result.reason}), "
-            f"{result.drive_time:.1f} s, {result.energy:.3f} J."
+            f"{result.drive_time:.1f} s, {result.energy:.3f} J "
+            f"({result.relative_energy:.2f} x a straight walk on the floor)."
         )
 
     def _draw_trajectory(self, traj) -> None:

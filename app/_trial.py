@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -12,9 +13,9 @@ import numpy as np
 
 from planning import PlannerConfig, PlanResult, plan_path
 from scenes import World, route_of
-from sim import DriveResult, Frame, Simulation, drive_path
+from sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
 
-TrialOutcome = Literal["success", "fell", "timeout", "no_path"]
+TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "no_path"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -35,6 +36,9 @@ class TrialResult:
     """Simulated time of the drive [s] (0 without a path)."""
     energy: float
     """Energy the leg motors spent [J] (Tong 2018, section 3.4)."""
+    relative_energy: float
+    """energy / (energy of walking straight on a flat floor for the start-goal distance) [-]:
+    the report's "relative unit"; ~1.0 = as cheap as the floor (0 without a drive)."""
     plan_time: float
     """Wall time spent planning [s]."""
     drive_wall_time: float
@@ -96,6 +100,15 @@ def drive(
         return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
 
 
+def reference_energy(
+    world: World, start: tuple[float, float, float], goal: tuple[float, float, float]
+) -> float:
+    """Energy [J] of walking straight on a flat floor over the start-goal distance."""
+    scene = world.scene
+    per_metre = reference_energy_per_metre(world.robot, scene.sim, scene.driver.omega0)
+    return per_metre * max(math.dist(start[:2], goal[:2]), 1e-6)
+
+
 def run_trial(
     world: World,
     *,
@@ -133,7 +146,7 @@ def finish_trial(
     if not planned.found:
         return TrialResult(
             **common, outcome="no_path", reason=planned.message, route="", drive_time=0.0,
-            energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
+            energy=0.0, relative_energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
         )  # fmt: skip
     t0 = time.perf_counter()
     driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame)
@@ -144,6 +157,7 @@ def finish_trial(
         route=route_of(world.scene, planned.path_xyz[:, :2]),
         drive_time=driven.drive_time,
         energy=driven.energy,
+        relative_energy=driven.energy / reference_energy(world, start, goal),
         drive_wall_time=time.perf_counter() - t0,
         path=tuple(tuple(p) for p in planned.path_xyz.tolist()),
         trajectory=driven.trajectory,

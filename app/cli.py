@@ -40,7 +40,8 @@ def _cmd_trial(args: argparse.Namespace) -> int:
         print(
             f"scene {result.scene}  seed {result.seed}  planner {result.planner}\n"
             f"outcome {result.outcome} ({result.reason})  route {result.route or '-'}\n"
-            f"drive time {result.drive_time:.2f} s  energy {result.energy:.4f} J  "
+            f"drive time {result.drive_time:.2f} s  energy {result.energy:.4f} J "
+            f"(relative {result.relative_energy:.3f})  "
             f"plan {result.plan_time:.2f} s  simulate {result.drive_wall_time:.2f} s wall"
         )
     return 0
@@ -98,6 +99,25 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ._calibrate import calibrate_turning
+
+    ratios = [float(r) for r in args.ratios.split(",")]
+    if any(r < 1.0 for r in ratios) or len(ratios) < 2:
+        raise SimError(f"--ratios {args.ratios!r}: give two or more right/left ratios >= 1")
+    samples, model = calibrate_turning(Path(args.out), ratios=ratios, duration=args.duration)
+    print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
+    for s in samples:
+        print(f"{s.ratio:6.2f} {s.distance:10.3f} {s.revolutions:7.3f} {s.curvature:13.3f}")
+    print(
+        f"fit: curvature = {model.slope:.3f} ln(ratio) {model.intercept:+.3f}  "
+        f"(R^2 {model.r_squared:.3f})\nwrote {args.out}/turning.csv, turning.png, turning_model.json"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="roachplan",
@@ -117,6 +137,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_trial)
+
+    p = sub.add_parser(
+        "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"
+    )
+    p.add_argument("--out", required=True, help="folder for turning.csv/.png/_model.json")
+    p.add_argument("--ratios", default="1,1.25,1.5,1.75,2,2.5,3", help="right/left speed ratios")
+    p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per ratio")
+    p.set_defaults(func=_cmd_calibrate_turning)
 
     p = sub.add_parser("scene", help="the scene library")
     scene_sub = p.add_subparsers(dest="scene_command", required=True)

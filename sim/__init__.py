@@ -1,5 +1,10 @@
 """Headless PyBullet simulation of a VelociRoACH-like hexapod and its path-following driver."""
 
+from ._calibration import TurningModel as TurningModel
+from ._calibration import TurningSample as TurningSample
+from ._calibration import fit_turning as fit_turning
+from ._calibration import reference_energy_per_metre as reference_energy_per_metre
+from ._calibration import turning_sweep as turning_sweep
 from ._config import DriverConfig as DriverConfig
 from ._config import SimConfig as SimConfig
 from ._driver import DriveResult as DriveResult

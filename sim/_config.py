@@ -25,8 +25,11 @@ class DriverConfig:
 
     omega0: float = 20.0
     """Base leg speed of both sides [rad/s]."""
-    gain: float = 1.2
-    """P gain p: the faster side turns at omega0 * exp(|p * theta|) [1/rad]."""
+    gain: float = 4.9
+    """P gain p: the faster side turns at omega0 * exp(|p * theta|) [1/rad]. Derived from the
+    turning calibration (`roachplan calibrate-turning`, appendix A): curvature = 4.09 ln(ratio)
+    on flat ground, and p = 2 / (4.09 * r_path) makes the controller drive the pure-pursuit arc
+    onto a waypoint r_path ahead (see sim/_calibration.py, TurningModel.gain_for)."""
     max_ratio: float = 3.0
     """Cap on the fast side's speed relative to omega0 [-]: the exponential of algorithm 2 grows
     without bound, a real motor does not."""
@@ -40,5 +43,9 @@ class DriverConfig:
     """Time between two controller updates [s]."""
     fall_drop: float = 0.08
     """A body this far below the planned surface under it has fallen off that surface [m]."""
+    stuck_time: float = 10.0
+    """A drive that makes no progress for this long is stuck [s]."""
+    stuck_distance: float = 0.02
+    """Progress: the next waypoint reached, or this much closer to it [m]."""
     frame_period: float = 1.0 / 30.0
     """Simulated time between two recorded trajectory samples [s]."""

@@ -100,7 +100,16 @@ class Simulation:
             )
             bc.changeDynamics(self.ground_id, -1, lateralFriction=cfg.friction, restitution=0.0)
         self.robot_id = self._create_robot()
+        self._cid = bc._client  # the hot loop calls pybullet directly, skipping the wrapper
         self._joints = list(range(6))
+        # The leg motor: a velocity servo with a position term, torque-limited. PyBullet's
+        # position gain multiplies (q* - q) / dt, so it scales with dt to keep the same 10 ms
+        # position time constant whatever the timestep.
+        self._motor = dict(
+            forces=[robot.max_motor_torque] * 6,
+            positionGains=[cfg.timestep / 0.01] * 6,
+            velocityGains=[1.0] * 6,
+        )
         self._sides = robot.leg_sides
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
@@ -187,33 +196,53 @@ class Simulation:
     def set_leg_speeds(self, left: float, right: float) -> None:
         """Command the left and right motors [rad/s], clipped to the motor's speed limit."""
         lim = self.robot.max_motor_speed
-        self._omega[:] = np.clip((left, right), -lim, lim)
+        self._omega[0] = min(max(left, -lim), lim)
+        self._omega[1] = min(max(right, -lim), lim)
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
-        dt = self.cfg.timestep
-        self._phase += self._omega * dt
-        self._apply_motors()
-        self._bc.stepSimulation()
-        self.time += dt
-        states = self._bc.getJointStates(self.robot_id, self._joints)
-        for j, (_, speed, _, torque) in enumerate(states):
-            self.energy_per_leg[j] += abs(speed * torque) * dt
+        self.advance(1)
+
+    def advance(self, n: int) -> None:
+        """Advance n timesteps at the current leg speeds, metering the motors' energy.
+
+        The hot loop of every drive: the legs' targets for all n steps are computed at once,
+        and each step costs three PyBullet calls (set targets, step, read joint states).
+        """
+        dt, cid, rid, joints = self.cfg.timestep, self._cid, self.robot_id, self._joints
+        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
+        leg_phase = self._phase[self._sides] + self._offsets
+        ahead = np.arange(1, n + 1)[:, None] * dt
+        q, dq_dphase = self.robot.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
+        targets, speeds = q.tolist(), (dq_dphase * omega).tolist()
+        power = []  # |omega * tau| per step and leg [W]
+        for k in range(n):
+            # Position control on each leg's share of its side's motor phase: the legs of a
+            # side stay locked in phase like the real linkage, and PyBullet reports the torque
+            # the motor applies (under torque control it would only echo our command).
+            p.setJointMotorControlArray(
+                rid, joints, p.POSITION_CONTROL, targetPositions=targets[k],
+                targetVelocities=speeds[k], physicsClientId=cid, **self._motor,
+            )  # fmt: skip
+            p.stepSimulation(physicsClientId=cid)
+            states = p.getJointStates(rid, joints, physicsClientId=cid)
+            power.append([abs(st[1] * st[3]) for st in states])
+        self.energy_per_leg += np.sum(power, axis=0) * dt
+        self._phase += self._omega * (n * dt)
+        self.time += n * dt
 
     def _apply_motors(self) -> None:
-        # Position control on each leg's share of its side's motor phase: the legs of a side
-        # stay locked in phase like the real linkage, and PyBullet reports the torque applied.
+        """Hold the legs at the targets of the current motor phase (while settling)."""
         q, dq_dphase = self.robot.leg_angle(self._phase[self._sides] + self._offsets)
-        self._bc.setJointMotorControlArray(
-            self.robot_id,
-            self._joints,
-            p.POSITION_CONTROL,
-            targetPositions=q.tolist(),
+        p.setJointMotorControlArray(
+            self.robot_id, self._joints, p.POSITION_CONTROL, targetPositions=q.tolist(),
             targetVelocities=(dq_dphase * self._omega[self._sides]).tolist(),
-            forces=[self.robot.max_motor_torque] * 6,
-            positionGains=[0.2] * 6,
-            velocityGains=[1.0] * 6,
-        )
+            physicsClientId=self._cid, **self._motor,
+        )  # fmt: skip
+
+    def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """(p_world_body [m], quat_world_body xyzw) as plain tuples: the controller's fast read."""
+        return p.getBasePositionAndOrientation(self.robot_id, physicsClientId=self._cid)
 
     def body_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """(p_world_body (3,) [m], quat_world_body (4,) xyzw)."""

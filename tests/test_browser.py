@@ -51,14 +51,15 @@ def test_plan_drive_reset_in_the_browser(page, artifacts):
     status.wait_for(timeout=120_000)
     page.screenshot(path=artifacts / "03-driven.png")
     text = status.inner_text()
-    assert re.search(r"\*?\*?(success|fell|timeout)", text), text
+    assert re.search(r"\*?\*?(success|fell|flipped|stuck|timeout)", text), text
     assert re.search(r"\d+\.\d{3} J", text), text
     # The trials table gained a row with the same outcome and an energy value.
     rows = page.get_by_role("row")
     assert rows.count() == 2, "header and one trial"
     cells = [c.strip() for c in rows.nth(1).inner_text().split("\t")]
-    assert cells[0] == "1" and cells[3] in ("success", "fell", "timeout"), cells
+    assert cells[0] == "1" and cells[3] in ("success", "fell", "flipped", "stuck", "timeout"), cells
     assert float(cells[5]) > 0, cells  # energy [J]
+    assert float(cells[6]) > 0.5, cells  # relative energy: at least half a floor walk
 
     page.get_by_role("button", name="Reset").click()
     page.get_by_text("Robot back at the start.").wait_for(timeout=30_000)

@@ -18,9 +18,8 @@ from sim import (
 )
 
 
-def yaw_matrix(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+def yaw_quat(yaw: float) -> tuple[float, float, float, float]:
+    return (0.0, 0.0, np.sin(yaw / 2), np.cos(yaw / 2))
 
 
 @pytest.mark.parametrize("yaw", [0.0, 0.7, -2.0, 3.0])
@@ -28,7 +27,7 @@ def test_heading_error_is_the_angle_to_the_target_left_positive(yaw):
     p = np.array([1.0, 2.0, 0.3])
     for rel in (0.0, 0.4, -1.2, 2.9):
         target = p + np.array([np.cos(yaw + rel), np.sin(yaw + rel), -0.3])
-        assert heading_error(p, yaw_matrix(yaw), target) == pytest.approx(rel, abs=1e-9)
+        assert heading_error(p, yaw_quat(yaw), target) == pytest.approx(rel, abs=1e-9)
 
 
 def test_motor_speeds_follow_algorithm_2():

@@ -33,11 +33,11 @@ def trial_seed3() -> dict:
 
 def test_trial_json_has_the_documented_fields(trial_seed3):
     d = trial_seed3
-    for key in ("seed", "planner", "path_found", "outcome", "drive_time", "energy", "path",
-                "trajectory"):  # fmt: skip
+    for key in ("seed", "planner", "path_found", "outcome", "drive_time", "energy",
+                "relative_energy", "path", "trajectory"):  # fmt: skip
         assert key in d, key
     assert d["seed"] == 3 and d["planner"] == "prm"
-    assert d["outcome"] in ("success", "fell", "timeout", "no_path")
+    assert d["outcome"] in ("success", "fell", "flipped", "stuck", "timeout", "no_path")
     assert d["path_found"] is True
     path = np.array(d["path"])
     traj = np.array(d["trajectory"])
@@ -47,6 +47,8 @@ def test_trial_json_has_the_documented_fields(trial_seed3):
     assert np.all(np.diff(traj[:, 0]) > 0), "trajectory time must increase"
     assert d["drive_time"] == pytest.approx(traj[-1, 0], abs=0.05)
     assert d["energy"] > 0
+    # Up ramps and over a bridge costs more than the straight floor walk of the same distance.
+    assert 1.0 < d["relative_energy"] < 5.0
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
