@@ -13,7 +13,7 @@ import numpy as np
 
 from planning import PlannerConfig, PlanResult, plan_path
 from scenes import World, route_of
-from sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
+from sim import DriveResult, Frame, drive_path, reference_energy_per_metre
 
 TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "no_path"]
 
@@ -89,13 +89,7 @@ def drive(
     """Drop the robot at start (default: the scene's) and drive it along path_xyz."""
     scene = world.scene
     x, y, yaw = start or scene.start
-    with Simulation(
-        world.mesh.vertices,
-        world.mesh.faces,
-        ground_height=scene.ground,
-        robot=world.robot,
-        cfg=scene.sim,
-    ) as sim:
+    with world.simulation() as sim:
         sim.reset(x, y, yaw)
         return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
 

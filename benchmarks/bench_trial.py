@@ -21,14 +21,7 @@ import pybullet as p
 
 from app._trial import plan
 from scenes import build_world, load_scene
-from sim import Simulation, drive_path
-
-
-def _world_sim(world) -> Simulation:
-    return Simulation(
-        world.mesh.vertices, world.mesh.faces, ground_height=world.scene.ground,
-        robot=world.robot, cfg=world.scene.sim,
-    )  # fmt: skip
+from sim import drive_path
 
 
 def main() -> None:
@@ -43,7 +36,7 @@ def main() -> None:
     drive_wall, setup_wall = [], []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        with _world_sim(world) as sim:
+        with world.simulation() as sim:
             sim.reset(*world.scene.start)
             t1 = time.perf_counter()
             result = drive_path(sim, planned.path_xyz, world.scene.driver)
@@ -55,7 +48,7 @@ def main() -> None:
     for name in ("walking", "standing"):
         best = []
         for _ in range(args.repeat):
-            with _world_sim(world) as sim:
+            with world.simulation() as sim:
                 sim.reset(*world.scene.start)
                 cid = sim._bc._client  # raw stepping: the floor we compare to
                 if name == "walking":

@@ -15,7 +15,7 @@ from planning import (
     describe_state,
     heightfield_from_mesh,
 )
-from sim import LEG_NAMES, RobotConfig, quat_to_matrix
+from sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
 
 from ._errors import SceneError
 from ._mesh import clean_terrain_mesh, read_mesh
@@ -40,6 +40,13 @@ class World:
     @property
     def footprint(self) -> Footprint:
         return footprint_of(self.robot)
+
+    def simulation(self) -> Simulation:
+        """A fresh PyBullet world of this terrain, ground and robot (the caller closes it)."""
+        return Simulation(
+            self.mesh.vertices, self.mesh.faces, ground_height=self.scene.ground,
+            robot=self.robot, cfg=self.scene.sim,
+        )  # fmt: skip
 
 
 def footprint_of(robot: RobotConfig) -> Footprint:

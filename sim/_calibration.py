@@ -62,9 +62,7 @@ def walk(
     robot: RobotConfig, cfg: SimConfig, left: float, right: float, duration: float
 ) -> TurningSample:
     """Walk on an open floor at fixed motor speeds [rad/s]; measure distance and turning."""
-    with Simulation(
-        np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), ground_height=0.0, robot=robot, cfg=cfg
-    ) as sim:  # fmt: skip
+    with Simulation.open_floor(robot, cfg) as sim:
         sim.reset(0.0, 0.0, 0.0)
         sim.set_leg_speeds(left, right)
         steps = max(1, round(0.02 / cfg.timestep))  # sample the pose every 20 ms
@@ -115,9 +113,7 @@ def reference_energy_per_metre(robot: RobotConfig, cfg: SimConfig, omega0: float
     distance is ~1.0 when the trial cost as much as walking straight on the floor.
     Cached per configuration (10 simulated seconds, about 0.2 s of wall time).
     """
-    with Simulation(
-        np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), ground_height=0.0, robot=robot, cfg=cfg
-    ) as sim:  # fmt: skip
+    with Simulation.open_floor(robot, cfg) as sim:
         sim.reset(0.0, 0.0, 0.0)
         sim.set_leg_speeds(omega0, omega0)
         start, _ = sim.pose()

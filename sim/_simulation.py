@@ -117,6 +117,12 @@ class Simulation:
         self.time = 0.0
         self.energy_per_leg = np.zeros(6)
 
+    @classmethod
+    def open_floor(cls, robot: RobotConfig, cfg: SimConfig) -> Simulation:
+        """A world with nothing but an endless floor at z = 0: calibration and reference walks."""
+        no_terrain = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        return cls(*no_terrain, ground_height=0.0, robot=robot, cfg=cfg)
+
     # -- construction -------------------------------------------------------------------------
 
     def _create_robot(self) -> int:
@@ -187,9 +193,7 @@ class Simulation:
         q0, _ = r.leg_angle(self._offsets)
         for j in self._joints:
             bc.resetJointState(self.robot_id, j, float(q0[j]), 0.0)
-        for _ in range(round(self.cfg.settle_time / self.cfg.timestep)):
-            self._apply_motors()
-            bc.stepSimulation()
+        self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
         self.time = 0.0
         self.energy_per_leg[:] = 0.0
 
@@ -231,22 +235,13 @@ class Simulation:
         self._phase += self._omega * (n * dt)
         self.time += n * dt
 
-    def _apply_motors(self) -> None:
-        """Hold the legs at the targets of the current motor phase (while settling)."""
-        q, dq_dphase = self.robot.leg_angle(self._phase[self._sides] + self._offsets)
-        p.setJointMotorControlArray(
-            self.robot_id, self._joints, p.POSITION_CONTROL, targetPositions=q.tolist(),
-            targetVelocities=(dq_dphase * self._omega[self._sides]).tolist(),
-            physicsClientId=self._cid, **self._motor,
-        )  # fmt: skip
-
     def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """(p_world_body [m], quat_world_body xyzw) as plain tuples: the controller's fast read."""
         return p.getBasePositionAndOrientation(self.robot_id, physicsClientId=self._cid)
 
     def body_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """(p_world_body (3,) [m], quat_world_body (4,) xyzw)."""
-        pos, quat = self._bc.getBasePositionAndOrientation(self.robot_id)
+        pos, quat = self.pose()
         return np.array(pos), np.array(quat)
 
     def joint_angles(self) -> np.ndarray:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
 from sim import (
     DriverConfig,
@@ -49,13 +48,9 @@ def test_next_waypoint_follows_algorithm_1():
 
 
 def test_roach_walks_forward_on_flat_ground_and_turns_toward_the_faster_side():
-    far = trimesh.creation.box((0.1, 0.1, 0.01))
-    far.apply_translation((20.0, 20.0, 0.0))  # a terrain piece out of the way
     results = {}
     for name, (left, right) in {"straight": (20.0, 20.0), "left": (20.0, 40.0)}.items():
-        with Simulation(
-            far.vertices, far.faces, ground_height=0.0, robot=RobotConfig(), cfg=SimConfig()
-        ) as sim:
+        with Simulation.open_floor(RobotConfig(), SimConfig()) as sim:
             sim.reset(0.0, 0.0, 0.0)
             sim.set_leg_speeds(left, right)
             while sim.time < 3.0:

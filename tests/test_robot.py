@@ -13,13 +13,9 @@ from conftest import roachplan
 from sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
 from sim._calibration import walk
 
-NO_TERRAIN = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-
 
 def flat_sim(robot: RobotConfig | None = None, cfg: SimConfig | None = None) -> Simulation:
-    return Simulation(
-        *NO_TERRAIN, ground_height=0.0, robot=robot or RobotConfig(), cfg=cfg or SimConfig()
-    )
+    return Simulation.open_floor(robot or RobotConfig(), cfg or SimConfig())
 
 
 def test_energy_meter_matches_a_leg_spinning_against_viscous_damping():

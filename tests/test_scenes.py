@@ -13,7 +13,6 @@ import yaml
 from conftest import roachplan
 
 from scenes import LIBRARY, SceneError, build_world, list_scenes, load_scene
-from sim import Simulation
 
 # -- every scene in the library -------------------------------------------------------------
 
@@ -23,10 +22,7 @@ def test_library_scene_loads_settles_and_walks_one_second(name):
     world = build_world(load_scene(name))
     scene = world.scene
     x, y, yaw = scene.start
-    with Simulation(
-        world.mesh.vertices, world.mesh.faces, ground_height=scene.ground, robot=world.robot,
-        cfg=scene.sim,
-    ) as sim:  # fmt: skip
+    with world.simulation() as sim:
         sim.reset(x, y, yaw)
         pos, _ = sim.body_pose()
         ground = float(world.heightfield.sample(pos[:2]))
