@@ -9,8 +9,9 @@ from dataclasses import dataclass
 class SimConfig:
     """Physics settings of one simulated world."""
 
-    timestep: float = 1.0 / 500.0
-    """Fixed physics step [s]."""
+    timestep: float = 1.0 / 1000.0
+    """Fixed physics step [s]. Halving it changes a 10 s floor walk by < 0.5 % in distance and
+    < 2.5 % in energy (README, timestep study)."""
     solver_iterations: int = 30
     """Constraint-solver iterations per step."""
     friction: float = 0.9
@@ -25,10 +26,10 @@ class DriverConfig:
 
     omega0: float = 20.0
     """Base leg speed of both sides [rad/s]."""
-    gain: float = 4.9
+    gain: float = 2.7
     """P gain p: the faster side turns at omega0 * exp(|p * theta|) [1/rad]. Derived from the
-    turning calibration (`roachplan calibrate-turning`, appendix A): curvature = 4.09 ln(ratio)
-    on flat ground, and p = 2 / (4.09 * r_path) makes the controller drive the pure-pursuit arc
+    turning calibration (`roachplan calibrate-turning`, appendix A): curvature = 7.46 ln(ratio)
+    on flat ground, and p = 2 / (7.46 * r_path) makes the controller drive the pure-pursuit arc
     onto a waypoint r_path ahead (see sim/_calibration.py, TurningModel.gain_for)."""
     max_ratio: float = 3.0
     """Cap on the fast side's speed relative to omega0 [-]: the exponential of algorithm 2 grows

@@ -49,6 +49,16 @@ class RobotConfig:
     """Torque limit of one leg drive [N m]."""
     max_motor_speed: float = 60.0
     """Motor speed limit [rad/s] (about 10 strides per second)."""
+    motor_kp: float = 0.02
+    """Proportional gain of a leg's servo on its commanded angle [N m / rad]."""
+    motor_kd: float = 3e-4
+    """Derivative gain of a leg's servo on its commanded speed [N m s / rad]. Bullet integrates
+    joint torques explicitly, so kd dt / I and kp dt^2 / I (I = drive_inertia) must stay well
+    below 1: these gains are stable at timesteps up to 2 ms."""
+    drive_inertia: float = 1e-6
+    """Moment of inertia of a leg with its share of motor rotor and gearbox, about the hip
+    [kg m^2]. A 1 g leg alone has ~2e-7; the geared motor's reflected inertia dominates (an
+    estimate: not published for the VelociRoACH)."""
     stance_sweep: float = 1.2
     """Angle a leg sweeps while its tripod is in stance [rad]. The motor phase maps to the leg
     angle through a Buehler clock: the stance arc takes half of every motor revolution and the

@@ -102,14 +102,6 @@ class Simulation:
         self.robot_id = self._create_robot()
         self._cid = bc._client  # the hot loop calls pybullet directly, skipping the wrapper
         self._joints = list(range(6))
-        # The leg motor: a velocity servo with a position term, torque-limited. PyBullet's
-        # position gain multiplies (q* - q) / dt, so it scales with dt to keep the same 10 ms
-        # position time constant whatever the timestep.
-        self._motor = dict(
-            forces=[robot.max_motor_torque] * 6,
-            positionGains=[cfg.timestep / 0.01] * 6,
-            velocityGains=[1.0] * 6,
-        )
         self._sides = robot.leg_sides
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
@@ -162,9 +154,14 @@ class Simulation:
                 linearDamping=0.0,
                 angularDamping=0.0,
             )
+        inertia = (r.drive_inertia,) * 3
         for j in range(6):
-            # Continuous joints: no limits; disable the default velocity motor.
-            bc.changeDynamics(robot_id, j, jointLowerLimit=1.0, jointUpperLimit=-1.0)
+            # Continuous joints: no limits; the leg carries its motor's reflected inertia; the
+            # default velocity motor is off, since our servo applies the torque itself.
+            bc.changeDynamics(
+                robot_id, j, jointLowerLimit=1.0, jointUpperLimit=-1.0,
+                localInertiaDiagonal=inertia,
+            )  # fmt: skip
             bc.setJointMotorControl2(robot_id, j, p.VELOCITY_CONTROL, force=0.0)
         return robot_id
 
@@ -211,27 +208,36 @@ class Simulation:
         """Advance n timesteps at the current leg speeds, metering the motors' energy.
 
         The hot loop of every drive: the legs' targets for all n steps are computed at once,
-        and each step costs three PyBullet calls (set targets, step, read joint states).
+        and each step costs three PyBullet calls (read joint states, apply torques, step).
         """
         dt, cid, rid, joints = self.cfg.timestep, self._cid, self.robot_id, self._joints
+        r = self.robot
+        kp, kd, limit = r.motor_kp, r.motor_kd, r.max_motor_torque
         omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
         leg_phase = self._phase[self._sides] + self._offsets
         ahead = np.arange(1, n + 1)[:, None] * dt
-        q, dq_dphase = self.robot.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
+        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
         targets, speeds = q.tolist(), (dq_dphase * omega).tolist()
-        power = []  # |omega * tau| per step and leg [W]
+        energy = self.energy_per_leg.tolist()
         for k in range(n):
-            # Position control on each leg's share of its side's motor phase: the legs of a
-            # side stay locked in phase like the real linkage, and PyBullet reports the torque
-            # the motor applies (under torque control it would only echo our command).
-            p.setJointMotorControlArray(
-                rid, joints, p.POSITION_CONTROL, targetPositions=targets[k],
-                targetVelocities=speeds[k], physicsClientId=cid, **self._motor,
-            )  # fmt: skip
-            p.stepSimulation(physicsClientId=cid)
+            # Each leg is a PD servo on its share of its side's motor phase: the legs of a
+            # side stay in phase like the real linkage. We apply the torque ourselves (PyBullet
+            # does not report it under torque control), so the meter integrates exactly the
+            # torque the physics received: E += |tau * dq/dt| dt (Tong 2018, 3.4).
             states = p.getJointStates(rid, joints, physicsClientId=cid)
-            power.append([abs(st[1] * st[3]) for st in states])
-        self.energy_per_leg += np.sum(power, axis=0) * dt
+            target, speed = targets[k], speeds[k]
+            torques = [0.0] * 6
+            for j in range(6):
+                q_j, dq_j = states[j][0], states[j][1]
+                tau = kp * (target[j] - q_j) + kd * (speed[j] - dq_j)
+                tau = limit if tau > limit else -limit if tau < -limit else tau
+                torques[j] = tau
+                energy[j] += abs(tau * dq_j) * dt
+            p.setJointMotorControlArray(
+                rid, joints, p.TORQUE_CONTROL, forces=torques, physicsClientId=cid
+            )
+            p.stepSimulation(physicsClientId=cid)
+        self.energy_per_leg[:] = energy
         self._phase += self._omega * (n * dt)
         self.time += n * dt
 

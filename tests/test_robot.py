@@ -54,14 +54,14 @@ def reference_walks(dt: float) -> np.ndarray:
     return np.array(out)
 
 
-def test_halving_the_timestep_changes_a_reference_walk_by_less_than_8_percent():
-    # Measured (README): distance -3.5 %, energy +7 %; heading drift is chaotic (+5 deg at
-    # 1/500 s, -13 deg at 1/1000 s, 0 deg at 1/2000 s), so it is only bounded here.
-    coarse, fine = reference_walks(1 / 500).mean(axis=0), reference_walks(1 / 1000).mean(axis=0)
-    assert fine[0] == pytest.approx(coarse[0], rel=0.05)  # distance
-    assert fine[2] == pytest.approx(coarse[2], rel=0.08)  # energy
-    assert abs(coarse[1]) < 20.0 and abs(fine[1]) < 20.0  # mean heading drift [deg]
-    assert coarse[0] > 1.0  # it walks: ~0.19 m/s, about two body lengths per second
+def test_halving_the_timestep_changes_a_reference_walk_by_a_few_percent():
+    # Measured (README): 1/1000 s -> 1/2000 s moves distance -0.4 %, energy +1.7 %, mean
+    # heading drift by < 0.1 deg.
+    coarse, fine = reference_walks(1 / 1000).mean(axis=0), reference_walks(1 / 2000).mean(axis=0)
+    assert fine[0] == pytest.approx(coarse[0], rel=0.02)  # distance
+    assert fine[2] == pytest.approx(coarse[2], rel=0.04)  # energy
+    assert abs(fine[1] - coarse[1]) < 3.0  # mean heading drift [deg]
+    assert coarse[0] > 1.0  # it walks: ~0.2 m/s, about two body lengths per second
 
 
 def test_more_right_speed_turns_left_harder():
@@ -80,7 +80,7 @@ def test_calibrate_turning_writes_the_sweep_and_the_gain_in_use(tmp_path):
     curvature = [float(r["curvature_per_m"]) for r in rows]
     assert abs(curvature[0]) < 0.5 and curvature[-1] > 3.0
     model = json.loads((tmp_path / "turning_model.json").read_text())
-    assert model["slope_per_m"] > 0 and model["r_squared"] > 0.8
+    assert model["slope_per_m"] > 0 and model["r_squared"] > 0.7
     # The driver's default gain is the one this calibration derives (p = 2 / (slope r_path)).
     assert model["gain"] == pytest.approx(DriverConfig().gain, rel=0.05)
     assert (tmp_path / "turning.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -108,7 +108,7 @@ def test_a_robot_that_makes_no_progress_is_stuck():
     assert "no progress for 3 s" in result.reason
 
 
-def test_a_straight_path_on_the_floor_costs_a_little_more_than_the_reference_walk():
+def test_a_straight_path_on_the_floor_costs_about_one_relative_unit():
     from sim import reference_energy_per_metre
 
     with flat_sim() as sim:
@@ -116,6 +116,7 @@ def test_a_straight_path_on_the_floor_costs_a_little_more_than_the_reference_wal
         result = drive_path(sim, STRAIGHT, DriverConfig())
     assert result.outcome == "success"
     per_metre = reference_energy_per_metre(RobotConfig(), SimConfig(), DriverConfig().omega0)
-    # Open-loop straight walking is the unit; the controller's steering corrections add some
-    # (measured 1.27 on this 1 m path).
-    assert 1.0 < result.energy / (per_metre * 1.0) < 1.5
+    # Open-loop straight walking is the unit, so a controlled straight walk of 1 m costs ~1.0
+    # (measured 1.00: the drive stops 5 cm short, steering adds about as much). A meter that
+    # dropped a leg, or counted the swing twice, would be far from 1.
+    assert 0.9 < result.energy / (per_metre * 1.0) < 1.15
