@@ -12,7 +12,7 @@ from typing import Literal
 import numpy as np
 
 from planning import PlannerConfig, PlanResult, plan_path
-from scenes import World, route_of
+from scenes import World
 from sim import DriveResult, Frame, drive_path, reference_energy_per_metre
 
 TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "no_path"]
@@ -76,7 +76,58 @@ def plan(
         bounds=scene.bounds,
         cfg=planner or scene.planner,
         seed=seed,
+        # The scene's standable map is from the scene's start; another start may lie elsewhere.
+        regions=world.regions if start is None or start == scene.start else None,
     )
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class LabelledPlan:
+    """One of several distinct plans, with the route it takes."""
+
+    route: str
+    plan: PlanResult
+
+
+def plan_many(
+    world: World,
+    count: int,
+    *,
+    seed: int,
+    start: tuple[float, float, float] | None = None,
+    goal: tuple[float, float, float] | None = None,
+    planner: PlannerConfig | None = None,
+    max_attempts: int | None = None,
+    min_separation: float = 0.02,
+) -> list[LabelledPlan]:
+    """Up to `count` distinct paths, planned with seeds seed, seed + 1, ... (each path's own
+    seed re-plans it alone), each labelled with its route (World.route).
+
+    Distinct: the mean distance between two paths, resampled at 50 points by arc length, is at
+    least min_separation [m]. Stops after max_attempts plans (default 3 count + 10).
+    """
+    out: list[LabelledPlan] = []
+    shapes: list[np.ndarray] = []
+    attempts = max_attempts if max_attempts is not None else 3 * count + 10
+    for k in range(attempts):
+        if len(out) == count:
+            break
+        planned = plan(world, seed=seed + k, start=start, goal=goal, planner=planner)
+        if not planned.found:
+            continue
+        shape = _resample(planned.path_xyz[:, :2], 50)
+        if any(np.mean(np.linalg.norm(shape - s, axis=1)) < min_separation for s in shapes):
+            continue
+        shapes.append(shape)
+        out.append(LabelledPlan(route=world.route(planned.path_xyz[:, :2]), plan=planned))
+    return out
+
+
+def _resample(xy: np.ndarray, n: int) -> np.ndarray:
+    """n points evenly spaced by arc length along the polyline xy ((K, 2)) [m]."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    t = np.linspace(0.0, s[-1], n)
+    return np.column_stack([np.interp(t, s, xy[:, 0]), np.interp(t, s, xy[:, 1])])
 
 
 def drive(
@@ -148,7 +199,7 @@ def finish_trial(
         **common,
         outcome=driven.outcome,
         reason=driven.reason,
-        route=route_of(world.scene, planned.path_xyz[:, :2]),
+        route=world.route(planned.path_xyz[:, :2]),
         drive_time=driven.drive_time,
         energy=driven.energy,
         relative_energy=driven.energy / reference_energy(world, start, goal),

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+
+import numpy as np
 
 from planning import PLANNER_NAMES, PlanningError
 from scenes import SceneError, list_scenes
@@ -44,6 +47,79 @@ def _cmd_trial(args: argparse.Namespace) -> int:
             f"(relative {result.relative_energy:.3f})  "
             f"plan {result.plan_time:.2f} s  simulate {result.drive_wall_time:.2f} s wall"
         )
+    return 0
+
+
+def _pose(text: str | None, flag: str) -> tuple[float, float, float] | None:
+    """'x,y,yaw_deg' -> (x [m], y [m], yaw [rad])."""
+    if text is None:
+        return None
+    try:
+        x, y, yaw = (float(v) for v in text.split(","))
+    except ValueError:
+        raise PlanningError(f"{flag} {text!r}: expected x,y,yaw_deg, e.g. 0,-1.6,90") from None
+    return (x, y, math.radians(yaw))
+
+
+def _planner_config(scene, args: argparse.Namespace):
+    import dataclasses
+
+    changes = {"name": args.planner} if args.planner else {}
+    for flag in ("simplify", "smooth", "optimize"):
+        if getattr(args, flag) is not None:
+            changes[flag] = getattr(args, flag)
+    if args.time_limit is not None:
+        if args.time_limit <= 0:
+            raise PlanningError(f"--time-limit {args.time_limit}: must be > 0 seconds")
+        changes["time_limit"] = args.time_limit
+    return dataclasses.replace(scene.planner, **changes)
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from scenes import build_world, load_scene
+
+    from ._trial import plan_many
+
+    if args.count < 1:
+        raise PlanningError(f"--count {args.count}: must be 1 or more")
+    scene = load_scene(args.scene)
+    world = build_world(scene)
+    planner = _planner_config(scene, args)
+    seed = scene.seed if args.seed is None else args.seed
+    start, goal = _pose(args.start, "--start"), _pose(args.goal, "--goal")
+    plans = plan_many(world, args.count, seed=seed, start=start, goal=goal, planner=planner)
+    rows = [
+        {
+            "route": lp.route,
+            "seed": lp.plan.seed,
+            "plan_time": round(lp.plan.plan_time, 4),
+            "length_m": round(
+                float(np.sum(np.linalg.norm(np.diff(lp.plan.path_xyz, axis=0), axis=1))), 4
+            ),
+            "states": lp.plan.states.round(5).tolist(),
+            "path": lp.plan.path_xyz.round(5).tolist(),
+        }
+        for lp in plans
+    ]
+    if args.json:
+        out = {"scene": scene.name, "planner": planner.name, "seed": seed}
+        if args.count == 1 and rows:
+            out.update(rows[0])
+        out["paths"] = rows
+        print(json.dumps(out))
+    else:
+        for r in rows:
+            print(
+                f"seed {r['seed']:4d}  route {r['route']:14s} {len(r['path']):4d} waypoints  "
+                f"{r['length_m']:.2f} m  planned in {r['plan_time']:.3f} s"
+            )
+    if len(rows) < args.count:
+        print(
+            f"roachplan: found {len(rows)} distinct path(s) of the {args.count} asked for "
+            f"({planner.name}, seeds from {seed})",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
@@ -137,6 +213,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_trial)
+
+    p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
+    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--planner", choices=PLANNER_NAMES, default=None, help="default: the scene's")
+    p.add_argument("--seed", type=int, default=None, help="first seed (default: the scene's)")
+    p.add_argument("--count", type=int, default=1, help="number of distinct paths, by route")
+    p.add_argument("--start", default=None, help="x,y,yaw_deg (default: the scene's)")
+    p.add_argument("--goal", default=None, help="x,y,yaw_deg (default: the scene's)")
+    p.add_argument("--time-limit", type=float, default=None, help="per plan [s]")
+    for flag, what in (
+        ("simplify", "shortcut the path"),
+        ("smooth", "B-spline smooth the path"),
+        ("optimize", "let optimizing planners refine to their budget"),
+    ):
+        p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None, help=what)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser(
         "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"

@@ -9,6 +9,10 @@ from ._ompl import PlanningError as PlanningError
 from ._ompl import PlanResult as PlanResult
 from ._ompl import plan_path as plan_path
 from ._ompl import waypoints_on_surface as waypoints_on_surface
+from ._regions import StandableMap as StandableMap
+from ._regions import homology_signature as homology_signature
+from ._regions import signature_label as signature_label
+from ._regions import standable_map as standable_map
 from ._validity import BODY_HEIGHT as BODY_HEIGHT
 from ._validity import COLLISION as COLLISION
 from ._validity import CONDITION_NAMES as CONDITION_NAMES

@@ -4,13 +4,19 @@ We use OMPL 1.7.0's Python bindings because they let a state-space sampler writt
 reach every planner (`space.setStateSamplerAllocator`), and they expose STRIDE, LazyPRM, SPARS,
 EST and SBL, which the 2.x wheels do not.
 
-Determinism: our sampler draws from a numpy Generator seeded by the trial seed; OMPL's own
-process-global RNG (used e.g. for RRT's goal bias and PRM's roadmap expansion) is seeded from the
-same seed, which takes effect only before OMPL's first random draw in a process, so a plan is
-reproducible when it runs in a fresh process (the CLI and the app's planning worker do).
-Anytime planners stop on an iteration budget rather than on the clock, and PRM's roadmap is grown
-in this thread in fixed batches (OMPL's PRM.solve grows it in a second thread and stops whenever
-that thread notices a solution, which is timing-dependent).
+Determinism: our sampler draws from a numpy Generator seeded by the plan's seed; OMPL's own
+process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, BIT*'s
+samples, the path simplifier) is seeded from the same seed, which takes effect only before
+OMPL's first random draw in a process; so every plan runs in a child forked from a process
+that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
+the clock, optimizing planners at their first solution unless asked to optimize, and PRM's and
+PRM*'s roadmaps are grown in this thread in fixed batches (OMPL's PRM.solve grows it in a second
+thread and stops whenever that thread notices a solution, which is timing-dependent).
+
+Which planners call the terrain sampler (tests/test_planning.py checks it): all of them except
+BIT*, whose informed sampler the 1.7 bindings cannot route to Python (it draws (x, y, yaw)
+uniformly over the bounds from OMPL's seeded RNG; its states are still projected onto the
+terrain and checked by the same validity checker).
 """
 
 from __future__ import annotations
@@ -23,8 +29,12 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from scipy import ndimage
+
 from ._heightfield import HeightField
+from ._isolated import run_isolated
 from ._ompl_import import ob, og, ou
+from ._regions import StandableMap, homology_signature, standable_map
 from ._validity import Footprint, ValidityConfig, check_states, describe_state
 
 PlannerName = Literal[
@@ -74,7 +84,13 @@ class PlannerConfig:
     check_resolution: float = 0.01
     """Spacing of validity checks along a motion [m]."""
     simplify: bool = False
-    """Shortcut and smooth the path (the report drove raw PRM paths)."""
+    """Shortcut the path: drop needless vertices, then try shortcuts between random pairs of
+    points (the report drove raw PRM paths, so off by default)."""
+    smooth: bool = False
+    """Round the path's corners with B-spline smoothing, keeping it valid."""
+    optimize: bool = False
+    """Optimizing planners (RRT*, PRM*, BIT*, ...) refine path length until the iteration
+    budget instead of stopping at their first solution."""
     waypoint_spacing: float = 0.05
     """Spacing of the waypoints handed to the driver [m]."""
     validity: ValidityConfig = field(default_factory=ValidityConfig)
@@ -96,51 +112,87 @@ class PlanResult:
     path_xyz: np.ndarray
     """(M, 3) waypoints every `waypoint_spacing`, z on the terrain surface [m]; empty when not found."""
     plan_time: float
-    """Wall time spent planning [s]."""
+    """Wall time spent planning [s] (for a non-optimizing plan: time to the first solution)."""
     message: str
     """Why planning failed, or a note on the solution."""
+    signature: tuple[int, ...] = ()
+    """Homology signature of the path round the terrain's holes (see _regions); () when not found."""
+    validity_checks: int = 0
+    """States whose validity was computed [-]."""
+    validity_time: float = 0.0
+    """Wall time spent computing validity [s]."""
+    sampler_calls: int = 0
+    """Samples drawn from the terrain sampler [-]."""
 
 
 class _TerrainSampler(ob.StateSampler):
-    """Samples (x, y, yaw) uniformly over the planning bounds; height, roll and pitch follow from
-    projecting the robot onto the terrain in the validity checker (Tong 2018, section 4.4)."""
+    """The terrain-projected sampler (Tong 2018, section 4.4): (x, y) uniform over the cells where
+    the robot can stand, yaw uniform; height, roll and pitch follow from projecting the robot
+    onto the terrain, which the validity checker does.
 
-    def __init__(self, space: ob.StateSpace, rng: np.random.Generator, lo, hi) -> None:
+    Uniform samples are drawn 256 at a time and checked in one vectorised call; the validity
+    checker then finds their verdict in `known` instead of checking them one by one.
+    """
+
+    BLOCK = 256
+
+    def __init__(self, space, rng: np.random.Generator, cells: np.ndarray, cell: float,
+                 lo, hi, check) -> None:  # fmt: skip
         super().__init__(space)
-        self._rng, self._lo, self._hi = rng, np.asarray(lo), np.asarray(hi)
+        self._rng, self._cells, self._cell = rng, cells, cell
+        self._lo, self._hi, self._check = np.asarray(lo), np.asarray(hi), check
+        self._block: list = []
+        self.known: dict[tuple[float, float, float], bool] = {}
         self.calls = 0
 
-    def _set(self, state, x: float, y: float, yaw: float) -> None:
-        state.setX(float(np.clip(x, self._lo[0], self._hi[0])))
-        state.setY(float(np.clip(y, self._lo[1], self._hi[1])))
-        state.setYaw(float((yaw + np.pi) % (2 * np.pi) - np.pi))
+    def _clip(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
+        return (
+            min(max(float(x), self._lo[0]), self._hi[0]),
+            min(max(float(y), self._lo[1]), self._hi[1]),
+            float((yaw + np.pi) % (2 * np.pi) - np.pi),
+        )
+
+    @staticmethod
+    def _set(state, xyyaw: tuple[float, float, float]) -> None:
+        state.setX(xyyaw[0])
+        state.setY(xyyaw[1])
+        state.setYaw(xyyaw[2])
+
+    def _refill(self) -> None:
+        rng, n = self._rng, self.BLOCK
+        centre = self._cells[rng.integers(len(self._cells), size=n)]
+        xy = centre + rng.uniform(-self._cell / 2, self._cell / 2, size=(n, 2))
+        block = [self._clip(x, y, a) for (x, y), a in zip(xy, rng.uniform(-np.pi, np.pi, n))]
+        valid = self._check(np.array(block))
+        self.known.update(zip(block, valid.tolist(), strict=True))
+        self._block = block[::-1]
 
     def sampleUniform(self, state) -> None:
         self.calls += 1
-        x, y = self._rng.uniform(self._lo, self._hi)
-        self._set(state, x, y, self._rng.uniform(-np.pi, np.pi))
+        if not self._block:
+            self._refill()
+        self._set(state, self._block.pop())
 
     def sampleUniformNear(self, state, near, distance: float) -> None:
         self.calls += 1
         d = self._rng.uniform(-distance, distance, size=3)
-        self._set(state, near.getX() + d[0], near.getY() + d[1], near.getYaw() + d[2])
+        self._set(state, self._clip(near.getX() + d[0], near.getY() + d[1], near.getYaw() + d[2]))
 
     def sampleGaussian(self, state, mean, std_dev: float) -> None:
         self.calls += 1
         d = self._rng.normal(0.0, std_dev, size=3)
-        self._set(state, mean.getX() + d[0], mean.getY() + d[1], mean.getYaw() + d[2])
+        self._set(state, self._clip(mean.getX() + d[0], mean.getY() + d[1], mean.getYaw() + d[2]))
 
 
 class _BatchMotionValidator(ob.MotionValidator):
     """Checks every state along a motion in one vectorised call instead of one Python callback
     per state: motions hold most of a planner's validity checks."""
 
-    def __init__(self, si, hf: HeightField, fp: Footprint, vcfg: ValidityConfig, resolution: float):
+    def __init__(self, si, fp: Footprint, check, resolution: float):
         super().__init__(si)
-        self._hf, self._fp, self._vcfg, self._res = hf, fp, vcfg, resolution
+        self._check, self._res = check, resolution
         # A yaw change moves the outermost body point by radius * dyaw.
         self._radius = float(np.max(np.hypot(fp.feet_xy[:, 0], fp.feet_xy[:, 1])))
-        self.states_checked = 0
 
     def checkMotion(self, s1, s2, *_last_valid) -> bool:
         a = np.array([s1.getX(), s1.getY(), s1.getYaw()])
@@ -150,8 +202,17 @@ class _BatchMotionValidator(ob.MotionValidator):
         n = max(1, int(np.ceil(length / self._res)))
         f = np.arange(1, n + 1)[:, None] / n  # the motion's end state included, its start not
         states = a + f * np.array([b[0] - a[0], b[1] - a[1], dyaw])
-        self.states_checked += n
-        return bool(check_states(self._hf, self._fp, self._vcfg, states).valid.all())
+        return bool(self._check(states).all())
+
+
+class _TerrainSpace(ob.SE2StateSpace):
+    """SE(2) whose *default* sampler is the terrain sampler too: informed samplers (InformedRRT*)
+    ask the space for its default sampler, bypassing the allocator."""
+
+    default_sampler = None
+
+    def allocDefaultStateSampler(self):
+        return self.default_sampler(self)
 
 
 def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
@@ -206,6 +267,21 @@ def _roadmap_path(si: ob.SpaceInformation, planner: og.PRM) -> list | None:
     return [pd.getVertex(v).getState() for v in reversed(chain)]
 
 
+class _Checker:
+    """Vectorised validity of (N, 3) states, counting states and time for the benchmark."""
+
+    def __init__(self, hf: HeightField, fp: Footprint, vcfg: ValidityConfig) -> None:
+        self._args = (hf, fp, vcfg)
+        self.states, self.seconds = 0, 0.0
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        t = time.perf_counter()
+        valid = check_states(*self._args, states).valid
+        self.seconds += time.perf_counter() - t
+        self.states += len(states)
+        return valid
+
+
 def plan_path(
     hf: HeightField,
     fp: Footprint,
@@ -215,75 +291,118 @@ def plan_path(
     bounds: tuple[tuple[float, float], tuple[float, float]],
     cfg: PlannerConfig,
     seed: int,
+    regions: StandableMap | None = None,
 ) -> PlanResult:
     """Plan a path for the robot's (x, y, yaw) from start to goal over the height field.
 
-    bounds: ((xmin, ymin), (xmax, ymax)) of the body centre [m]. Raises PlanningError when the
-    start or goal is itself invalid (naming the failed condition); returns found=False when the
-    planner gives up.
+    bounds: ((xmin, ymin), (xmax, ymax)) of the body centre [m]; regions: the standable map of
+    these bounds from start (computed when not given; pass it to save ~50 ms per plan).
+    Raises PlanningError when the start or goal is itself invalid (naming the failed condition
+    and leg); returns found=False when the planner gives up. Runs in a forked child process,
+    so the same seed gives the same plan whatever ran in this process before.
     """
-    t0 = time.perf_counter()
     vcfg = cfg.validity
+    (xa, ya), (xb, yb) = bounds
     for label, pose in (("start", start), ("goal", goal)):
+        if not (xa <= pose[0] <= xb and ya <= pose[1] <= yb):
+            raise PlanningError(
+                f"{label} ({pose[0]:.3f}, {pose[1]:.3f}) is invalid: outside the planning area "
+                f"x in [{xa:g}, {xb:g}], y in [{ya:g}, {yb:g}]"
+            )
         verdict = describe_state(hf, fp, vcfg, np.asarray(pose))
         if verdict != "valid":
             raise PlanningError(
                 f"{label} ({pose[0]:.3f}, {pose[1]:.3f}, yaw {np.degrees(pose[2]):.0f} deg) "
                 f"is invalid: {verdict}"
             )
-    ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)  # OMPL rejects seed 0
+    return run_isolated(_plan_here, hf, fp, start, goal, bounds, cfg, seed, regions)
+
+
+def _plan_here(hf, fp, start, goal, bounds, cfg: PlannerConfig, seed: int, regions) -> PlanResult:
+    t0 = time.perf_counter()
+    ompl_seed = int(seed) % (2**31 - 1) + 1  # OMPL rejects seed 0
+    ou.RNG.setSeed(ompl_seed)
+    if ou.RNG.getSeed() != ompl_seed:
+        raise PlanningError(
+            "OMPL's random generator was used in this process before planning, so the seed "
+            "cannot take effect: plan only through plan_path"
+        )
     rng = np.random.default_rng(seed)
     lo, hi = np.asarray(bounds[0], dtype=float), np.asarray(bounds[1], dtype=float)
+    check = _Checker(hf, fp, cfg.validity)
+    if regions is None:
+        regions = standable_map(hf, fp, cfg.validity, bounds, start[:2])
+    # Sample where the robot can stand, one cell of margin round it (the map is coarse).
+    cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
+    if len(cells) == 0:
+        cells = regions.cell_centres(np.ones_like(regions.reachable))
 
-    space = ob.SE2StateSpace()
+    space = _TerrainSpace()
     rv = ob.RealVectorBounds(2)
     for k in range(2):
         rv.setLow(k, float(lo[k]))
         rv.setHigh(k, float(hi[k]))
     space.setBounds(rv)
     samplers: list[_TerrainSampler] = []
+    known: dict[tuple[float, float, float], bool] = {}
 
     def alloc(sp):
-        sampler = _TerrainSampler(sp, rng, lo, hi)
+        sampler = _TerrainSampler(sp, rng, cells, regions.cell, lo, hi, check)
+        sampler.known = known  # one verdict cache for every sampler OMPL allocates
         samplers.append(sampler)  # OMPL holds only a C++ reference: keep the Python object alive
         return sampler
 
     space.setStateSamplerAllocator(ob.StateSamplerAllocator(alloc))
+    space.default_sampler = alloc
     si = ob.SpaceInformation(space)
 
     def is_valid(s) -> bool:
-        return bool(
-            check_states(hf, fp, vcfg, np.array([[s.getX(), s.getY(), s.getYaw()]])).valid[0]
-        )
+        key = (s.getX(), s.getY(), s.getYaw())
+        verdict = known.get(key)
+        if verdict is None:
+            verdict = bool(check(np.array([key]))[0])
+        return verdict
 
     si.setStateValidityChecker(ob.StateValidityCheckerFn(is_valid))
-    motion_validator = _BatchMotionValidator(si, hf, fp, vcfg, cfg.check_resolution)
-    si.setMotionValidator(motion_validator)
+    si.setMotionValidator(_BatchMotionValidator(si, fp, check, cfg.check_resolution))
     si.setup()
     pdef = ob.ProblemDefinition(si)
     pdef.setStartAndGoalStates(_se2_state(space, start), _se2_state(space, goal))
+    objective = ob.PathLengthOptimizationObjective(si)
+    # An infinite threshold is met by any path: optimizing planners stop at their first one.
+    objective.setCostThreshold(ob.Cost(0.0 if cfg.optimize else float("inf")))
+    pdef.setOptimizationObjective(objective)
     planner = getattr(og, _OMPL_CLASS[cfg.name])(si)
     planner.setProblemDefinition(pdef)
     planner.setup()
     deadline = t0 + cfg.time_limit
 
-    if cfg.name == "prm":
+    if cfg.name in ("prm", "prmstar") and not cfg.optimize:
         states = _solve_prm(si, planner, cfg, deadline)
     else:
         planner.solve(_budget_ptc(cfg.max_iterations, deadline))
         states = pdef.getSolutionPath().getStates() if pdef.hasExactSolution() else None
+    stats = dict(
+        validity_checks=check.states, validity_time=check.seconds,
+        sampler_calls=sum(smp.calls for smp in samplers),
+    )  # fmt: skip
     if states is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
         return PlanResult(
             found=False, planner=cfg.name, seed=seed, states=np.zeros((0, 3)),
             path_xyz=np.zeros((0, 3)), plan_time=time.perf_counter() - t0,
-            message=f"{cfg.name} found no path within its {why}",
+            message=f"{cfg.name} found no path within its {why}", **stats,
         )  # fmt: skip
     path = og.PathGeometric(si)
     for s in states:
         path.append(s)
+    simplifier = og.PathSimplifier(si)
     if cfg.simplify:
-        og.PathSimplifier(si).simplifyMax(path)
+        simplifier.reduceVertices(path)
+        simplifier.collapseCloseVertices(path)
+        simplifier.partialShortcutPath(path)
+    if cfg.smooth:
+        simplifier.smoothBSpline(path)
     xyyaw = np.array([[s.getX(), s.getY(), s.getYaw()] for s in path.getStates()])
     return PlanResult(
         found=True,
@@ -293,6 +412,10 @@ def plan_path(
         path_xyz=waypoints_on_surface(hf, xyyaw[:, :2], cfg.waypoint_spacing),
         plan_time=time.perf_counter() - t0,
         message=f"{len(xyyaw)} states",
+        signature=homology_signature(regions.holes, xyyaw[:, :2]),
+        validity_checks=check.states,
+        validity_time=check.seconds,
+        sampler_calls=stats["sampler_calls"],
     )
 
 

@@ -12,6 +12,7 @@ Where the terrain has no surface at all (no ground plane), a foot finds no groun
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,10 +78,18 @@ class StateCheck:
         return self.code == VALID
 
 
-def _body_samples(fp: Footprint, n_x: int = 5, n_y: int = 3) -> np.ndarray:
-    u = np.linspace(-fp.body_length / 2, fp.body_length / 2, n_x)
-    v = np.linspace(-fp.body_width / 2, fp.body_width / 2, n_y)
-    return np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
+@functools.lru_cache(maxsize=16)
+def _footprint_terms(fp: Footprint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What check_states needs of a footprint, computed once per footprint: sample points
+    ((P, 2) feet then body, body frame [m]), the support-plane fit ((3, F) pseudo-inverse), and
+    the plane's design matrices at the feet (F, 3) and the body samples (B, 3)."""
+    u = np.linspace(-fp.body_length / 2, fp.body_length / 2, 5)
+    v = np.linspace(-fp.body_width / 2, fp.body_width / 2, 3)
+    body = np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
+    local = np.concatenate([fp.feet_xy, body])
+    design = np.column_stack([np.ones(len(fp.feet_xy)), fp.feet_xy])
+    body_design = np.column_stack([np.ones(len(body)), body])
+    return local, np.linalg.pinv(design), design, body_design
 
 
 def check_states(
@@ -90,8 +99,7 @@ def check_states(
     states = np.atleast_2d(np.asarray(states, dtype=np.float64))
     if states.shape[-1] != 3:
         raise ValueError(f"states must be (N, 3) x, y, yaw; got {states.shape}")
-    body = _body_samples(fp)
-    local = np.concatenate([fp.feet_xy, body])  # (P, 2) body frame
+    local, fit, design, body_design = _footprint_terms(fp)
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
     wx = states[:, None, 0] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
     wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
@@ -102,10 +110,8 @@ def check_states(
     h_feet, h_body = h[:, :n_feet], h[:, n_feet:]
     # Support plane z = a + b u + c v in body coordinates (u, v): a least-squares fit through
     # the ground under the feet; its pseudo-inverse is the same for every state.
-    design = np.column_stack([np.ones(n_feet), fp.feet_xy])
-    coef = np.nan_to_num(h_feet) @ np.linalg.pinv(design).T  # (N, 3)
+    coef = np.nan_to_num(h_feet) @ fit.T  # (N, 3)
     plane_feet = coef @ design.T
-    body_design = np.column_stack([np.ones(len(body)), body])
     plane_body = coef @ body_design.T
     residual = h_feet - plane_feet  # < 0: ground below where the foot would be
     residual = np.nan_to_num(residual, nan=-np.inf)
@@ -120,7 +126,7 @@ def check_states(
 
     code = np.full(len(states), VALID)
     slope = np.degrees(np.arctan(np.hypot(coef[:, 1], coef[:, 2])))
-    centre = len(body) // 2  # the middle body sample is the body centre
+    centre = len(body_design) // 2  # the middle body sample is the body centre
     checks = (
         (OFF_MAP, off_map),
         (FOOT, unsupported.any(axis=1)),

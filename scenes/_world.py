@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,9 +12,13 @@ from planning import (
     VALID,
     Footprint,
     HeightField,
+    StandableMap,
     check_states,
     describe_state,
     heightfield_from_mesh,
+    homology_signature,
+    signature_label,
+    standable_map,
 )
 from sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
 
@@ -37,9 +42,27 @@ class World:
     heightfield: HeightField
     robot: RobotConfig
 
-    @property
+    @functools.cached_property
     def footprint(self) -> Footprint:
         return footprint_of(self.robot)
+
+    @functools.cached_property
+    def regions(self) -> StandableMap:
+        """Where the robot can stand within the scene's bounds, and the holes between those
+        places (computed once, ~50 ms): the terrain sampler's support and the route labels."""
+        sc = self.scene
+        return standable_map(
+            self.heightfield, self.footprint, sc.planner.validity, sc.bounds, sc.start[:2]
+        )
+
+    def route(self, path_xy: np.ndarray) -> str:
+        """The route a path ((K, 2) [m]) takes: the first of the scene's named route regions it
+        passes through; without named routes (or through none of them), its homology class
+        round the terrain's holes (e.g. "h1:+1"; "direct" on terrain without holes)."""
+        named = route_of(self.scene, path_xy)
+        if named != "other":
+            return named
+        return signature_label(homology_signature(self.regions.holes, path_xy))
 
     def simulation(self) -> Simulation:
         """A fresh PyBullet world of this terrain, ground and robot (the caller closes it)."""

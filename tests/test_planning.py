@@ -1,0 +1,227 @@
+"""Planning on terrain (issue 5): every planner, the terrain sampler, validity, routes, the CLI.
+
+The path checks here do not use the planner's height field: they cast rays at the robot's feet
+onto the physics mesh in PyBullet, and compare with the double bridge's known geometry
+(bridges |x| in [0.5, 1.0], y in [-0.5, 0.5], 0.2 m high; the gap between them has no terrain).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pybullet as p
+import pytest
+from conftest import roachplan
+
+from app._trial import plan, plan_many
+from planning import PLANNER_NAMES, PlanningError, homology_signature
+
+BRIDGE_HALF_LENGTH = 0.5
+GAP_HALF_WIDTH = 0.5
+
+
+def dense_states(states: np.ndarray, step: float = 0.01) -> np.ndarray:
+    """(N, 3) x, y, yaw every `step` metres along the straight motions between states."""
+    out = [states[:1]]
+    for a, b in zip(states[:-1], states[1:], strict=True):
+        dyaw = (b[2] - a[2] + math.pi) % (2 * math.pi) - math.pi
+        n = max(1, math.ceil(max(math.dist(a[:2], b[:2]), abs(dyaw) * 0.06) / step))
+        f = np.arange(1, n + 1)[:, None] / n
+        out.append(a + f * np.array([b[0] - a[0], b[1] - a[1], dyaw]))
+    return np.concatenate(out)
+
+
+def independent_check(world, states: np.ndarray) -> list[str]:
+    """Problems of a path of (x, y, yaw) states, found by ray casts on the physics mesh."""
+    dense = dense_states(states)
+    feet = world.robot.foot_points_xy  # (6, 2) body frame
+    c, s = np.cos(dense[:, 2:3]), np.sin(dense[:, 2:3])
+    fx = dense[:, :1] + c * feet[:, 0] - s * feet[:, 1]
+    fy = dense[:, 1:2] + s * feet[:, 0] + c * feet[:, 1]
+    # A foot is a 3 mm sphere on a 1 cm height field: it stands if the terrain reaches within
+    # 5 mm of its centre, so each foot casts five rays (centre and 5 mm to four sides) and
+    # stands on the highest hit.
+    centres = np.stack([fx, fy], axis=-1).reshape(-1, 1, 2)
+    patch = np.array([[0, 0], [0.005, 0], [-0.005, 0], [0, 0.005], [0, -0.005]])
+    pts = (centres + patch).reshape(-1, 2)
+    with world.simulation() as sim:
+        sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, -100), (0, 0, 0, 1))
+        hits = []
+        for k in range(0, len(pts), 8000):
+            chunk = pts[k : k + 8000]
+            hits += sim._bc.rayTestBatch(
+                [(x, y, 2.0) for x, y in chunk], [(x, y, -2.0) for x, y in chunk]
+            )
+        terrain_id = sim.terrain_id
+    z = np.array([h[3][2] if h[0] >= 0 else -np.inf for h in hits]).reshape(len(dense), 6, 5)
+    on_terrain = np.array([h[0] == terrain_id for h in hits]).reshape(len(dense), 6, 5)
+    best = np.argmax(z, axis=2)[..., None]
+    z = np.take_along_axis(z, best, axis=2)[..., 0]
+    z[np.isinf(z)] = np.nan
+    on_terrain = np.take_along_axis(on_terrain, best, axis=2)[..., 0]
+    problems = []
+    (xa, ya), (xb, yb) = world.scene.bounds
+    if not np.all(
+        (dense[:, 0] >= xa) & (dense[:, 0] <= xb) & (dense[:, 1] >= ya) & (dense[:, 1] <= yb)
+    ):
+        problems.append("leaves the planning bounds")
+    if np.isnan(z).any():
+        problems.append("a foot over nothing at all")
+    in_gap = (np.abs(dense[:, 0]) < GAP_HALF_WIDTH) & (np.abs(dense[:, 1]) < BRIDGE_HALF_LENGTH)
+    if in_gap.any():
+        problems.append(f"centre in the gap at {dense[in_gap][0, :2]}")
+    # Over the bridges' span every foot stands on a bridge, not on the floor of the gap.
+    span = np.abs(fy) < BRIDGE_HALF_LENGTH - 0.01
+    if not np.all(on_terrain[span] & (z[span] > 0.19)):
+        problems.append("a foot over the gap")
+    # Nowhere a foot over a drop: the feet's ground lies within 3 cm of the plane fitted
+    # through it (on a ramp the plane tilts; over an edge one foot drops 0.2 m).
+    design = np.stack([np.ones_like(fx), fx, fy], axis=-1)  # (N, 6, 3)
+    zz = np.nan_to_num(z)
+    coef = np.array([np.linalg.lstsq(d, h, rcond=None)[0] for d, h in zip(design, zz)])
+    residual = np.abs(zz - np.einsum("nfk,nk->nf", design, coef))
+    if np.any(residual > 0.03):
+        problems.append(f"a foot {residual.max():.3f} m off the plane of the others")
+    return problems
+
+
+@pytest.fixture(scope="module")
+def runs(world):
+    """Every planner, seeds 0-9 on the double bridge, then seed 0 again."""
+    out = {}
+    for name in PLANNER_NAMES:
+        cfg = dataclasses.replace(world.scene.planner, name=name)
+        plans = [plan(world, seed=seed, planner=cfg) for seed in range(10)]
+        again = plan(world, seed=0, planner=cfg)
+        out[name] = (plans, again)
+    return out
+
+
+@pytest.mark.parametrize("name", PLANNER_NAMES)
+def test_every_planner_finds_valid_paths_for_ten_seeds(world, runs, name):
+    plans, _ = runs[name]
+    assert all(pl.found for pl in plans), [pl.message for pl in plans if not pl.found]
+    for pl in plans:
+        assert independent_check(world, pl.states) == [], f"seed {pl.seed}"
+        np.testing.assert_allclose(pl.states[0], world.scene.start, atol=1e-9)
+        np.testing.assert_allclose(pl.states[-1], world.scene.goal, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", PLANNER_NAMES)
+def test_every_planner_draws_from_the_terrain_sampler(runs, name):
+    plans, _ = runs[name]
+    assert all(pl.sampler_calls > 0 for pl in plans), [pl.sampler_calls for pl in plans]
+
+
+@pytest.mark.parametrize("name", PLANNER_NAMES)
+def test_same_seed_same_path_after_other_plans_in_the_process(runs, name):
+    plans, again = runs[name]
+    np.testing.assert_array_equal(again.states, plans[0].states)
+    # ... and the seeds matter: ten seeds give more than one path.
+    assert len({pl.states.tobytes() for pl in plans}) > 1
+
+
+def test_both_bridges_are_found_and_labelled(world, runs):
+    for pl in runs["prm"][0]:
+        route = world.route(pl.path_xyz[:, :2])
+        side = np.median(pl.path_xyz[np.abs(pl.path_xyz[:, 1]) < 0.4, 0])
+        assert route == ("left_bridge" if side < 0 else "right_bridge")
+        # The homology signature round the one hole (the gap) agrees with the named route.
+        assert pl.signature == ((0,) if side < 0 else (1,))
+    routes = {world.route(pl.path_xyz[:, :2]) for pl in runs["prm"][0]}
+    assert routes == {"left_bridge", "right_bridge"}
+
+
+def test_the_double_bridge_has_one_hole_the_gap(world):
+    holes = world.regions.holes
+    assert holes.shape == (1, 2)
+    assert np.all(np.abs(holes[0]) < 0.45)
+
+
+def test_homology_signature_counts_signed_crossings():
+    holes = np.array([[0.0, 0.0]])
+    right = np.array([[0.0, -1.0], [1.0, -0.5], [1.0, 0.5], [0.0, 1.0]])
+    left = right * [-1, 1]
+    loop = np.array(
+        [[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]]
+    )
+    assert homology_signature(holes, right) == (1,)
+    assert homology_signature(holes, left) == (0,)
+    assert homology_signature(holes, right[::-1]) == (-1,)
+    assert homology_signature(holes, loop) == (2,)  # round the hole once more
+
+
+def test_plan_many_returns_distinct_labelled_paths(world):
+    plans = plan_many(world, 6, seed=0)
+    assert len(plans) == 6
+    shapes = [lp.plan.path_xyz for lp in plans]
+    for i in range(6):
+        for j in range(i):
+            assert not (len(shapes[i]) == len(shapes[j]) and np.allclose(shapes[i], shapes[j]))
+    assert {lp.route for lp in plans} == {"left_bridge", "right_bridge"}
+    assert len({lp.plan.seed for lp in plans}) == 6
+
+
+def test_simplify_and_smooth_keep_the_path_valid(world):
+    def length(pl):
+        return float(np.sum(np.linalg.norm(np.diff(pl.states[:, :2], axis=0), axis=1)))
+
+    shortened = []
+    for seed in range(4):
+        raw = plan(world, seed=seed)
+        short = plan(
+            world, seed=seed, planner=dataclasses.replace(world.scene.planner, simplify=True)
+        )
+        assert length(short) <= length(raw) + 1e-9
+        assert independent_check(world, short.states) == []
+        shortened.append(length(raw) - length(short))
+    assert max(shortened) > 0.05
+    smooth = plan(
+        world, seed=2, planner=dataclasses.replace(world.scene.planner, simplify=True, smooth=True)
+    )
+    assert len(smooth.states) > len(short.states)  # B-spline smoothing adds states
+    assert independent_check(world, smooth.states) == []
+    # Waypoints carry z on the terrain surface: 0.2 m on the bridges.
+    on_bridge = np.abs(smooth.path_xyz[:, 1]) < BRIDGE_HALF_LENGTH - 0.05
+    np.testing.assert_allclose(smooth.path_xyz[on_bridge, 2], 0.2, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--start=-0.46,0,0",), "start (-0.460, 0.000, yaw 0 deg) is invalid: a foot has no ground under it (leg L"),
+        (("--goal=5,5,90",), "goal (5.000, 5.000) is invalid: outside the planning area x in [-1, 1]"),
+        (("--scene", "heightmap", "--start=-0.62,0,0"), "start (-0.620, 0.000, yaw 0 deg) is invalid: ground too steep"),
+        (("--start", "1,2"), "--start '1,2': expected x,y,yaw_deg"),
+        (("--count", "0"), "--count 0: must be 1 or more"),
+    ],
+)  # fmt: skip
+def test_invalid_requests_name_what_failed(args, message):
+    out = roachplan("plan", *args)
+    assert out.returncode == 2
+    assert message in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def test_plan_cli_json_single_and_many():
+    one = roachplan(
+        "plan", "--scene", "double_bridge", "--planner", "rrtconnect", "--seed", "4", "--json"
+    )
+    assert one.returncode == 0, one.stderr
+    d = json.loads(one.stdout)
+    path = np.array(d["path"])
+    assert path.shape[1] == 3 and len(path) > 20
+    np.testing.assert_allclose(path[[0, -1], :2], [[0.0, -1.6], [0.0, 1.6]], atol=1e-6)
+    assert d["route"] in ("left_bridge", "right_bridge") and d["seed"] == 4
+
+    many = roachplan("plan", "--count", "4", "--planner", "rrtconnect", "--seed", "4", "--json")
+    assert many.returncode == 0, many.stderr
+    paths = json.loads(many.stdout)["paths"]
+    assert len(paths) == 4
+    assert paths[0]["path"] == d["path"]  # the first of many is the single plan of that seed
+    for entry in paths:
+        side = np.median([x for x, y, _ in entry["path"] if abs(y) < 0.4])
+        assert entry["route"] == ("left_bridge" if side < 0 else "right_bridge")
