@@ -30,6 +30,7 @@ test: $(STAMP)
 
 bench: setup
 	$(BIN)/python benchmarks/bench_trial.py
+	$(BIN)/python benchmarks/bench_planning.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

@@ -26,10 +26,9 @@ from dataclasses import dataclass, field
 from typing import Literal, get_args
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
-
-from scipy import ndimage
 
 from ._heightfield import HeightField
 from ._isolated import run_isolated
@@ -136,8 +135,11 @@ class _TerrainSampler(ob.StateSampler):
 
     BLOCK = 256
 
-    def __init__(self, space, rng: np.random.Generator, cells: np.ndarray, cell: float,
-                 lo, hi, check) -> None:  # fmt: skip
+    def __init__(
+        self, space, *, rng: np.random.Generator, cells: np.ndarray, cell: float, lo, hi, check
+    ) -> None:
+        """cells: (K, 2) centres of standable cells of size `cell` [m]; lo, hi: (2,) bounds of
+        (x, y) [m]; check: vectorised validity of (N, 3) states."""
         super().__init__(space)
         self._rng, self._cells, self._cell = rng, cells, cell
         self._lo, self._hi, self._check = np.asarray(lo), np.asarray(hi), check
@@ -315,11 +317,11 @@ def plan_path(
                 f"{label} ({pose[0]:.3f}, {pose[1]:.3f}, yaw {np.degrees(pose[2]):.0f} deg) "
                 f"is invalid: {verdict}"
             )
-    return run_isolated(_plan_here, hf, fp, start, goal, bounds, cfg, seed, regions)
+    request = dict(start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions)
+    return run_isolated(_plan_here, hf, fp, **request)
 
 
-def _plan_here(hf, fp, start, goal, bounds, cfg: PlannerConfig, seed: int, regions) -> PlanResult:
-    t0 = time.perf_counter()
+def _seed_ompl(seed: int) -> None:
     ompl_seed = int(seed) % (2**31 - 1) + 1  # OMPL rejects seed 0
     ou.RNG.setSeed(ompl_seed)
     if ou.RNG.getSeed() != ompl_seed:
@@ -327,6 +329,28 @@ def _plan_here(hf, fp, start, goal, bounds, cfg: PlannerConfig, seed: int, regio
             "OMPL's random generator was used in this process before planning, so the seed "
             "cannot take effect: plan only through plan_path"
         )
+
+
+def _simplified(si, states: list, cfg: PlannerConfig) -> np.ndarray:
+    """The solution's states after the simplification and smoothing cfg asks for, (K, 3)."""
+    path = og.PathGeometric(si)
+    for s in states:
+        path.append(s)
+    simplifier = og.PathSimplifier(si)
+    if cfg.simplify:
+        simplifier.reduceVertices(path)
+        simplifier.collapseCloseVertices(path)
+        simplifier.partialShortcutPath(path)
+    if cfg.smooth:
+        simplifier.smoothBSpline(path)
+    return np.array([[s.getX(), s.getY(), s.getYaw()] for s in path.getStates()])
+
+
+def _plan_here(
+    hf, fp, *, start, goal, bounds, cfg: PlannerConfig, seed: int, regions
+) -> PlanResult:
+    t0 = time.perf_counter()
+    _seed_ompl(seed)
     rng = np.random.default_rng(seed)
     lo, hi = np.asarray(bounds[0], dtype=float), np.asarray(bounds[1], dtype=float)
     check = _Checker(hf, fp, cfg.validity)
@@ -347,7 +371,9 @@ def _plan_here(hf, fp, start, goal, bounds, cfg: PlannerConfig, seed: int, regio
     known: dict[tuple[float, float, float], bool] = {}
 
     def alloc(sp):
-        sampler = _TerrainSampler(sp, rng, cells, regions.cell, lo, hi, check)
+        sampler = _TerrainSampler(
+            sp, rng=rng, cells=cells, cell=regions.cell, lo=lo, hi=hi, check=check
+        )
         sampler.known = known  # one verdict cache for every sampler OMPL allocates
         samplers.append(sampler)  # OMPL holds only a C++ reference: keep the Python object alive
         return sampler
@@ -393,17 +419,7 @@ def _plan_here(hf, fp, start, goal, bounds, cfg: PlannerConfig, seed: int, regio
             path_xyz=np.zeros((0, 3)), plan_time=time.perf_counter() - t0,
             message=f"{cfg.name} found no path within its {why}", **stats,
         )  # fmt: skip
-    path = og.PathGeometric(si)
-    for s in states:
-        path.append(s)
-    simplifier = og.PathSimplifier(si)
-    if cfg.simplify:
-        simplifier.reduceVertices(path)
-        simplifier.collapseCloseVertices(path)
-        simplifier.partialShortcutPath(path)
-    if cfg.smooth:
-        simplifier.smoothBSpline(path)
-    xyyaw = np.array([[s.getX(), s.getY(), s.getYaw()] for s in path.getStates()])
+    xyyaw = _simplified(si, states, cfg)
     return PlanResult(
         found=True,
         planner=cfg.name,

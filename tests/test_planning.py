@@ -12,12 +12,11 @@ import json
 import math
 
 import numpy as np
-import pybullet as p
 import pytest
 from conftest import roachplan
 
 from app._trial import plan, plan_many
-from planning import PLANNER_NAMES, PlanningError, homology_signature
+from planning import PLANNER_NAMES, homology_signature
 
 BRIDGE_HALF_LENGTH = 0.5
 GAP_HALF_WIDTH = 0.5
