@@ -5,18 +5,19 @@ reach every planner (`space.setStateSamplerAllocator`), and they expose STRIDE, 
 EST and SBL, which the 2.x wheels do not.
 
 Determinism: our sampler draws from a numpy Generator seeded by the plan's seed; OMPL's own
-process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, BIT*'s
-samples, the path simplifier) is seeded from the same seed, which takes effect only before
+process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, the
+informed samplers once a solution exists, the path simplifier) is seeded from the same seed, which takes effect only before
 OMPL's first random draw in a process; so every plan runs in a child forked from a process
 that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
 the clock, optimizing planners at their first solution unless asked to optimize, and PRM's and
 PRM*'s roadmaps are grown in this thread in fixed batches (OMPL's PRM.solve grows it in a second
 thread and stops whenever that thread notices a solution, which is timing-dependent).
 
-Which planners call the terrain sampler (tests/test_planning.py checks it): all of them except
-BIT*, whose informed sampler the 1.7 bindings cannot route to Python (it draws (x, y, yaw)
-uniformly over the bounds from OMPL's seeded RNG; its states are still projected onto the
-terrain and checked by the same validity checker).
+Which planners call the terrain sampler (tests/test_planning.py checks it): all 16. Most ask
+the space's sampler allocator; BIT* and Informed RRT* ask for the space's *default* sampler
+(through their informed sampler, before a first solution), which `_TerrainSpace` overrides.
+When optimizing past the first solution, those two draw inside the informed ellipse from OMPL's
+own path-length sampler.
 """
 
 from __future__ import annotations
