@@ -24,17 +24,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from scenes import build_world, load_scene
 
     from ._trial import run_trial
 
     scene = load_scene(args.scene)
     world = build_world(scene)
-    planner = scene.planner
-    if args.planner:
-        planner = dataclasses.replace(planner, name=args.planner)
+    planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     result = run_trial(world, seed=seed, planner=planner)
     if args.json:
@@ -65,10 +61,11 @@ def _planner_config(scene, args: argparse.Namespace):
     import dataclasses
 
     changes = {"name": args.planner} if args.planner else {}
+    # `trial` has only --planner; `plan` also the post-processing flags and the time limit.
     for flag in ("simplify", "smooth", "optimize"):
-        if getattr(args, flag) is not None:
+        if getattr(args, flag, None) is not None:
             changes[flag] = getattr(args, flag)
-    if args.time_limit is not None:
+    if getattr(args, "time_limit", None) is not None:
         if args.time_limit <= 0:
             raise PlanningError(f"--time-limit {args.time_limit}: must be > 0 seconds")
         changes["time_limit"] = args.time_limit

@@ -6,9 +6,9 @@ EST and SBL, which the 2.x wheels do not.
 
 Determinism: our sampler draws from a numpy Generator seeded by the plan's seed; OMPL's own
 process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, the
-informed samplers once a solution exists, the path simplifier) is seeded from the same seed, which takes effect only before
-OMPL's first random draw in a process; so every plan runs in a child forked from a process
-that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
+informed samplers once a solution exists, the path simplifier) is seeded from the same seed,
+which takes effect only before OMPL's first random draw in a process; so every plan runs in a
+child forked from a process that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
 the clock, optimizing planners at their first solution unless asked to optimize, and PRM's and
 PRM*'s roadmaps are grown in this thread in fixed batches (OMPL's PRM.solve grows it in a second
 thread and stops whenever that thread notices a solution, which is timing-dependent).
@@ -137,15 +137,17 @@ class _TerrainSampler(ob.StateSampler):
     BLOCK = 256
 
     def __init__(
-        self, space, *, rng: np.random.Generator, cells: np.ndarray, cell: float, lo, hi, check
-    ) -> None:
+        self, space, *, rng: np.random.Generator, cells: np.ndarray, cell: float, lo, hi, check,
+        known: dict[tuple[float, float, float], bool],
+    ) -> None:  # fmt: skip
         """cells: (K, 2) centres of standable cells of size `cell` [m]; lo, hi: (2,) bounds of
-        (x, y) [m]; check: vectorised validity of (N, 3) states."""
+        (x, y) [m]; check: vectorised validity of (N, 3) states; known: the verdict cache this
+        sampler fills (shared by every sampler of one plan)."""
         super().__init__(space)
         self._rng, self._cells, self._cell = rng, cells, cell
         self._lo, self._hi, self._check = np.asarray(lo), np.asarray(hi), check
         self._block: list = []
-        self.known: dict[tuple[float, float, float], bool] = {}
+        self.known = known
         self.calls = 0
 
     def _clip(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
@@ -209,13 +211,17 @@ class _BatchMotionValidator(ob.MotionValidator):
 
 
 class _TerrainSpace(ob.SE2StateSpace):
-    """SE(2) whose *default* sampler is the terrain sampler too: informed samplers (InformedRRT*)
-    ask the space for its default sampler, bypassing the allocator."""
+    """SE(2) whose sampler allocator *and* default sampler are the terrain sampler (`alloc`):
+    informed samplers (BIT*, Informed RRT*) ask the space for its default sampler, bypassing
+    the allocator."""
 
-    default_sampler = None
+    def __init__(self, alloc) -> None:
+        super().__init__()
+        self._alloc = alloc
+        self.setStateSamplerAllocator(ob.StateSamplerAllocator(alloc))
 
     def allocDefaultStateSampler(self):
-        return self.default_sampler(self)
+        return self._alloc(self)
 
 
 def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
@@ -362,25 +368,22 @@ def _plan_here(
     if len(cells) == 0:
         cells = regions.cell_centres(np.ones_like(regions.reachable))
 
-    space = _TerrainSpace()
+    samplers: list[_TerrainSampler] = []
+    known: dict[tuple[float, float, float], bool] = {}  # one verdict cache for every sampler
+
+    def alloc(sp):
+        sampler = _TerrainSampler(
+            sp, rng=rng, cells=cells, cell=regions.cell, lo=lo, hi=hi, check=check, known=known
+        )
+        samplers.append(sampler)  # OMPL holds only a C++ reference: keep the Python object alive
+        return sampler
+
+    space = _TerrainSpace(alloc)
     rv = ob.RealVectorBounds(2)
     for k in range(2):
         rv.setLow(k, float(lo[k]))
         rv.setHigh(k, float(hi[k]))
     space.setBounds(rv)
-    samplers: list[_TerrainSampler] = []
-    known: dict[tuple[float, float, float], bool] = {}
-
-    def alloc(sp):
-        sampler = _TerrainSampler(
-            sp, rng=rng, cells=cells, cell=regions.cell, lo=lo, hi=hi, check=check
-        )
-        sampler.known = known  # one verdict cache for every sampler OMPL allocates
-        samplers.append(sampler)  # OMPL holds only a C++ reference: keep the Python object alive
-        return sampler
-
-    space.setStateSamplerAllocator(ob.StateSamplerAllocator(alloc))
-    space.default_sampler = alloc
     si = ob.SpaceInformation(space)
 
     def is_valid(s) -> bool:
@@ -430,9 +433,7 @@ def _plan_here(
         plan_time=time.perf_counter() - t0,
         message=f"{len(xyyaw)} states",
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
-        validity_checks=check.states,
-        validity_time=check.seconds,
-        sampler_calls=stats["sampler_calls"],
+        **stats,
     )
 
 
