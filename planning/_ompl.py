@@ -32,7 +32,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from ._heightfield import HeightField
-from ._isolated import run_isolated
+from ._isolated import Method, run_isolated
 from ._ompl_import import ob, og, ou
 from ._regions import StandableMap, homology_signature, standable_map
 from ._validity import Footprint, ValidityConfig, check_states, describe_state
@@ -301,14 +301,16 @@ def plan_path(
     cfg: PlannerConfig,
     seed: int,
     regions: StandableMap | None = None,
+    isolation: Method = "auto",
 ) -> PlanResult:
     """Plan a path for the robot's (x, y, yaw) from start to goal over the height field.
 
     bounds: ((xmin, ymin), (xmax, ymax)) of the body centre [m]; regions: the standable map of
     these bounds from start (computed when not given; pass it to save ~50 ms per plan).
     Raises PlanningError when the start or goal is itself invalid (naming the failed condition
-    and leg); returns found=False when the planner gives up. Runs in a forked child process,
-    so the same seed gives the same plan whatever ran in this process before.
+    and leg); returns found=False when the planner gives up. Runs in a child process
+    (`run_isolated`, how: isolation), so the same seed gives the same plan whatever ran in this
+    process before.
     """
     vcfg = cfg.validity
     (xa, ya), (xb, yb) = bounds
@@ -325,7 +327,7 @@ def plan_path(
                 f"is invalid: {verdict}"
             )
     request = dict(start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions)
-    return run_isolated(_plan_here, hf, fp, **request)
+    return run_isolated(_plan_here, hf, fp, isolation=isolation, preload=__name__, **request)
 
 
 def _seed_ompl(seed: int) -> None:
