@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from conftest import roachplan
 
-from app._trial import plan, plan_many
+from experiments import plan, plan_many
 from planning import PLANNER_NAMES, homology_signature
 
 BRIDGE_HALF_LENGTH = 0.5
@@ -224,3 +224,34 @@ def test_plan_cli_json_single_and_many():
     for entry in paths:
         side = np.median([x for x, y, _ in entry["path"] if abs(y) < 0.4])
         assert entry["route"] == ("left_bridge" if side < 0 else "right_bridge")
+
+
+def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(world, monkeypatch):
+    """Forking a process with other threads is unsafe (Ray workers, the web server): there, a
+    plan runs in a child of the clean fork server, and gives the very path a fork gives."""
+    import threading
+
+    from planning import _isolated, plan_path
+
+    sc = world.scene
+    kw = dict(bounds=sc.bounds, cfg=sc.planner, seed=5, regions=world.regions)
+    forked = plan_path(
+        world.heightfield, world.footprint, sc.start, sc.goal, isolation="fork", **kw
+    )
+    served = plan_path(
+        world.heightfield, world.footprint, sc.start, sc.goal, isolation="forkserver", **kw
+    )
+    assert forked.found and np.array_equal(forked.path_xyz, served.path_xyz)
+
+    used = []
+    real = _isolated._via_forkserver
+    monkeypatch.setattr(_isolated, "_via_forkserver", lambda *a: used.append(1) or real(*a))
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        auto = plan(world, seed=5)
+    finally:
+        stop.set()
+        other.join()
+    assert used and np.array_equal(auto.path_xyz, forked.path_xyz)
