@@ -31,6 +31,7 @@ test: $(STAMP)
 bench: setup
 	$(BIN)/python benchmarks/bench_trial.py
 	$(BIN)/python benchmarks/bench_planning.py
+	$(BIN)/python benchmarks/bench_experiment.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

@@ -18,11 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
+from experiments import TrialResult, finish_trial, plan
 from planning import PlanResult
 from scenes import World, build_world, load_scene
 from sim import Frame
-
-from ._trial import TrialResult, finish_trial, plan
 
 # -- commands (what callbacks enqueue) ----------------------------------------------------------
 

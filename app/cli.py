@@ -9,11 +9,12 @@ import sys
 
 import numpy as np
 
+from experiments import ExperimentError
 from planning import PLANNER_NAMES, PlanningError
 from scenes import SceneError, list_scenes
 from sim import SimError
 
-USER_ERRORS = (SceneError, PlanningError, SimError)
+USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError)
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -24,25 +25,98 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
+    from experiments import run_trial
     from scenes import build_world, load_scene
 
-    from ._trial import run_trial
-
-    scene = load_scene(args.scene)
+    if args.from_dir is not None or args.trial is not None:
+        return _rerun_trial(args)
+    scene = load_scene(args.scene or "double_bridge")
     world = build_world(scene)
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     result = run_trial(world, seed=seed, planner=planner)
-    if args.json:
-        print(json.dumps(result.to_json()))
-    else:
-        print(
-            f"scene {result.scene}  seed {result.seed}  planner {result.planner}\n"
-            f"outcome {result.outcome} ({result.reason})  route {result.route or '-'}\n"
-            f"drive time {result.drive_time:.2f} s  energy {result.energy:.4f} J "
-            f"(relative {result.relative_energy:.3f})  "
-            f"plan {result.plan_time:.2f} s  simulate {result.drive_wall_time:.2f} s wall"
+    _print_trial(result.to_json(), args.json)
+    return 0
+
+
+def _print_trial(r: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(r))
+        return
+    print(
+        f"scene {r['scene']}  seed {r['seed']}  planner {r['planner']}\n"
+        f"outcome {r['outcome']} ({r['reason']})  route {r['route'] or '-'}\n"
+        f"drive time {r['drive_time']:.2f} s  energy {r['energy']:.4f} J "
+        f"(relative {r['relative_energy']:.3f})  "
+        f"plan {r['plan_time']:.2f} s  simulate {r['drive_wall_time']:.2f} s wall"
+    )
+
+
+def _rerun_trial(args: argparse.Namespace) -> int:
+    """`trial --from DIR --trial K`: re-run a stored trial and compare."""
+    from experiments import rerun_trial
+
+    if args.from_dir is None or args.trial is None:
+        raise ExperimentError("give both --from DIR and --trial K to re-run a stored trial")
+    if args.scene is not None or args.seed is not None or args.planner is not None:
+        raise ExperimentError(
+            "--from re-runs a trial with its recorded scene, seed and planner; "
+            "drop --scene/--seed/--planner"
         )
+    rec, stored, differ = rerun_trial(args.from_dir, args.trial)
+    _print_trial(rec, args.json)
+    if stored is None:
+        print(f"roachplan: trial {args.trial} is not in the store yet; nothing to compare",
+              file=sys.stderr)  # fmt: skip
+        return 0
+    if differ:
+        print(f"roachplan: the re-run differs from the stored trial in: {', '.join(differ)}",
+              file=sys.stderr)  # fmt: skip
+        return 1
+    print(f"roachplan: identical to stored trial {args.trial} (apart from wall-clock times)",
+          file=sys.stderr)  # fmt: skip
+    return 0
+
+
+def _cmd_experiment(args: argparse.Namespace) -> int:
+    import dataclasses
+    import os
+    from concurrent.futures.process import BrokenProcessPool
+    from pathlib import Path
+
+    from experiments import describe_best, load_experiment, read_manifest, run_experiment
+
+    spec = load_experiment(args.spec)
+    out = Path(args.out) if args.out else Path("results") / spec.name
+    trials, repeats = args.trials, args.repeats
+    if args.resume and (out / "manifest.json").is_file():  # continue as it was started
+        manifest = read_manifest(out)
+        trials = manifest["trials_total"] if trials is None else trials
+        repeats = manifest["best_path"]["repeats"] if repeats is None else repeats
+    if repeats is not None:
+        if repeats < 0:
+            raise ExperimentError(f"--repeats {repeats}: must be 0 or more")
+        spec = dataclasses.replace(spec, best_path_repeats=repeats)
+    trials = spec.default_trials if trials is None else trials
+    # Ray with a cluster address: one worker per CPU of the cluster unless told.
+    cluster = args.backend == "ray" and args.address is not None
+    workers = args.workers or (None if cluster else os.cpu_count() or 1)
+    try:
+        report = run_experiment(
+            spec, trials=trials, out=out, workers=workers, resume=args.resume,
+            backend=args.backend, address=args.address, progress=not args.quiet,
+        )  # fmt: skip
+    except (KeyboardInterrupt, BrokenProcessPool) as exc:
+        why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"a worker died ({exc})"
+        print(f"roachplan: {why}; every finished trial is stored in {out}; continue with "
+              f"--resume", file=sys.stderr)  # fmt: skip
+        return 130 if isinstance(exc, KeyboardInterrupt) else 1
+    print(f"{spec.name}: {report.trials_stored} trials in {out} "
+          f"({report.trials_run} run now, {report.trials_stored - report.trials_run} stored before)\n")  # fmt: skip
+    print(report.table)
+    print()
+    print(describe_best(report.best))
+    print(f"\nwrote {out}/summary.csv, summary.md, paths.png, energy.png, best_path.json")
     return 0
 
 
@@ -73,9 +147,8 @@ def _planner_config(scene, args: argparse.Namespace):
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
+    from experiments import plan_many
     from scenes import build_world, load_scene
-
-    from ._trial import plan_many
 
     if args.count < 1:
         raise PlanningError(f"--count {args.count}: must be 1 or more")
@@ -191,6 +264,32 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_experiment_parser(sub) -> None:
+    from experiments import list_experiments
+
+    p = sub.add_parser(
+        "experiment", help="a batch of trials in parallel: tables 7.1/7.2, figures, best path"
+    )
+    p.add_argument(
+        "spec", metavar="SPEC", help=f"{', '.join(list_experiments())} or an experiment .yaml"
+    )
+    p.add_argument("--trials", type=int, default=None,
+                   help="total trials, split evenly over the spec's routes (default: the spec's)")  # fmt: skip
+    p.add_argument(
+        "--workers", type=int, default=None, help="parallel workers (default: all cores)"
+    )
+    p.add_argument("--out", default=None, help="results folder (default: results/SPEC)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the experiment in --out (its --trials and --repeats by default)")  # fmt: skip
+    p.add_argument("--repeats", type=int, default=None, help="re-drives of the best path")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local worker processes, or a Ray cluster")  # fmt: skip
+    p.add_argument("--address", default=None,
+                   help="Ray cluster address (default: start a local Ray instance)")  # fmt: skip
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_experiment)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="roachplan",
@@ -205,11 +304,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_serve)
 
     p = sub.add_parser("trial", help="one headless plan-and-drive trial")
-    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--scene", default=None, help="library scene name or scene .yaml "
+                   "(default: double_bridge)")  # fmt: skip
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the scene's)")
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
+    p.add_argument("--from", dest="from_dir", default=None, metavar="DIR",
+                   help="re-run a trial of the experiment in DIR exactly (with --trial K)")  # fmt: skip
+    p.add_argument("--trial", type=int, default=None, metavar="K", help="trial number in DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_trial)
+
+    _add_experiment_parser(sub)
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
     p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from app._trial import plan
+from experiments import plan
 from planning import PLANNER_NAMES, check_states
 from scenes import build_world, load_scene
 

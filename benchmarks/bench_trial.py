@@ -20,7 +20,7 @@ import time
 
 import pybullet as p
 
-from app._trial import plan
+from experiments import plan
 from scenes import build_world, load_scene
 from sim import drive_path
 

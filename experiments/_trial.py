@@ -13,7 +13,7 @@ import numpy as np
 
 from planning import PlannerConfig, PlanResult, plan_path
 from scenes import World
-from sim import DriveResult, Frame, drive_path, reference_energy_per_metre
+from sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
 
 TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "no_path"]
 
@@ -136,13 +136,20 @@ def drive(
     *,
     start: tuple[float, float, float] | None = None,
     on_frame: Callable[[Frame], None] | None = None,
+    sim: Simulation | None = None,
 ) -> DriveResult:
-    """Drop the robot at start (default: the scene's) and drive it along path_xyz."""
+    """Drop the robot at start (default: the scene's) and drive it along path_xyz.
+
+    sim: a simulation of this world to reuse (a worker keeps one PyBullet client for all its
+    trials; `reset` makes a reused one drive exactly as a fresh one); default: a fresh one.
+    """
     scene = world.scene
     x, y, yaw = start or scene.start
-    with world.simulation() as sim:
-        sim.reset(x, y, yaw)
-        return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
+    if sim is None:
+        with world.simulation() as fresh:
+            return drive(world, path_xyz, start=start, on_frame=on_frame, sim=fresh)
+    sim.reset(x, y, yaw)
+    return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
 
 
 def reference_energy(
@@ -162,12 +169,13 @@ def run_trial(
     start: tuple[float, float, float] | None = None,
     goal: tuple[float, float, float] | None = None,
     on_frame: Callable[[Frame], None] | None = None,
+    sim: Simulation | None = None,
 ) -> TrialResult:
     """Plan, then drive the plan; 'no_path' when the planner gives up."""
     scene = world.scene
     start, goal = start or scene.start, goal or scene.goal
     planned = plan(world, seed=seed, start=start, goal=goal, planner=planner)
-    return finish_trial(world, planned, start=start, goal=goal, on_frame=on_frame)
+    return finish_trial(world, planned, start=start, goal=goal, on_frame=on_frame, sim=sim)
 
 
 def finish_trial(
@@ -177,6 +185,7 @@ def finish_trial(
     start: tuple[float, float, float],
     goal: tuple[float, float, float],
     on_frame: Callable[[Frame], None] | None = None,
+    sim: Simulation | None = None,
 ) -> TrialResult:
     """Drive an existing plan and record the trial."""
     common = dict(
@@ -194,7 +203,7 @@ def finish_trial(
             energy=0.0, relative_energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
         )  # fmt: skip
     t0 = time.perf_counter()
-    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame)
+    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim)
     return TrialResult(
         **common,
         outcome=driven.outcome,

@@ -5,6 +5,7 @@ from ._openscad import render_scad as render_scad
 from ._scene import LIBRARY as LIBRARY
 from ._scene import Scene as Scene
 from ._scene import TerrainObject as TerrainObject
+from ._scene import YamlFields as YamlFields
 from ._scene import list_scenes as list_scenes
 from ._scene import load_scene as load_scene
 from ._scene import resolve_scene as resolve_scene

@@ -98,15 +98,18 @@ def resolve_scene(name_or_path: str | Path) -> Path:
     )
 
 
-# -- validation helpers ------------------------------------------------------------------------
+# -- validation (also used by experiment specs) ------------------------------------------------------------------------
 
 
-class _Ctx:
-    def __init__(self, path: Path) -> None:
+class YamlFields:
+    """Checks on the values read from one YAML file; every error names the file and the key."""
+
+    def __init__(self, path: Path, error: type[ValueError] = SceneError) -> None:
         self.path = path
+        self.error = error
 
-    def fail(self, key: str, msg: str) -> SceneError:
-        return SceneError(f"{self.path}: {key}: {msg}")
+    def fail(self, key: str, msg: str) -> ValueError:
+        return self.error(f"{self.path}: {key}: {msg}")
 
     def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required=()) -> dict:
         if not isinstance(value, dict):
@@ -181,7 +184,7 @@ class _Ctx:
         return cls(**kwargs)
 
 
-def _pose(ctx: _Ctx, value: Any, key: str) -> tuple[float, float, float]:
+def _pose(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
     """[x, y] or [x, y, yaw_deg] -> (x, y, yaw_rad)."""
     if isinstance(value, list | tuple) and len(value) == 2:
         value = [*value, 90.0]
@@ -189,7 +192,7 @@ def _pose(ctx: _Ctx, value: Any, key: str) -> tuple[float, float, float]:
     return (x, y, math.radians(yaw))
 
 
-def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
+def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     data = ctx.mapping(value, key, ("scad", "mesh", "params", "timeout", "position", "orientation"))
     kinds = [k for k in ("scad", "mesh") if k in data]
     if len(kinds) != 1:
@@ -247,7 +250,7 @@ def _terrain_object(ctx: _Ctx, value: Any, key: str) -> TerrainObject:
 def load_scene(name_or_path: str | Path) -> Scene:
     """Read and validate a scene file (or a library scene by name)."""
     path = resolve_scene(name_or_path)
-    ctx = _Ctx(path)
+    ctx = YamlFields(path)
     try:
         raw = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:

@@ -1,0 +1,197 @@
+"""Experiment specs: which scene, planner and settings, how many trials over which routes.
+
+A spec is a YAML file (or a named one from `experiments/library/`), validated here, at one
+boundary; errors name the file, the key and what is accepted. The planner, sim and driver
+sections override the scene's own settings field by field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from planning import PlannerConfig
+from scenes import Scene, SceneError, YamlFields, load_scene
+from sim import DriverConfig, SimConfig
+
+from ._errors import ExperimentError
+
+LIBRARY = Path(__file__).parent / "library"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExperimentSpec:
+    """A batch of plan-and-drive trials (Tong 2018, chapter 6)."""
+
+    name: str
+    """Spec name (the file's stem)."""
+    path: Path
+    """The spec file."""
+    description: str = ""
+    scene: Path
+    """The scene file the trials run in."""
+    planner: PlannerConfig
+    sim: SimConfig
+    driver: DriverConfig
+    """The scene's settings with the spec's overrides applied."""
+    routes: tuple[str, ...] = ()
+    """Routes to fill with trials_per_route paths each (the report: 20 over each bridge);
+    () takes every planned path in seed order, whatever its route."""
+    trials_per_route: int = 20
+    seed: int = 0
+    """First planning seed; the candidate paths are planned with seeds seed, seed + 1, ..."""
+    max_plans: int = 1000
+    """Give up filling the routes after this many plans."""
+    best_path_repeats: int = 10
+    """Re-drives of the lowest-energy successful path (the report's best_path service)."""
+    best_path_jitter: tuple[float, float] = (0.01, 3.0)
+    """Each re-drive drops the robot up to this far [m] and this many degrees of yaw away from
+    the start: PyBullet is deterministic, so an exact repeat would only confirm itself."""
+
+    @property
+    def default_trials(self) -> int:
+        """Total trials the spec asks for (trials_per_route over each route)."""
+        return self.trials_per_route * max(len(self.routes), 1)
+
+    def quotas(self, trials: int) -> dict[str, int]:
+        """Trials per route for a total of `trials` (split as evenly as possible, first routes
+        first); {"": trials} when the spec takes any route."""
+        if not self.routes:
+            return {"": trials}
+        base, extra = divmod(trials, len(self.routes))
+        return {r: base + (i < extra) for i, r in enumerate(self.routes)}
+
+    def scene_with_settings(self) -> Scene:
+        """The scene, with this spec's planner, sim and driver settings."""
+        scene = load_scene(self.scene)
+        return dataclasses.replace(scene, planner=self.planner, sim=self.sim, driver=self.driver)
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["path"], d["scene"] = str(self.path), str(self.scene)
+        return d
+
+
+def list_experiments() -> list[str]:
+    """Names of the experiments in the library."""
+    return sorted(p.stem for p in LIBRARY.glob("*.yaml"))
+
+
+def resolve_experiment(name_or_path: str | Path) -> Path:
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise ExperimentError(f"{p}: no such experiment file")
+        return p.resolve()
+    lib = LIBRARY / f"{name_or_path}.yaml"
+    if lib.is_file():
+        return lib
+    raise ExperimentError(
+        f"unknown experiment {str(name_or_path)!r}: give an experiment file (.yaml) or one of "
+        f"{', '.join(list_experiments())}"
+    )
+
+
+_KEYS = ("description", "scene", "planner", "sim", "driver", "routes", "trials_per_route",
+         "seed", "max_plans", "best_path")  # fmt: skip
+
+
+def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
+    """Read and validate an experiment spec (a YAML file or a library name)."""
+    path = resolve_experiment(name_or_path)
+    f = YamlFields(path, ExperimentError)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ExperimentError(f"{path}: not valid YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ExperimentError(f"{path}: cannot read the experiment file: {exc}") from None
+    data = f.mapping(raw, "", _KEYS, required=("scene",))
+    if not isinstance(data["scene"], str):
+        raise f.fail(
+            "scene", f"expected a library scene name or a .yaml path, got {data['scene']!r}"
+        )
+    scene_ref = data["scene"]
+    if scene_ref.endswith((".yaml", ".yml")):
+        scene_ref = str((path.parent / scene_ref).resolve())
+    try:
+        scene = load_scene(scene_ref)
+    except SceneError as exc:
+        raise f.fail("scene", str(exc)) from None
+    routes = data.get("routes") or []
+    known = [name for name, _ in scene.routes]
+    if not isinstance(routes, list) or not all(isinstance(r, str) for r in routes):
+        raise f.fail("routes", f"expected a list of route names, got {routes!r}")
+    for r in routes:
+        if r not in known:
+            raise f.fail(
+                "routes", f"{r!r} is not a route of scene {scene.name} (it has: "
+                f"{', '.join(known) or 'none'})"
+            )  # fmt: skip
+    if len(set(routes)) != len(routes):
+        raise f.fail("routes", f"a route is listed twice: {routes}")
+    best = f.mapping(data.get("best_path") or {}, "best_path", ("repeats", "jitter"))
+    jitter = f.vector(best.get("jitter", [0.01, 3.0]), "best_path.jitter", 2)
+    if min(jitter) < 0:
+        raise f.fail("best_path.jitter", f"expected [metres, degrees] >= 0, got {list(jitter)}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise f.fail("description", f"expected a string, got {description!r}")
+    return ExperimentSpec(
+        name=path.stem,
+        path=path,
+        description=description,
+        scene=scene.path,
+        planner=_override(f, scene.planner, data.get("planner"), "planner"),
+        sim=_override(f, scene.sim, data.get("sim"), "sim"),
+        driver=_override(f, scene.driver, data.get("driver"), "driver"),
+        routes=tuple(routes),
+        trials_per_route=_count(f, data.get("trials_per_route", 20), "trials_per_route", 1),
+        seed=_count(f, data.get("seed", scene.seed), "seed", 0),
+        max_plans=_count(f, data.get("max_plans", 1000), "max_plans", 1),
+        best_path_repeats=_count(f, best.get("repeats", 10), "best_path.repeats", 0),
+        best_path_jitter=jitter,  # type: ignore[arg-type]
+    )
+
+
+def _count(f: YamlFields, value: Any, key: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise f.fail(key, f"expected an integer >= {minimum}, got {value!r}")
+    return value
+
+
+def _override(f: YamlFields, base: Any, changes: Any, key: str) -> Any:
+    """base (a config dataclass) with the fields in `changes` replaced, validated as the scene
+    loader validates them; nested configs merge field by field too."""
+    merged = _merge(dataclasses.asdict(base), changes or {})
+    return f.config(type(base), merged, key)
+
+
+def _merge(base: dict, changes: Any) -> Any:
+    if not isinstance(changes, dict):
+        return changes
+    out = dict(base)
+    for k, v in changes.items():
+        out[k] = _merge(base[k], v) if isinstance(base.get(k), dict) else v
+    return out
+
+
+def config_from_json(cls: type, data: dict, where: str) -> Any:
+    """A config dataclass from its recorded form (a manifest), validated like a scene's."""
+    return YamlFields(Path(where), ExperimentError).config(cls, data, cls.__name__)
+
+
+def jitter_pose(
+    pose: tuple[float, float, float], jitter: tuple[float, float], rng
+) -> tuple[float, float, float]:
+    """pose (x [m], y [m], yaw [rad]) moved uniformly within a disc of radius jitter[0] [m] and
+    turned uniformly within +-jitter[1] [deg]; rng: a numpy Generator."""
+    r = jitter[0] * math.sqrt(rng.uniform())
+    a = rng.uniform(0.0, 2.0 * math.pi)
+    dyaw = math.radians(rng.uniform(-jitter[1], jitter[1]))
+    return (pose[0] + r * math.cos(a), pose[1] + r * math.sin(a), pose[2] + dyaw)

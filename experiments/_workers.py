@@ -1,0 +1,172 @@
+"""Where trials run: a pool of local worker processes, or Ray actors on a cluster.
+
+Each worker builds the experiment's world once and keeps one PyBullet client for all its
+trials (`Simulation.reset` makes a reused client drive exactly as a fresh one). Every plan runs
+in a clean child process seeded with the trial's seed (planning/_isolated.py), so a trial's
+result does not depend on which worker ran it or what it ran before.
+
+Both backends take calls (method name, arguments) and yield each result as soon as it is ready.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import signal
+from collections.abc import Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+
+import numpy as np
+
+from planning import PlanResult
+from scenes import build_world
+
+from ._spec import ExperimentSpec
+from ._store import REDRIVE, TRIAL
+from ._trial import drive, finish_trial, plan, reference_energy
+
+Call = tuple[str, tuple]
+"""(TrialWorker method name, its arguments)."""
+
+
+class TrialWorker:
+    """One process's world and PyBullet client; runs calls of the experiment."""
+
+    def __init__(self, spec: ExperimentSpec) -> None:
+        self.spec = spec
+        self.world = build_world(spec.scene_with_settings())
+        self.world.regions  # noqa: B018 - the standable map, computed once per worker
+        self.sim = self.world.simulation()
+
+    def plan_route(self, seed: int) -> dict:
+        """Plan with `seed` only, to learn which route its path takes (and keep the plan)."""
+        planned = plan(self.world, seed=seed)
+        route = self.world.route(planned.path_xyz[:, :2]) if planned.found else None
+        return {"seed": seed, "route": route, "plan": planned}
+
+    def trial(self, index: int, seed: int, target_route: str, planned: PlanResult | None) -> dict:
+        """Trial `index`: drive the plan of `seed` (planned now unless given: the census's
+        plan of that seed is the same plan); a store record."""
+        scene = self.world.scene
+        if planned is None:
+            planned = plan(self.world, seed=seed)
+        result = finish_trial(self.world, planned, start=scene.start, goal=scene.goal, sim=self.sim)
+        return {"kind": TRIAL, "index": index, "target_route": target_route, **result.to_json()}
+
+    def redrive(self, index: int, of_trial: int, path: list, start: list) -> dict:
+        """Repeat `index` of the best path: drive the stored path from a jittered start."""
+        scene = self.world.scene
+        driven = drive(self.world, np.asarray(path), start=tuple(start), sim=self.sim)
+        return {
+            "kind": REDRIVE, "index": index, "of_trial": of_trial, "start": list(start),
+            "outcome": driven.outcome, "reason": driven.reason,
+            "drive_time": driven.drive_time, "energy": driven.energy,
+            "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
+            "trajectory": [list(p) for p in driven.trajectory],
+        }  # fmt: skip
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+# -- local processes ----------------------------------------------------------------------------
+
+_worker: TrialWorker | None = None
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this worker when its parent dies: a SIGKILLed experiment leaves no
+    orphans running trials whose results nobody will store."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: orphans finish their trial and exit
+        pass
+
+
+def _init_local(spec: ExperimentSpec) -> None:
+    global _worker  # noqa: PLW0603 - a pool initializer's result lives in its process
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
+    _worker = TrialWorker(spec)
+
+
+def _call_local(call: Call):
+    name, args = call
+    return getattr(_worker, name)(*args)
+
+
+class LocalPool:
+    """`workers` processes on this machine.
+
+    Spawned (fresh interpreters, children of this process): forking a process that may hold
+    threads is unsafe, and as direct children they can ask to die with this process.
+    """
+
+    def __init__(self, spec: ExperimentSpec, workers: int) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self.workers = workers
+        self._pool = ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_init_local, initargs=(spec,)
+        )
+
+    def run(self, calls: Iterable[Call]) -> Iterator:
+        """Each call's result as it finishes (in any order). At most 2 calls per worker are
+        queued, so an interrupted run leaves little in flight."""
+        todo = iter(calls)
+        running: set[Future] = set()
+        try:
+            while True:
+                for call in todo:
+                    running.add(self._pool.submit(_call_local, call))
+                    if len(running) >= 2 * self.workers:
+                        break
+                if not running:
+                    return
+                done, running = wait(running, return_when=FIRST_COMPLETED)
+                for f in done:
+                    yield f.result()
+        finally:
+            for f in running:
+                f.cancel()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+# -- Ray --------------------------------------------------------------------------------------
+
+
+class RayPool:
+    """One TrialWorker actor per worker slot of a Ray cluster (a local one when address is
+    None). Every node must have roachplan installed and the scene's files at the same path."""
+
+    def __init__(self, spec: ExperimentSpec, workers: int | None, address: str | None) -> None:
+        import ray
+        from ray.util import ActorPool
+
+        self._ray = ray
+        self._owns_ray = not ray.is_initialized()
+        if self._owns_ray:
+            ray.init(
+                address=address,
+                num_cpus=workers if address is None else None,
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level="WARNING",
+            )
+        n = workers or int(ray.cluster_resources().get("CPU", 1))
+        actor = ray.remote(num_cpus=1)(TrialWorker)
+        self._actors = [actor.remote(spec) for _ in range(n)]
+        self._pool = ActorPool(self._actors)
+        self.workers = n
+
+    def run(self, calls: Iterable[Call]) -> Iterator:
+        yield from self._pool.map_unordered(
+            lambda actor, call: getattr(actor, call[0]).remote(*call[1]), list(calls)
+        )
+
+    def close(self) -> None:
+        for a in self._actors:
+            self._ray.kill(a)
+        if self._owns_ray:
+            self._ray.shutdown()
