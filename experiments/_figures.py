@@ -35,7 +35,13 @@ def paths_figure(
     The best path (lowest-energy success) is drawn thicker, in green."""
     ok = [t for t in trials if t["outcome"] == "success"]
     bad = [t for t in trials if t["outcome"] != "success"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 8.5), sharey=True)
+    x0, x1, y0, y1 = hf.extent
+    if (x1 - x0) > (y1 - y0):  # a wide terrain: one panel above the other
+        fig, axes = plt.subplots(
+            2, 1, figsize=(10, 2 * 9 * (y1 - y0) / (x1 - x0) + 2.2), sharex=True
+        )
+    else:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 8.5), sharey=True)
     for ax, group, label in ((axes[0], ok, "successful"), (axes[1], bad, "failed")):
         _terrain(ax, hf)
         for t in group:  # trajectories first and wider, so the planned path shows on top

@@ -46,6 +46,8 @@ from ._summary import (
 )
 
 STORE = "trials.jsonl"
+UNREACHABLE_AFTER = 100
+"""The census gives up on the routes when one of them has no path after this many plans."""
 Backend = Literal["local", "ray"]
 
 
@@ -178,6 +180,8 @@ def _census(spec: ExperimentSpec, trials: int, workers_pool, progress: bool):
     seed, last = spec.seed, spec.seed + spec.max_plans
     bar = _bar(progress, trials, 0, "paths")
     while seed < last and any(len(picked[r]) < q for r, q in quotas.items()):
+        if seed - spec.seed >= UNREACHABLE_AFTER and any(not v for v in picked.values()):
+            break  # a route no plan has taken in this many: do not spend max_plans on it
         missing = sum(q - len(picked[r]) for r, q in quotas.items())
         pool = workers_pool()
         batch = range(seed, min(seed + max(2 * pool.workers, missing), last))
@@ -194,11 +198,16 @@ def _census(spec: ExperimentSpec, trials: int, workers_pool, progress: bool):
     short = {r: f"{len(picked[r])} of {q}" for r, q in quotas.items() if len(picked[r]) < q}
     if short:
         print(
-            f"roachplan: after {seed - spec.seed} plans (max_plans) some routes are short of "
-            f"paths: {short}; running the trials found",
+            f"roachplan: after {seed - spec.seed} plans some routes are short of paths: {short} "
+            f"(routes the plans took: {dict(seen)}); running the trials found",
             file=sys.stderr,
         )
     chosen = sorted((s, r) for r, seeds in picked.items() for s in seeds)
+    if not chosen:
+        raise ExperimentError(
+            f"{spec.path}: no plan took any of the routes {list(spec.routes)} in "
+            f"{seed - spec.seed} plans (the plans took: {dict(seen)}); check the routes' regions"
+        )
     census = {"plans": seed - spec.seed, "quotas": quotas, "routes_planned": dict(seen),
               "short": short}  # fmt: skip
     return census, [{"index": k, "seed": s, "route": r} for k, (s, r) in enumerate(chosen)], plans
