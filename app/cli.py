@@ -10,11 +10,12 @@ import sys
 import numpy as np
 
 from experiments import ExperimentError
+from perception import CaptureError
 from planning import PLANNER_NAMES, PlanningError
 from scenes import SceneError, list_scenes
 from sim import SimError
 
-USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError)
+USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError, CaptureError)
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -245,6 +246,172 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _numbers(text: str | None, flag: str, n: tuple[int, ...]) -> list[float] | None:
+    """'a,b,c' -> [a, b, c] with a count in n, or CaptureError naming the flag."""
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in n:
+        raise CaptureError(
+            f"{flag} {text!r}: expected {' or '.join(map(str, n))} comma-separated numbers"
+        )
+    return values
+
+
+def _capture_settings(args: argparse.Namespace):
+    from perception import capture_settings
+
+    voxel = _numbers(args.voxel, "--voxel", (1, 3))
+    given = {
+        "voxel": voxel[0] if voxel and len(voxel) == 1 else voxel,
+        "method": getattr(args, "method", None),
+        "camera_pose": _numbers(getattr(args, "camera_pose", None), "--camera-pose", (7,)),
+        "intrinsics": args.intrinsics,
+        "depth_scale": args.depth_scale,
+        "units": args.units,
+        "topic": args.topic,
+        "seed": getattr(args, "seed", None),
+    }
+    crop = _numbers(getattr(args, "crop", None), "--crop", (6,))
+    if crop:
+        given["crop"] = [crop[:3], crop[3:]]
+    settings = {k: v for k, v in given.items() if v is not None}
+    try:
+        return capture_settings(settings)
+    except CaptureError as exc:
+        raise CaptureError(f"--{str(exc).replace('_', '-')}") from None
+
+
+def _cmd_mesh(args: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from perception import mesh_capture
+
+    out = Path(args.output)
+    formats = (".stl", ".ply", ".obj")
+    if out.suffix.lower() not in formats:
+        raise CaptureError(f"{out}: the output must end in one of {', '.join(formats)}")
+    rec = mesh_capture(args.input, _capture_settings(args))
+    tmp = out.with_name(f".{out.name}.part")  # nothing half-written on failure
+    rec.mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
+    os.replace(tmp, out)
+    from scipy.spatial.transform import Rotation
+
+    wfc = rec.world_from_camera
+    pose = [*wfc[:3, 3], *Rotation.from_matrix(wfc[:3, :3]).as_quat()]
+    print(
+        f"wrote {out}: {len(rec.mesh.faces)} triangles, bounds {rec.mesh.bounds.round(3).tolist()} m"
+    )
+    print("points: " + ", ".join(f"{k} {v}" for k, v in rec.counts.items()))
+    print("seconds: " + ", ".join(f"{k} {v:.3f}" for k, v in rec.times.items()))
+    print("camera pose in the world (x,y,z,qx,qy,qz,qw): " + ",".join(f"{v:.5f}" for v in pose))
+    return 0
+
+
+def _cmd_voxel_study(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from perception import load_capture
+    from perception._voxel_study import format_study, square_region, study_csv, voxel_study
+
+    sizes = _numbers(args.sizes, "--sizes", tuple(range(1, 32)))
+    if any(s <= 0 for s in sizes):
+        raise CaptureError(f"--sizes {args.sizes!r}: voxel sizes must be > 0 cm")
+    settings = _capture_settings(args)
+    cap = load_capture(args.capture, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
+                       topic=settings.topic, units=settings.units)  # fmt: skip
+    pts = cap.finite_points() - cap.sensor_origin
+    if args.square is not None:
+        pts = square_region(pts, args.square)
+        if len(pts) < 4:
+            raise CaptureError(
+                f"{args.capture}: fewer than 4 points within the {args.square} m square"
+            )
+    rows = voxel_study(pts, sizes)
+    print(format_study(rows))
+    if args.csv:
+        Path(args.csv).write_text(study_csv(rows))
+        print(f"wrote {args.csv}")
+    return 0
+
+
+def _cmd_synth_capture(args: argparse.Namespace) -> int:
+    import numpy as np
+    import trimesh
+
+    from perception import NO_NOISE, NoiseModel, load_intrinsics, look_at, render_depth, save_depth
+    from scenes import build_terrain_mesh, load_scene
+
+    scene = load_scene(args.scene)
+    mesh = build_terrain_mesh(scene)
+    if scene.ground is not None:  # the endless floor, as a big square
+        g = trimesh.creation.box((100.0, 100.0, 0.01))
+        g.apply_translation((0, 0, scene.ground - 0.005))
+        mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
+    intr = load_intrinsics(args.intrinsics)
+    eye = _numbers(args.eye, "--eye", (3,))
+    target = _numbers(args.target, "--target", (3,))
+    pose = look_at(eye, target)
+    noise = NO_NOISE if args.no_noise else NoiseModel()
+    depth = render_depth(mesh, intr, pose, noise, np.random.default_rng(args.seed))
+    written = save_depth(args.output, depth, intr, world_from_camera=pose)
+    print(f"wrote {', '.join(map(str, written))}: {intr.width}x{intr.height}, "
+          f"{np.mean(depth > 0) * 100:.1f} % of pixels measured, seed {args.seed}")  # fmt: skip
+    return 0
+
+
+def _add_perception_parsers(sub) -> None:
+    from perception import METHODS, PRESETS
+
+    def capture_flags(p):
+        p.add_argument("--intrinsics", default=None,
+                       help=f"depth images: a .json/.xml file or {', '.join(PRESETS)}")  # fmt: skip
+        p.add_argument("--depth-scale", type=float, default=None,
+                       help="depth images: units per metre (default 1000, i.e. mm)")  # fmt: skip
+        p.add_argument("--units", choices=("m", "mm"), default=None, help="point cloud units")
+        p.add_argument("--topic", default=None, help="bags: the topic to read")
+
+    p = sub.add_parser("mesh", help="capture (point cloud, depth image, bag) -> terrain mesh")
+    p.add_argument("input", metavar="INPUT", help=".pcd .ply .xyz .pts .npy .png .bag .db3 .mcap")
+    p.add_argument("-o", "--output", required=True, help="mesh file: .stl, .ply or .obj")
+    p.add_argument("--voxel", default=None, help="voxel size [m]: d or dx,dy,dz (default 0.01)")
+    p.add_argument("--method", choices=METHODS, default=None, help="default: grid")
+    p.add_argument("--camera-pose", default=None,
+                   help="x,y,z,qx,qy,qz,qw of the camera in the world (default: from the ground)")  # fmt: skip
+    p.add_argument("--crop", default=None, help="world box xmin,ymin,zmin,xmax,ymax,zmax [m]")
+    p.add_argument("--seed", type=int, default=None, help="RANSAC seed (default 0)")
+    capture_flags(p)
+    p.set_defaults(func=_cmd_mesh)
+
+    p = sub.add_parser(
+        "voxel-study", help="table 3.1: voxel size vs plane-fit error of a flat capture"
+    )
+    p.add_argument("capture", metavar="CAPTURE")
+    p.add_argument("--sizes", default="1,2,5,10,20", help="voxel sizes [cm]")
+    p.add_argument("--square", type=float, default=None,
+                   help="use the points within this square around the optical axis [m]")  # fmt: skip
+    p.add_argument("--csv", default=None, help="also write the table as CSV")
+    p.add_argument("--voxel", default=None, help=argparse.SUPPRESS)
+    capture_flags(p)
+    p.set_defaults(func=_cmd_voxel_study)
+
+    p = sub.add_parser("synth-capture", help="render a scene as a noisy Kinect v2 depth capture")
+    p.add_argument("scene", metavar="SCENE", help="library scene name or scene .yaml")
+    p.add_argument(
+        "-o", "--output", required=True, help=".png (+ .json sidecar), .pcd, .ply or .npy"
+    )
+    p.add_argument("--eye", required=True, help="camera position x,y,z [m]")
+    p.add_argument("--target", required=True, help="point the camera looks at x,y,z [m]")
+    p.add_argument("--intrinsics", default="kinect2-qhd", help=f"{', '.join(PRESETS)} or a file")
+    p.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    p.add_argument("--no-noise", action="store_true", help="exact depth")
+    p.set_defaults(func=_cmd_synth_capture)
+
+
 def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -315,6 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_trial)
 
     _add_experiment_parser(sub)
+    _add_perception_parsers(sub)
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
     p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")

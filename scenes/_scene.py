@@ -16,6 +16,7 @@ from typing import Any, Literal
 
 import yaml
 
+from perception import CAPTURE_SUFFIXES, CaptureError, CaptureSettings, capture_settings
 from planning import PlannerConfig
 from sim import DriverConfig, SimConfig
 
@@ -42,9 +43,13 @@ class TerrainObject:
     """Time limit of the OpenSCAD render [s] (scad only)."""
     key: str = "terrain[0]"
     """Where the object sits in its scene file, for error messages."""
+    capture: CaptureSettings | None = None
+    """How to read and mesh the source (capture objects only)."""
 
     @property
-    def kind(self) -> Literal["scad", "mesh"]:
+    def kind(self) -> Literal["scad", "mesh", "capture"]:
+        if self.capture is not None:
+            return "capture"
         return "scad" if self.source.suffix.lower() == ".scad" else "mesh"
 
 
@@ -192,20 +197,41 @@ def _pose(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
     return (x, y, math.radians(yaw))
 
 
+def _capture_of(ctx: YamlFields, data: dict, key: str) -> CaptureSettings:
+    """A capture object's `perception:` settings, checked (file names relative to the scene)."""
+    try:
+        return capture_settings(
+            data.get("perception") or {}, resolve=lambda p: (ctx.path.parent / p).resolve()
+        )
+    except CaptureError as exc:  # "field: what" -> "<file>: terrain[i].perception.field: what"
+        field, _, what = str(exc).partition(": ")
+        raise ctx.fail(f"{key}.perception.{field}", what) from None
+
+
 def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
-    data = ctx.mapping(value, key, ("scad", "mesh", "params", "timeout", "position", "orientation"))
-    kinds = [k for k in ("scad", "mesh") if k in data]
+    data = ctx.mapping(
+        value, key,
+        ("scad", "mesh", "capture", "params", "timeout", "perception", "position", "orientation"),
+    )  # fmt: skip
+    kinds = [k for k in ("scad", "mesh", "capture") if k in data]
     if len(kinds) != 1:
-        raise ctx.fail(key, "give exactly one of `scad: FILE.scad` or `mesh: FILE.stl|obj|ply|glb`")
+        raise ctx.fail(
+            key,
+            "give exactly one of `scad: FILE.scad`, `mesh: FILE.stl|obj|ply|glb` or "
+            f"`capture: FILE` ({', '.join(CAPTURE_SUFFIXES)})",
+        )
     kind = kinds[0]
     if not isinstance(data[kind], str):
         raise ctx.fail(f"{key}.{kind}", f"expected a file name, got {data[kind]!r}")
     source = (ctx.path.parent / data[kind]).resolve()
     if not source.is_file():
         raise ctx.fail(f"{key}.{kind}", f"file {source} does not exist")
-    allowed = (".scad",) if kind == "scad" else MESH_SUFFIXES
+    allowed = {"scad": (".scad",), "mesh": MESH_SUFFIXES, "capture": CAPTURE_SUFFIXES}[kind]
     if source.suffix.lower() not in allowed:
         raise ctx.fail(f"{key}.{kind}", f"{source.name}: expected a {' or '.join(allowed)} file")
+    capture = _capture_of(ctx, data, key) if kind == "capture" else None
+    if kind != "capture" and "perception" in data:
+        raise ctx.fail(f"{key}.perception", "only a capture object takes this")
     params = data.get("params") or {}
     if kind != "scad" and ("params" in data or "timeout" in data):
         raise ctx.fail(
@@ -244,6 +270,7 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
         timeout=timeout,
         key=key,
+        capture=capture,
     )
 
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from perception import CaptureError, mesh_capture
 from planning import (
     VALID,
     Footprint,
@@ -92,7 +93,14 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
             source = render_scad(source, dict(obj.params), timeout=obj.timeout)
         except SceneError as exc:
             raise SceneError(f"{label}: {exc}") from None
-    mesh = clean_terrain_mesh(read_mesh(source, label), label)
+    if obj.kind == "capture":
+        try:
+            raw = mesh_capture(source, obj.capture).mesh
+        except CaptureError as exc:
+            raise SceneError(f"{label}: {exc}") from None
+    else:
+        raw = read_mesh(source, label)
+    mesh = clean_terrain_mesh(raw, label)
     transform = np.eye(4)
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position

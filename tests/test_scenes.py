@@ -227,8 +227,12 @@ def test_the_readme_example_is_a_valid_scene(tmp_path):
     shutil.copy(LIBRARY / "double_bridge.scad", tmp_path)
     (tmp_path / "meshes").mkdir()
     trimesh.creation.box((0.1, 0.1, 0.05)).export(tmp_path / "meshes" / "rock.stl")
+    (tmp_path / "captures").mkdir()
+    shutil.copy(LIBRARY / "kinect_bridge_depth.png", tmp_path / "captures" / "bridge.png")
     world = build_world(load_scene(tmp_path / "example.yaml"))
-    assert [o.kind for o in world.scene.terrain] == ["scad", "mesh"]
+    assert [o.kind for o in world.scene.terrain] == ["scad", "mesh", "capture"]
+    # The captured plywood bridge's floor, moved 4 m along y, reaches past y = 5 m.
+    assert world.mesh.bounds[1][1] > 5.0
     assert dict(world.scene.terrain[0].params) == {"separation": 0.8, "left_bump_height": 0.015}
     assert world.scene.planner.validity.max_slope_deg == 25.0
     # The bridges moved 0.1 m closer to the middle; the 5 cm rock, centred on z = 0, at (0.8, 1.7).
