@@ -32,6 +32,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_trial.py
 	$(BIN)/python benchmarks/bench_planning.py
 	$(BIN)/python benchmarks/bench_experiment.py
+	$(BIN)/python benchmarks/bench_perception.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts
