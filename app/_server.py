@@ -46,7 +46,7 @@ Command = PlanCmd | DriveCmd | ResetCmd
 # -- worker processes ---------------------------------------------------------------------------
 
 _CTX = mp.get_context("forkserver")
-_CTX.set_forkserver_preload(["app._trial"])
+_CTX.set_forkserver_preload(["experiments._trial"])
 
 
 def _plan_worker(conn, world: World, seed: int, start, goal) -> None:
