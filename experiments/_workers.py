@@ -25,8 +25,8 @@ from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL
 from ._trial import drive, finish_trial, plan, reference_energy
 
-Call = tuple[str, tuple]
-"""(TrialWorker method name, its arguments)."""
+Call = tuple[str, tuple] | tuple[str, tuple, dict]
+"""(TrialWorker method name, its arguments[, its keyword arguments])."""
 
 
 class TrialWorker:
@@ -44,13 +44,18 @@ class TrialWorker:
         route = self.world.route(planned.path_xyz[:, :2]) if planned.found else None
         return {"seed": seed, "route": route, "plan": planned}
 
-    def trial(self, index: int, seed: int, target_route: str, planned: PlanResult | None) -> dict:
+    def trial(
+        self, index: int, seed: int, target_route: str, planned: PlanResult | None, *,
+        start: tuple | None = None, goal: tuple | None = None,
+    ) -> dict:  # fmt: skip
         """Trial `index`: drive the plan of `seed` (planned now unless given: the census's
-        plan of that seed is the same plan); a store record."""
+        plan of that seed is the same plan) from start to goal (default: the scene's); a store
+        record."""
         scene = self.world.scene
+        start, goal = start or scene.start, goal or scene.goal
         if planned is None:
-            planned = plan(self.world, seed=seed)
-        result = finish_trial(self.world, planned, start=scene.start, goal=scene.goal, sim=self.sim)
+            planned = plan(self.world, seed=seed, start=start, goal=goal)
+        result = finish_trial(self.world, planned, start=start, goal=goal, sim=self.sim)
         return {"kind": TRIAL, "index": index, "target_route": target_route, **result.to_json()}
 
     def redrive(self, index: int, of_trial: int, path: list, start: list) -> dict:
@@ -91,8 +96,8 @@ def _init_local(spec: ExperimentSpec) -> None:
 
 
 def _call_local(call: Call):
-    name, args = call
-    return getattr(_worker, name)(*args)
+    name, args, *kwargs = call
+    return getattr(_worker, name)(*args, **(kwargs[0] if kwargs else {}))
 
 
 class LocalPool:
@@ -162,7 +167,8 @@ class RayPool:
 
     def run(self, calls: Iterable[Call]) -> Iterator:
         yield from self._pool.map_unordered(
-            lambda actor, call: getattr(actor, call[0]).remote(*call[1]), list(calls)
+            lambda actor, call: getattr(actor, call[0]).remote(*call[1], **(call[2:] or [{}])[0]),
+            list(calls),
         )
 
     def close(self) -> None:

@@ -3,6 +3,7 @@
 from ._errors import SceneError as SceneError
 from ._openscad import render_scad as render_scad
 from ._scene import LIBRARY as LIBRARY
+from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
 from ._scene import Scene as Scene
 from ._scene import TerrainObject as TerrainObject
 from ._scene import YamlFields as YamlFields
@@ -13,4 +14,5 @@ from ._world import World as World
 from ._world import build_terrain_mesh as build_terrain_mesh
 from ._world import build_world as build_world
 from ._world import footprint_of as footprint_of
+from ._world import pose_problem as pose_problem
 from ._world import route_of as route_of
