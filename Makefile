@@ -33,6 +33,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_planning.py
 	$(BIN)/python benchmarks/bench_experiment.py
 	$(BIN)/python benchmarks/bench_perception.py
+	$(BIN)/python benchmarks/bench_app.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts
