@@ -93,6 +93,8 @@ class PlannerConfig:
     budget instead of stopping at their first solution."""
     waypoint_spacing: float = 0.05
     """Spacing of the waypoints handed to the driver [m]."""
+    keep_roadmap: bool = False
+    """Return the planner's graph (roadmap or tree) with the plan, for display."""
     validity: ValidityConfig = field(default_factory=ValidityConfig)
     """Tolerances of the validity conditions."""
 
@@ -123,6 +125,8 @@ class PlanResult:
     """Wall time spent computing validity [s]."""
     sampler_calls: int = 0
     """Samples drawn from the terrain sampler [-]."""
+    roadmap: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    """(E, 2, 2) the planner's graph as xy segments [m] (with keep_roadmap; else empty)."""
 
 
 class _TerrainSampler(ob.StateSampler):
@@ -418,6 +422,8 @@ def _plan_here(
         validity_checks=check.states, validity_time=check.seconds,
         sampler_calls=sum(smp.calls for smp in samplers),
     )  # fmt: skip
+    if cfg.keep_roadmap:
+        stats["roadmap"] = _graph_segments(si, planner)
     if states is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
         return PlanResult(
@@ -437,6 +443,20 @@ def _plan_here(
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
         **stats,
     )
+
+
+def _graph_segments(si, planner) -> np.ndarray:
+    """(E, 2, 2) xy segments [m] of the planner's roadmap or tree (OMPL PlannerData)."""
+    data = ob.PlannerData(si)
+    planner.getPlannerData(data)
+    xy = np.array([[v.getState().getX(), v.getState().getY()]
+                   for v in (data.getVertex(i) for i in range(data.numVertices()))])  # fmt: skip
+    segments = []
+    targets = ou.vectorUint()
+    for i in range(data.numVertices()):
+        data.getEdges(i, targets)
+        segments.extend((xy[i], xy[j]) for j in targets)
+    return np.array(segments, dtype=np.float64).reshape(-1, 2, 2)
 
 
 def _solve_prm(si, planner: og.PRM, cfg: PlannerConfig, deadline: float) -> list | None:

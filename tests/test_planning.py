@@ -255,3 +255,19 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
         stop.set()
         other.join()
     assert used and np.array_equal(auto.path_xyz, forked.path_xyz)
+
+
+@pytest.mark.parametrize("name", ["prm", "rrtconnect"])
+def test_keep_roadmap_returns_the_planners_graph(world, name):
+    """The graph the app can show: edges between states in the planning area, the start among
+    them, and more edges than the path has."""
+    cfg = dataclasses.replace(world.scene.planner, name=name, keep_roadmap=True)
+    planned = plan(world, seed=2, planner=cfg)
+    graph = planned.roadmap
+    assert planned.found and graph.shape[1:] == (2, 2) and len(graph) >= len(planned.states) - 1
+    (xa, ya), (xb, yb) = world.scene.bounds
+    pts = graph.reshape(-1, 2)
+    assert np.all((pts[:, 0] >= xa - 1e-9) & (pts[:, 0] <= xb + 1e-9))
+    assert np.all((pts[:, 1] >= ya - 1e-9) & (pts[:, 1] <= yb + 1e-9))
+    assert np.min(np.linalg.norm(pts - np.array(world.scene.start[:2]), axis=1)) < 1e-9
+    assert len(plan(world, seed=2).roadmap) == 0  # only when asked
