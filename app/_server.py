@@ -229,7 +229,10 @@ class Batch:
 class RoachApp:
     """Owns the viser server and the state shown in it."""
 
-    def __init__(self, world: World, *, host: str, port: int, upload_dir: Path | None = None):
+    def __init__(
+        self, world: World, *, host: str, port: int, upload_dir: Path | None = None,
+        max_upload_bytes: int = MAX_UPLOAD_BYTES,
+    ):  # fmt: skip
         self.world = world
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.commands: queue.Queue[Cmd] = queue.Queue()
@@ -243,7 +246,8 @@ class RoachApp:
         """Scene dropdown label -> scene file of each loaded upload."""
         self.upload_dir = Path(upload_dir or tempfile.mkdtemp(prefix="roachplan-uploads-"))
         self._next_seed = world.scene.seed
-        _limit_uploads(self.server, MAX_UPLOAD_BYTES, self._refuse_upload)
+        self.max_upload_bytes = max_upload_bytes
+        _limit_uploads(self.server, max_upload_bytes, self._refuse_upload)
         self._build_gui()
         self._show_world()
         self._stop = threading.Event()
@@ -289,6 +293,7 @@ class RoachApp:
             )
             self.time_limit = gui.add_number("Time budget [s]", 20.0, min=0.1, max=300.0, step=0.5)
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
+            self.show_roadmap = gui.add_checkbox("Show roadmap", False)
             self.plan_button = gui.add_button("Plan")
             self.drive_button = gui.add_button("Drive", disabled=True)
             self.reset_button = gui.add_button("Reset")
@@ -351,7 +356,7 @@ class RoachApp:
 
     def _refuse_upload(self, client_id, name: str, size: int) -> None:
         self._notify(client_id, "File too large",
-                     f"{name}: {size / 1e6:.1f} MB; the limit is {MAX_UPLOAD_BYTES / 1e6:.0f} MB",
+                     f"{name}: {size / 1e6:.3f} MB; the limit is {self.max_upload_bytes / 1e6:.3f} MB",
                      error=True)  # fmt: skip
 
     # the world in the scene ------------------------------------------------------------------
@@ -570,7 +575,8 @@ class RoachApp:
 
     def _planner(self):
         return dataclasses.replace(self.world.scene.planner, name=self.planner.value,
-                                   time_limit=float(self.time_limit.value))  # fmt: skip
+                                   time_limit=float(self.time_limit.value),
+                                   keep_roadmap=bool(self.show_roadmap.value))  # fmt: skip
 
     def _do_plan(self, cmd: Cmd) -> None:
         if not self._check_markers():
@@ -600,6 +606,12 @@ class RoachApp:
             return
         for k, lp in enumerate(plans):
             self._draw(f"/plans/{k}", lp.plan.path_xyz + [0, 0, 0.005], BLACK)
+        graph = plans[0].plan.roadmap
+        if len(graph):  # the first plan's roadmap or tree, grey, just above the surface
+            z = self.world.heightfield.sample(graph.reshape(-1, 2)).reshape(-1, 2, 1)
+            segs = np.concatenate([graph, np.nan_to_num(z) + 0.003], axis=2).astype(np.float32)
+            self.server.scene.add_line_segments("/plans/roadmap", segs, colors=(150, 150, 150),
+                                                thickness=1.0, thickness_units="screen")  # fmt: skip
         first = plans[0].plan
         if count == 1:
             self.status.content = (

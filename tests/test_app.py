@@ -167,3 +167,46 @@ def test_click_places_the_start_and_invalid_markers_say_why(artifacts):
             assert np.allclose(app.balls["start"].color, (220, 30, 30))
     finally:
         app.stop()
+
+
+def test_cancel_a_batch_show_a_trial_and_the_roadmap(artifacts):
+    """In-process server (to read its state): a batch cancelled after its first trial stops
+    short; picking a trial draws it again; Show roadmap draws the planner's graph."""
+    from app._server import RoachApp
+    from scenes import build_world, load_scene
+
+    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port(),
+                   max_upload_bytes=1000)  # fmt: skip
+    try:
+        with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+            set_value(page, "Trials (N)", "40")
+            set_value(page, "Workers", "2")
+            page.get_by_role("button", name="Run trials").click()
+            page.get_by_text(re.compile(r"1/40 trials")).wait_for(timeout=120_000)
+            page.get_by_role("button", name="Cancel").click()
+            done = page.get_by_text(re.compile(r"Batch cancelled: \d+/40 trials"))
+            done.wait_for(timeout=60_000)
+            n = int(re.search(r"cancelled: (\d+)/40", done.inner_text()).group(1))
+            assert 1 <= n < 40 and len(app.scene_trials) == n
+            page.screenshot(path=artifacts / "app-09-batch-cancelled.png")
+
+            page.locator("input[value='-']").first.click()
+            page.get_by_role("option", name="1", exact=True).click()
+            page.get_by_text(
+                re.compile(r"^Trial 1: (success|fell|flipped|stuck|timeout)")
+            ).wait_for(timeout=30_000)
+            handles = app.server.scene._handle_from_node_name
+            assert "/plans/shown" in handles and "/trajectories/shown" in handles
+
+            page.get_by_text("Show roadmap").click()
+            page.get_by_role("button", name="Plan").click()
+            page.get_by_text(re.compile(r"Path found in")).wait_for(timeout=60_000)
+            assert "/plans/roadmap" in app.server.scene._handle_from_node_name
+            page.screenshot(path=artifacts / "app-10-roadmap.png")
+
+            big = ROOT / "scenes" / "library" / "double_bridge.scad"  # > 1000 bytes
+            upload(page, big)
+            page.get_by_text("File too large").wait_for(timeout=30_000)
+            assert "double_bridge" in title(page)
+    finally:
+        app.stop()
