@@ -31,7 +31,8 @@ class TrialResult:
     reason: str
     """Why the trial ended as it did."""
     route: str
-    """Which of the scene's named regions the path crosses ("other" if none, "" if no path)."""
+    """The route the path takes (World.route: the scene's named region it crosses, else its
+    homology label round the terrain's holes; "" without a path)."""
     drive_time: float
     """Simulated time of the drive [s] (0 without a path)."""
     energy: float
