@@ -685,7 +685,7 @@ class RoachApp:
                          error=True)  # fmt: skip
             return
         k, best = min(ok, key=lambda kt: kt[1]["relative_energy"])
-        planned = dataclasses.replace(self._stub_plan(best), path_xyz=np.asarray(best["path"]))
+        planned = self._stub_plan(best)
         self._draw("/plans/0", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
         result = self._drive(planned, tuple(best["start"]), tuple(best["goal"]), cmd)
         if result is not None:

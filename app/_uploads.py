@@ -9,6 +9,7 @@ it is written into a fresh folder under the app's upload directory under a sanit
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import shutil
 import tempfile
@@ -131,7 +132,7 @@ def prepare_upload_scene(scene_path: Path):
     raw["robot"] = {"start": [*centre.round(3).tolist(), 0.0]}
     raw["goal"] = [*centre.round(3).tolist(), 0.0]
     scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
-    world = build_world(load_scene(scene_path), check_poses=False)
+    world = build_world(load_scene(scene_path), check_poses=False, mesh=mesh)
     axis = 0 if (hi - lo)[0] >= (hi - lo)[1] else 1
     yaw = 0.0 if axis == 0 else np.pi / 2
     t = np.linspace(lo[axis], hi[axis], 80)
@@ -151,4 +152,5 @@ def prepare_upload_scene(scene_path: Path):
     raw["robot"] = {"start": [round(float(a[0]), 3), round(float(a[1]), 3), float(np.degrees(yaw))]}
     raw["goal"] = [round(float(b[0]), 3), round(float(b[1]), 3), float(np.degrees(yaw))]
     scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
-    return build_world(load_scene(scene_path), check_poses=False)
+    # Only the poses changed: the same terrain and height field, with the scene as now written.
+    return dataclasses.replace(world, scene=load_scene(scene_path))

@@ -225,8 +225,17 @@ def _cmd_scene_check(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _cmd_scene_build(args: argparse.Namespace) -> int:
+def _export_mesh(mesh, out) -> None:
+    """Write the mesh in the format out's suffix names, beside out and renamed: a failure
+    leaves no half-written file."""
     import os
+
+    tmp = out.with_name(f".{out.name}.part")
+    mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
+    os.replace(tmp, out)
+
+
+def _cmd_scene_build(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from scenes import build_terrain_mesh, load_scene
@@ -238,10 +247,7 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     mesh = build_terrain_mesh(load_scene(args.scene))
     if len(mesh.faces) == 0:
         raise SceneError(f"scene {args.scene!r} has no terrain objects, only a ground plane")
-    # Write beside the target and rename, so a failure leaves no half-written file.
-    tmp = out.with_name(f".{out.name}.part")
-    mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
-    os.replace(tmp, out)
+    _export_mesh(mesh, out)
     print(f"wrote {out}: {len(mesh.faces)} triangles, bounds {mesh.bounds.round(4).tolist()} m")
     return 0
 
@@ -286,7 +292,6 @@ def _capture_settings(args: argparse.Namespace):
 
 
 def _cmd_mesh(args: argparse.Namespace) -> int:
-    import os
     from pathlib import Path
 
     from perception import mesh_capture
@@ -296,9 +301,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in formats:
         raise CaptureError(f"{out}: the output must end in one of {', '.join(formats)}")
     rec = mesh_capture(args.input, _capture_settings(args))
-    tmp = out.with_name(f".{out.name}.part")  # nothing half-written on failure
-    rec.mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
-    os.replace(tmp, out)
+    _export_mesh(rec.mesh, out)
     from scipy.spatial.transform import Rotation
 
     wfc = rec.world_from_camera

@@ -13,10 +13,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from planning import PlannerConfig
-from scenes import Scene, SceneError, YamlFields, load_scene
+from scenes import (
+    Scene,
+    SceneError,
+    YamlFields,
+    library_names,
+    load_scene,
+    read_yaml,
+    resolve_in_library,
+)
 from sim import DriverConfig, SimConfig
 
 from ._errors import ExperimentError
@@ -79,22 +85,12 @@ class ExperimentSpec:
 
 def list_experiments() -> list[str]:
     """Names of the experiments in the library."""
-    return sorted(p.stem for p in LIBRARY.glob("*.yaml"))
+    return library_names(LIBRARY)
 
 
 def resolve_experiment(name_or_path: str | Path) -> Path:
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml"):
-        if not p.is_file():
-            raise ExperimentError(f"{p}: no such experiment file")
-        return p.resolve()
-    lib = LIBRARY / f"{name_or_path}.yaml"
-    if lib.is_file():
-        return lib
-    raise ExperimentError(
-        f"unknown experiment {str(name_or_path)!r}: give an experiment file (.yaml) or one of "
-        f"{', '.join(list_experiments())}"
-    )
+    """A library experiment name or a path to a spec file -> the spec file's path."""
+    return resolve_in_library(name_or_path, LIBRARY, "experiment", ExperimentError)
 
 
 _KEYS = ("description", "scene", "planner", "sim", "driver", "routes", "trials_per_route",
@@ -105,12 +101,7 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     """Read and validate an experiment spec (a YAML file or a library name)."""
     path = resolve_experiment(name_or_path)
     f = YamlFields(path, ExperimentError)
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ExperimentError(f"{path}: not valid YAML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ExperimentError(f"{path}: cannot read the experiment file: {exc}") from None
+    raw = read_yaml(path, "experiment", ExperimentError)
     data = f.mapping(raw, "", _KEYS, required=("scene",))
     if not isinstance(data["scene"], str):
         raise f.fail(

@@ -95,9 +95,14 @@ def _init_local(spec: ExperimentSpec) -> None:
     _worker = TrialWorker(spec)
 
 
-def _call_local(call: Call):
+def _unpack(call: Call) -> tuple[str, tuple, dict]:
     name, args, *kwargs = call
-    return getattr(_worker, name)(*args, **(kwargs[0] if kwargs else {}))
+    return name, args, kwargs[0] if kwargs else {}
+
+
+def _call_local(call: Call):
+    name, args, kwargs = _unpack(call)
+    return getattr(_worker, name)(*args, **kwargs)
 
 
 class LocalPool:
@@ -166,10 +171,11 @@ class RayPool:
         self.workers = n
 
     def run(self, calls: Iterable[Call]) -> Iterator:
-        yield from self._pool.map_unordered(
-            lambda actor, call: getattr(actor, call[0]).remote(*call[1], **(call[2:] or [{}])[0]),
-            list(calls),
-        )
+        def submit(actor, call: Call):
+            name, args, kwargs = _unpack(call)
+            return getattr(actor, name).remote(*args, **kwargs)
+
+        yield from self._pool.map_unordered(submit, list(calls))
 
     def close(self) -> None:
         for a in self._actors:

@@ -113,8 +113,14 @@ def depth_to_points(depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
 # -- formats --------------------------------------------------------------------------------
 
 
+def _head(path: Path, n: int) -> bytes:
+    """The first n bytes of a file (without reading a large capture whole)."""
+    with open(path, "rb") as f:
+        return f.read(n)
+
+
 def _sniff(path: Path, magic: tuple[bytes, ...], what: str) -> None:
-    head = path.read_bytes()[:64]
+    head = _head(path, 64)
     if not any(head.startswith(m) for m in magic):
         raise CaptureError(f"{path}: not a {what} file (it starts with {head[:16]!r})")
 
@@ -122,7 +128,7 @@ def _sniff(path: Path, magic: tuple[bytes, ...], what: str) -> None:
 def _load_pcd(path: Path) -> Capture:
     from pypcd4 import PointCloud
 
-    head = path.read_bytes()[:256]
+    head = _head(path, 256)
     if not (head.startswith(b"#") or head.startswith(b"VERSION") or head.startswith(b"FIELDS")):
         raise CaptureError(f"{path}: not a PCD file (no PCD header; starts with {head[:16]!r})")
     try:

@@ -7,8 +7,11 @@ from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
 from ._scene import Scene as Scene
 from ._scene import TerrainObject as TerrainObject
 from ._scene import YamlFields as YamlFields
+from ._scene import library_names as library_names
 from ._scene import list_scenes as list_scenes
 from ._scene import load_scene as load_scene
+from ._scene import read_yaml as read_yaml
+from ._scene import resolve_in_library as resolve_in_library
 from ._scene import resolve_scene as resolve_scene
 from ._world import World as World
 from ._world import build_terrain_mesh as build_terrain_mesh

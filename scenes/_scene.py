@@ -84,23 +84,49 @@ class Scene:
 
 def list_scenes() -> list[str]:
     """Names of the scenes in the library."""
-    return sorted(p.stem for p in LIBRARY.glob("*.yaml"))
+    return library_names(LIBRARY)
 
 
 def resolve_scene(name_or_path: str | Path) -> Path:
     """A library scene name or a path to a scene file -> the scene file's path."""
+    return resolve_in_library(name_or_path, LIBRARY, "scene", SceneError)
+
+
+# -- YAML files in a library (scenes, experiment specs) ---------------------------------------
+
+
+def library_names(library: Path) -> list[str]:
+    """Names of the .yaml files in a library folder."""
+    return sorted(p.stem for p in library.glob("*.yaml"))
+
+
+def resolve_in_library(
+    name_or_path: str | Path, library: Path, kind: str, error: type[ValueError]
+) -> Path:
+    """A library name or a path to a .yaml file -> the file's path; `error` names the `kind`
+    of file and the library's names when there is no such file."""
     p = Path(name_or_path)
     if p.suffix in (".yaml", ".yml"):
         if not p.is_file():
-            raise SceneError(f"{p}: no such scene file")
+            raise error(f"{p}: no such {kind} file")
         return p.resolve()
-    lib = LIBRARY / f"{name_or_path}.yaml"
+    lib = library / f"{name_or_path}.yaml"
     if lib.is_file():
         return lib
-    raise SceneError(
-        f"unknown scene {str(name_or_path)!r}: give a scene file (.yaml) or one of "
-        f"{', '.join(list_scenes())}"
+    raise error(
+        f"unknown {kind} {str(name_or_path)!r}: give {'an' if kind[0] in 'aeiou' else 'a'} "
+        f"{kind} file (.yaml) or one of {', '.join(library_names(library))}"
     )
+
+
+def read_yaml(path: Path, kind: str, error: type[ValueError]) -> Any:
+    """The parsed content of a YAML file; `error` when it cannot be read or parsed."""
+    try:
+        return yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise error(f"{path}: not valid YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: cannot read the {kind} file: {exc}") from None
 
 
 # -- validation (also used by experiment specs) ------------------------------------------------------------------------
@@ -278,12 +304,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     """Read and validate a scene file (or a library scene by name)."""
     path = resolve_scene(name_or_path)
     ctx = YamlFields(path)
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise SceneError(f"{path}: not valid YAML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
+    raw = read_yaml(path, "scene", SceneError)
     keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
             "planner", "sim", "driver", "seed")  # fmt: skip
     data = ctx.mapping(raw, "", keys, required=("terrain", "robot", "goal", "bounds"))

@@ -118,13 +118,18 @@ def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
 
 
 def build_world(
-    scene: Scene, robot: RobotConfig | None = None, *, check_poses: bool = True
+    scene: Scene,
+    robot: RobotConfig | None = None,
+    *,
+    check_poses: bool = True,
+    mesh: trimesh.Trimesh | None = None,
 ) -> World:
     """Render/load the terrain and rasterise the planner's height field around the bounds;
     SceneError when the start or goal is not a place the robot can stand (unless check_poses
-    is False: the app shows such a scene and says what is wrong with its markers)."""
+    is False: the app shows such a scene and says what is wrong with its markers).
+    mesh: the scene's terrain if already built (build_terrain_mesh), not to build it twice."""
     robot = robot or RobotConfig()
-    mesh = build_terrain_mesh(scene)
+    mesh = build_terrain_mesh(scene) if mesh is None else mesh
     margin = 0.15  # the robot's feet reach this far past its centre's bounds [m]
     (lo, hi) = scene.bounds
     hf = heightfield_from_mesh(
