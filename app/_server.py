@@ -2,7 +2,8 @@
 the report's performance evaluator (plan, drive, reset, best path, batches of trials).
 
 Threads: viser runs callbacks on its own thread pool; they only put a command on a queue (the
-batch Cancel button also raises a flag the batch thread polls). One loop thread owns the state:
+batch Cancel button also raises a flag the batch thread polls). Commands run one at a time, in
+the order they were clicked, from any browser. One loop thread owns the state:
 it drains the queue and runs each piece of work outside the server's process - planning,
 driving and scene loading (meshing a capture, rendering OpenSCAD) in a fresh child each (OMPL
 holds the GIL while it solves, and a fresh process is where OMPL's global RNG can be seeded);
@@ -481,17 +482,14 @@ class RoachApp:
                 cmd = self.commands.get(timeout=0.05)
             except queue.Empty:
                 continue
-            busy = (self.plan_button, self.drive_button, self.reset_button, self.best_button)
-            for button in busy:
-                button.disabled = True
+            # The buttons stay enabled while a command runs: viser drops a click on a disabled
+            # button, so another browser's click would be lost; clicks queue here instead.
             try:
                 self._handle(cmd)
             except Exception as exc:  # keep serving whatever went wrong in one command
                 self._notify(cmd.client_id, "Error", f"{exc}", error=True)
                 self.status.content = f"Error: {exc}"
             finally:
-                for button in busy:
-                    button.disabled = False
                 self.drive_button.disabled = not self.plans
 
     def _handle(self, cmd: Cmd) -> None:  # noqa: PLR0912 - one branch per command
