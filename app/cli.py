@@ -202,13 +202,24 @@ def _cmd_scene_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scene_options(scene, args: argparse.Namespace):
+    """The scene with the command line's --scale and --scad-timeout applied, where given."""
+    from scenes import scaled_scene, with_scad_timeout
+
+    if getattr(args, "scale", None) is not None:
+        scene = scaled_scene(scene, args.scale)
+    if getattr(args, "scad_timeout", None) is not None:
+        scene = with_scad_timeout(scene, args.scad_timeout)
+    return scene
+
+
 def _cmd_scene_check(args: argparse.Namespace) -> int:
     from scenes import build_world, load_scene
 
     failed = 0
     for name in args.files:
         try:
-            world = build_world(load_scene(name))
+            world = build_world(_scene_options(load_scene(name), args))
         except SceneError as exc:
             print(f"FAIL {name}: {exc}")
             failed += 1
@@ -244,7 +255,7 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     formats = (".stl", ".obj", ".ply", ".glb")
     if out.suffix.lower() not in formats:
         raise SceneError(f"{out}: the output must end in one of {', '.join(formats)}")
-    mesh = build_terrain_mesh(load_scene(args.scene))
+    mesh = build_terrain_mesh(_scene_options(load_scene(args.scene), args))
     if len(mesh.faces) == 0:
         raise SceneError(f"scene {args.scene!r} has no terrain objects, only a ground plane")
     _export_mesh(mesh, out)
@@ -261,10 +272,30 @@ def _numbers(text: str | None, flag: str, n: tuple[int, ...]) -> list[float] | N
     except ValueError:
         values = []
     if len(values) not in n:
-        raise CaptureError(
-            f"{flag} {text!r}: expected {' or '.join(map(str, n))} comma-separated numbers"
-        )
+        contiguous = len(n) > 2 and n == tuple(range(n[0], n[-1] + 1))
+        counts = f"{n[0]} to {n[-1]}" if contiguous else " or ".join(map(str, n))
+        raise CaptureError(f"{flag} {text!r}: expected {counts} comma-separated numbers")
     return values
+
+
+def _intrinsics_flags(args: argparse.Namespace) -> str | dict | None:
+    """--intrinsics, or --fx --fy --cx --cy (all four) as a mapping; CaptureError names the
+    flag."""
+    given = {k: getattr(args, k, None) for k in ("fx", "fy", "cx", "cy")}
+    if all(v is None for v in given.values()):
+        return args.intrinsics
+    missing = [f"--{k}" for k, v in given.items() if v is None]
+    if missing:
+        raise CaptureError(
+            f"--fx --fy --cx --cy go together (the pinhole's focal lengths and principal point "
+            f"[px]); missing {' '.join(missing)}"
+        )
+    if args.intrinsics is not None:
+        raise CaptureError("pass either --intrinsics or --fx --fy --cx --cy, not both")
+    for k, v in given.items():
+        if not (math.isfinite(v) and v > 0):
+            raise CaptureError(f"--{k} {v:g}: expected a number of pixels > 0")
+    return given
 
 
 def _capture_settings(args: argparse.Namespace):
@@ -275,11 +306,16 @@ def _capture_settings(args: argparse.Namespace):
         "voxel": voxel[0] if voxel and len(voxel) == 1 else voxel,
         "method": getattr(args, "method", None),
         "camera_pose": _numbers(getattr(args, "camera_pose", None), "--camera-pose", (7,)),
-        "intrinsics": args.intrinsics,
+        "intrinsics": _intrinsics_flags(args),
         "depth_scale": args.depth_scale,
         "units": args.units,
         "topic": args.topic,
         "seed": getattr(args, "seed", None),
+        "frame": getattr(args, "frame", None),
+        "up": _numbers(getattr(args, "up", None), "--up", (3,)),
+        "depth_range": _numbers(getattr(args, "depth_range", None), "--depth-range", (2,)),
+        "ground_point": _numbers(getattr(args, "ground_point", None), "--ground-point", (3,)),
+        "recentre": getattr(args, "recentre", None),
     }
     crop = _numbers(getattr(args, "crop", None), "--crop", (6,))
     if crop:
@@ -300,18 +336,32 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     formats = (".stl", ".ply", ".obj")
     if out.suffix.lower() not in formats:
         raise CaptureError(f"{out}: the output must end in one of {', '.join(formats)}")
+    if out.resolve() == Path(args.input).resolve():
+        raise CaptureError(f"{out}: the output would overwrite the input capture; name another file")
     rec = mesh_capture(args.input, _capture_settings(args))
     _export_mesh(rec.mesh, out)
-    from scipy.spatial.transform import Rotation
-
-    wfc = rec.world_from_camera
-    pose = [*wfc[:3, 3], *Rotation.from_matrix(wfc[:3, :3]).as_quat()]
-    print(
-        f"wrote {out}: {len(rec.mesh.faces)} triangles, bounds {rec.mesh.bounds.round(3).tolist()} m"
-    )
+    report = {"input": args.input, "output": str(out), **rec.report()}
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"wrote {out}: {report['triangles']} triangles, bounds {report['bounds']} m")
     print("points: " + ", ".join(f"{k} {v}" for k, v in rec.counts.items()))
     print("seconds: " + ", ".join(f"{k} {v:.3f}" for k, v in rec.times.items()))
-    print("camera pose in the world (x,y,z,qx,qy,qz,qw): " + ",".join(f"{v:.5f}" for v in pose))
+    print(f"frame: {report['frame']}; up: {report['up_source']}")
+    if report["camera_pose"] is not None:
+        g = report.get("ground") or {}
+        print(
+            f"camera: {report['camera_height_m']:.3f} m above the ground, pitched "
+            f"{report['pitch_down_deg']:.1f} deg down, roll {report['roll_deg']:.1f} deg; ground "
+            f"support {100 * g.get('support_fraction', 1.0):.0f} % of the points, "
+            f"{g.get('area_m2', 0.0):.2f} m^2 seen"
+        )
+        print("camera pose in the world (x,y,z,qx,qy,qz,qw): "
+              + ",".join(f"{v:.5f}" for v in report["camera_pose"]))  # fmt: skip
+    for note in report["notes"]:
+        print(f"note: {note}")
+    for warning in report["warnings"]:
+        print(f"roachplan: warning: {warning}", file=sys.stderr)
     return 0
 
 
@@ -319,26 +369,57 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from perception import load_capture
-    from perception._voxel_study import format_study, square_region, study_csv, voxel_study
+    from perception._voxel_study import (
+        format_study,
+        planarity_warning,
+        plane_region,
+        rect_region,
+        square_region,
+        study_csv,
+        study_json,
+        voxel_study,
+    )
 
     sizes = _numbers(args.sizes, "--sizes", tuple(range(1, 32)))
-    if any(s <= 0 for s in sizes):
-        raise CaptureError(f"--sizes {args.sizes!r}: voxel sizes must be > 0 cm")
+    if not all(math.isfinite(s) and s > 0 for s in sizes):
+        raise CaptureError(f"--sizes {args.sizes!r}: voxel sizes must be numbers > 0 [cm]")
+    if args.square is not None and not (math.isfinite(args.square) and args.square > 0):
+        raise CaptureError(f"--square {args.square:g}: expected the square's side > 0 [m]")
+    region = _numbers(args.region, "--region", (4,))
+    if region is not None:
+        x0, y0, x1, y1 = region
+        if not (all(map(math.isfinite, region)) and x0 < x1 and y0 < y1):
+            raise CaptureError(f"--region {args.region!r}: expected x0,y0,x1,y1 [m] in the "
+                               f"camera frame with x0 < x1 and y0 < y1")  # fmt: skip
+        if args.square is not None:
+            raise CaptureError("pass either --square or --region, not both")
     settings = _capture_settings(args)
     cap = load_capture(args.capture, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
                        topic=settings.topic, units=settings.units)  # fmt: skip
     pts = cap.finite_points() - cap.sensor_origin
+    total, where = len(pts), "the whole capture"
     if args.square is not None:
-        pts = square_region(pts, args.square)
-        if len(pts) < 4:
-            raise CaptureError(
-                f"{args.capture}: fewer than 4 points within the {args.square} m square"
-            )
+        pts, where = square_region(pts, args.square), f"the {args.square:g} m square"
+    elif region is not None:
+        pts, where = rect_region(pts, *region), f"the region {args.region}"
+    if len(pts) < 4:
+        raise CaptureError(f"{args.capture}: {len(pts)} points within {where}; 4 or more needed")
+    if args.plane:
+        pts = plane_region(pts, settings.meshing.seed)
+        where = f"the dominant plane of {where} (seed {settings.meshing.seed})"
     rows = voxel_study(pts, sizes)
-    print(format_study(rows))
+    warning = planarity_warning(rows[0], float(np.median(np.linalg.norm(pts, axis=1))))
+    if args.json:
+        print(json.dumps({"capture": args.capture, "region": where, "capture_points": total,
+                          **study_json(rows, warning)}))  # fmt: skip
+    else:
+        print(f"{len(pts)} of {total} points: {where}")
+        print(format_study(rows))
+    if warning is not None:
+        print(f"roachplan: warning: {warning}", file=sys.stderr)
     if args.csv:
         Path(args.csv).write_text(study_csv(rows))
-        print(f"wrote {args.csv}")
+        print(f"wrote {args.csv}", file=sys.stderr if args.json else sys.stdout)
     return 0
 
 
@@ -368,18 +449,26 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
 
 
 def _add_perception_parsers(sub) -> None:
-    from perception import METHODS, PRESETS
+    from perception import FRAMES, METHODS, PRESETS
 
     def capture_flags(p):
         p.add_argument("--intrinsics", default=None,
-                       help=f"depth images: a .json/.xml file or {', '.join(PRESETS)}")  # fmt: skip
+                       help=f"depth images: a calibration file (.json, PCL .xml, OpenCV or ROS "
+                            f".yaml) or a preset: {', '.join(PRESETS)}")  # fmt: skip
+        for k, what in (("fx", "focal length x"), ("fy", "focal length y"),
+                        ("cx", "principal point x"), ("cy", "principal point y")):  # fmt: skip
+            p.add_argument(f"--{k}", type=float, default=None,
+                           help=f"depth images: {what} [px] (with the other three of "
+                                f"--fx --fy --cx --cy, instead of --intrinsics)")  # fmt: skip
         p.add_argument("--depth-scale", type=float, default=None,
-                       help="depth images: units per metre (default 1000, i.e. mm)")  # fmt: skip
+                       help="depth images: units per metre (default: the calibration's or "
+                            "preset's, e.g. 5000 for tum-*, else 1000, i.e. mm)")  # fmt: skip
         p.add_argument("--units", choices=("m", "mm"), default=None, help="point cloud units")
         p.add_argument("--topic", default=None, help="bags: the topic to read")
 
     p = sub.add_parser("mesh", help="capture (point cloud, depth image, bag) -> terrain mesh")
-    p.add_argument("input", metavar="INPUT", help=".pcd .ply .xyz .pts .npy .png .bag .db3 .mcap")
+    p.add_argument("input", metavar="INPUT",
+                   help=".pcd .ply .xyz .pts .npy .png .pgm .ppm .bag .db3 .mcap")  # fmt: skip
     p.add_argument("-o", "--output", required=True, help="mesh file: .stl, .ply or .obj")
     p.add_argument("--voxel", default=None, help="voxel size [m]: d or dx,dy,dz (default 0.01)")
     p.add_argument("--method", choices=METHODS, default=None, help="default: grid")
@@ -387,6 +476,22 @@ def _add_perception_parsers(sub) -> None:
                    help="x,y,z,qx,qy,qz,qw of the camera in the world (default: from the ground)")  # fmt: skip
     p.add_argument("--crop", default=None, help="world box xmin,ymin,zmin,xmax,ymax,zmax [m]")
     p.add_argument("--seed", type=int, default=None, help="RANSAC seed (default 0)")
+    p.add_argument("--frame", choices=FRAMES, default=None,
+                   help="camera: optical frame (x right, y down, z forward); world: z up (or "
+                        "--up), e.g. a lidar or a map; default auto: what the file says")  # fmt: skip
+    p.add_argument("--up", default=None, metavar="X,Y,Z",
+                   help="up in the capture's frame (default: a calibration's pose, a bag's "
+                        "IMU, -y for a camera, +z for a world frame)")  # fmt: skip
+    p.add_argument("--ground-point", default=None, metavar="X,Y,Z",
+                   help="a point on the intended ground, capture frame [m]: the plane through "
+                        "it is the ground")  # fmt: skip
+    p.add_argument("--depth-range", default=None, metavar="NEAR,FAR",
+                   help="keep points this near/far [m] (default: 0.3,8 for a camera, all for "
+                        "a world frame)")  # fmt: skip
+    p.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
+                   help="put the cloud's centre at x = y = 0 (default: when georeferenced)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: camera pose, ground, triangles, warnings")
     capture_flags(p)
     p.set_defaults(func=_cmd_mesh)
 
@@ -397,6 +502,13 @@ def _add_perception_parsers(sub) -> None:
     p.add_argument("--sizes", default="1,2,5,10,20", help="voxel sizes [cm]")
     p.add_argument("--square", type=float, default=None,
                    help="use the points within this square around the optical axis [m]")  # fmt: skip
+    p.add_argument("--region", default=None, metavar="X0,Y0,X1,Y1",
+                   help="use the points with x0<=x<=x1, y0<=y<=y1 in the camera frame "
+                        "(x right, y down) [m]; write --region=-1,0,1,1 when x0 < 0")  # fmt: skip
+    p.add_argument("--plane", action="store_true",
+                   help="use only the dominant plane's points (RANSAC), e.g. a room's wall")
+    p.add_argument("--seed", type=int, default=None, help="RANSAC seed of --plane (default 0)")
+    p.add_argument("--json", action="store_true", help="print the study as JSON")
     p.add_argument("--csv", default=None, help="also write the table as CSV")
     p.add_argument("--voxel", default=None, help=argparse.SUPPRESS)
     capture_flags(p)
@@ -520,10 +632,16 @@ def build_parser() -> argparse.ArgumentParser:
         "check", help="validate scene files: load, render, and check start and goal"
     )
     q.add_argument("files", nargs="+", metavar="FILE", help="scene .yaml files or library names")
+    q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
+                   help="time limit of each OpenSCAD render (default: the scene's, else 600)")
     q.set_defaults(func=_cmd_scene_check)
     q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
     q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
     q.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj, .ply or .glb")
+    q.add_argument("--scale", type=float, default=None, metavar="S",
+                   help="scale every terrain model by S before placing it (0.001: millimetres)")
+    q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
+                   help="time limit of each OpenSCAD render (default: the scene's, else 600)")
     q.set_defaults(func=_cmd_scene_build)
     return parser
 

@@ -1,13 +1,22 @@
 """From a depth camera's capture to a simulation-ready terrain mesh (Tong 2018, 3.1-3.2)."""
 
+from ._camera import PRESET_DEPTH_SCALES as PRESET_DEPTH_SCALES
 from ._camera import PRESETS as PRESETS
+from ._camera import Calibration as Calibration
 from ._camera import Intrinsics as Intrinsics
+from ._camera import PinholeNumbers as PinholeNumbers
+from ._camera import load_calibration as load_calibration
 from ._camera import load_intrinsics as load_intrinsics
 from ._capture import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
 from ._capture import Capture as Capture
+from ._capture import depth_scale_advice as depth_scale_advice
 from ._capture import depth_to_points as depth_to_points
 from ._capture import load_capture as load_capture
 from ._errors import CaptureError as CaptureError
+from ._ground import GroundChoice as GroundChoice
+from ._ground import GroundConfig as GroundConfig
+from ._ground import choose_ground as choose_ground
+from ._pipeline import FRAMES as FRAMES
 from ._pipeline import METHODS as METHODS
 from ._pipeline import CaptureSettings as CaptureSettings
 from ._pipeline import MeshingConfig as MeshingConfig

@@ -1,11 +1,14 @@
 """From a capture to a simulation-ready terrain mesh (Tong 2018, sections 3.1-3.2).
 
 crop (depth range) -> voxel grid (dx, dy, dz; centroid per voxel) -> statistical outliers ->
-ground plane (RANSAC) and the camera-to-world transform (ground at z = 0, z up) or the user's
-camera pose -> crop (world box) -> mesh -> every facet's normal toward the camera.
+ground (perception/_ground.py: the lowest well-supported plane facing up under a gravity prior)
+and the capture-to-world transform (ground at z = 0, z up) or the user's camera pose -> crop
+(world box) -> mesh -> every facet's normal toward the camera.
 
-Frames: camera = x right, y down, z forward (the sensor's); world = z up, ground z = 0, x the
-camera's x projected on the ground, origin where the optical axis meets the ground.
+Frames: camera = x right, y down, z forward (the sensor's optical frame); world = z up, ground
+z = 0, x the camera's x projected on the ground, origin where the optical axis meets the ground.
+A cloud already in a world frame (a lidar's or a map's, z up) keeps its axes: only its ground
+is put at z = 0 and, when georeferenced (UTM), its centre at the origin.
 """
 
 from __future__ import annotations
@@ -17,11 +20,19 @@ from typing import Literal
 import numpy as np
 import trimesh
 
-from ._capture import Capture
+from ._camera import PinholeNumbers
+from ._capture import Capture, is_georeferenced
 from ._errors import CaptureError
+from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
 
 Method = Literal["grid", "poisson", "ball-pivot"]
 METHODS: tuple[str, ...] = ("grid", "poisson", "ball-pivot")
+Frame = Literal["auto", "camera", "world"]
+FRAMES: tuple[str, ...] = ("auto", "camera", "world")
+CAMERA_DEPTH_RANGE = (0.3, 8.0)
+"""Default depth range of a camera-frame capture [m] (Kinect v2: 0.5-4.5 m rated)."""
+MAX_GRID_CELLS = 40_000_000
+"""Largest height field the grid method builds (~1 GB of arrays); beyond it, crop."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -30,8 +41,9 @@ class MeshingConfig:
 
     voxel: tuple[float, float, float] = (0.01, 0.01, 0.01)
     """Voxel size dx, dy, dz in the camera frame [m] (section 3.1)."""
-    depth_range: tuple[float, float] = (0.3, 8.0)
-    """Keep points this near/far along the optical axis [m] (Kinect v2: 0.5-4.5 m rated)."""
+    depth_range: tuple[float, float] | None = None
+    """Keep points this near/far [m]: along the optical axis in a camera frame, from the
+    sensor in a world frame; None: 0.3-8 m for a camera, everything for a world frame."""
     crop: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     """World-frame box ((xmin, ymin, zmin), (xmax, ymax, zmax)) to keep [m]; None: all."""
     outlier_neighbours: int = 16
@@ -43,9 +55,22 @@ class MeshingConfig:
     ground_iterations: int = 1000
     camera_pose: tuple[float, ...] | None = None
     """World pose of the camera x, y, z [m], qx, qy, qz, qw; None: from the ground plane."""
+    frame: Frame = "auto"
+    """The capture's frame: "camera" (optical: x right, y down, z forward), "world" (z up,
+    or `up`), or "auto": what the file says (depth images, organized clouds, a bag's frame
+    id), else "world" for a georeferenced cloud or one all round the sensor, else "camera"."""
+    up: tuple[float, float, float] | None = None
+    """Up in the capture's frame (the gravity prior); None: a calibration's camera pose, a
+    bag's IMU, -y for a camera frame, +z for a world frame."""
+    ground_point: tuple[float, float, float] | None = None
+    """A point on the intended ground, capture frame [m]: the plane through it is the ground
+    (the page's "click the ground to re-level")."""
+    recentre: bool | None = None
+    """Put the cloud's centre at x = y = 0 (world frame); None: when georeferenced."""
     method: Method = "grid"
     cell: float | None = None
-    """Grid method: cell size of the height field [m] (default: dx)."""
+    """Grid method: cell size of the height field [m] (default: dx, or the cloud's point
+    spacing when it is sparser, as an airborne lidar's metres)."""
     fill_holes: int = 2
     """Grid method: fill holes up to this many cells across from their neighbours."""
     poisson_depth: int = 9
@@ -60,15 +85,69 @@ class Reconstruction:
     mesh: trimesh.Trimesh
     """Terrain in the world frame [m], every facet facing the camera."""
     world_from_camera: np.ndarray
-    """(4, 4) transform of camera-frame points into the world frame."""
+    """(4, 4) transform of capture-frame points into the world frame."""
     counts: dict[str, int] = field(default_factory=dict)
     """Points after each stage, and triangles."""
     times: dict[str, float] = field(default_factory=dict)
     """Wall time of each stage [s]."""
+    frame: Literal["camera", "world"] = "camera"
+    """The capture's frame as read."""
+    up_source: str = ""
+    """Where the gravity prior came from."""
+    ground: GroundChoice | None = None
+    """The ground plane found (None when a camera pose was given)."""
+    warnings: tuple[str, ...] = ()
+    """What the user should check."""
+    notes: tuple[str, ...] = ()
+    """What was assumed or adapted."""
 
     @property
     def camera_position(self) -> np.ndarray:
         return self.world_from_camera[:3, 3]
+
+    @property
+    def camera_pose(self) -> list[float] | None:
+        """[x, y, z, qx, qy, qz, qw]: the camera in the world; None for a world-frame cloud."""
+        if self.frame != "camera":
+            return None
+        from scipy.spatial.transform import Rotation
+
+        quat = Rotation.from_matrix(self.world_from_camera[:3, :3]).as_quat()
+        return [*map(float, self.world_from_camera[:3, 3]), *map(float, quat)]
+
+    def to_capture_frame(self, p_world: np.ndarray) -> np.ndarray:
+        """(..., 3) world points [m] -> the same points in the capture's frame [m]."""
+        inv = np.linalg.inv(self.world_from_camera)
+        return np.asarray(p_world) @ inv[:3, :3].T + inv[:3, 3]
+
+    def report(self) -> dict:
+        """What was found, as plain data (the `mesh --json` output)."""
+        out: dict = {"frame": self.frame, "camera_pose": None, "up_source": self.up_source}
+        pose = self.camera_pose
+        if pose is not None:
+            out["camera_pose"] = [round(v, 6) for v in pose]
+            up = self.world_from_camera[2, :3]  # world z in camera coordinates
+            out["camera_height_m"] = round(float(self.world_from_camera[2, 3]), 4)
+            out["pitch_down_deg"] = round(float(np.degrees(np.arcsin(-np.clip(up[2], -1, 1)))), 2)
+            out["roll_deg"] = round(float(np.degrees(np.arctan2(up[0], -up[1]))), 2)
+        else:
+            out["origin_in_capture_frame"] = [
+                round(float(v), 4) for v in self.to_capture_frame(np.zeros(3))
+            ]
+        if self.ground is not None:
+            g = self.ground
+            out["ground"] = {
+                "normal_in_capture_frame": [round(float(v), 5) for v in g.normal],
+                "support_points": g.support, "support_fraction": round(g.fraction, 4),
+                "area_m2": round(g.area, 3),
+            }  # fmt: skip
+        out["triangles"] = int(len(self.mesh.faces))
+        out["bounds"] = self.mesh.bounds.round(4).tolist() if len(self.mesh.faces) else None
+        out["counts"] = dict(self.counts)
+        out["seconds"] = {k: round(v, 4) for k, v in self.times.items()}
+        out["warnings"] = list(self.warnings)
+        out["notes"] = list(self.notes)
+        return out
 
 
 def voxel_downsample(points: np.ndarray, size: tuple[float, float, float]) -> np.ndarray:
@@ -99,28 +178,11 @@ def remove_outliers(points: np.ndarray, neighbours: int, std: float) -> np.ndarr
     return points[np.asarray(kept, dtype=np.int64)]
 
 
-def fit_ground(points: np.ndarray, threshold: float, iterations: int, seed: int):
-    """RANSAC plane of the points ((N, 3) camera frame [m]): (unit normal toward the camera,
-    offset d with n.p + d = 0, inlier count)."""
-    import open3d as o3d
-
-    if len(points) < 3:
-        raise CaptureError("too few points left to find the ground plane")
-    o3d.utility.random.seed(seed)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    (a, b, c, d), inliers = cloud.segment_plane(threshold, 3, iterations)
-    n = np.array([a, b, c])
-    norm = np.linalg.norm(n)
-    n, d = n / norm, d / norm
-    if d < 0:  # the camera (the origin) is on the side the normal points to
-        n, d = -n, -d
-    return n, d, len(inliers)
-
-
-def world_from_ground(normal: np.ndarray, d: float) -> np.ndarray:
+def world_from_ground(normal: np.ndarray, d: float, reach: float = 8.0) -> np.ndarray:
     """(4, 4) camera -> world: z = the ground normal, ground at z = 0, x = the camera's x
-    projected on the ground, origin where the optical axis meets the ground (or the foot of
-    the camera when it looks away from the ground)."""
+    projected on the ground, origin where the optical axis meets the ground within reach [m]
+    (else the foot of the camera: a level camera's axis meets the floor far beyond what it
+    saw)."""
     z = normal
     x = np.array([1.0, 0.0, 0.0]) - z[0] * z
     if np.linalg.norm(x) < 1e-6:  # camera x along the normal: use camera z instead
@@ -130,7 +192,7 @@ def world_from_ground(normal: np.ndarray, d: float) -> np.ndarray:
     axis = np.array([0.0, 0.0, 1.0])
     denom = normal @ axis
     t = -d / denom if denom < -1e-6 else None  # the optical axis hits the ground ahead
-    origin = axis * t if t is not None and t > 0 else -d * normal
+    origin = axis * t if t is not None and 0 < t <= reach else -d * normal
     rot = np.stack([x, y, z])  # rows: world axes in camera coordinates
     out = np.eye(4)
     out[:3, :3] = rot
@@ -146,6 +208,11 @@ def pose_matrix(pose: tuple[float, ...]) -> np.ndarray:
     q = np.array([qx, qy, qz, qw], dtype=float)
     if not np.isfinite(q).all() or np.linalg.norm(q) < 1e-9:
         raise CaptureError(f"camera pose {pose}: the quaternion must be finite and non-zero")
+    if abs(np.linalg.norm(q) - 1.0) > 1e-3:
+        raise CaptureError(
+            f"camera pose {pose}: the quaternion (qx, qy, qz, qw) has norm "
+            f"{np.linalg.norm(q):.4f}; give a unit quaternion"
+        )
     qx, qy, qz, qw = q / np.linalg.norm(q)
     out = np.eye(4)
     out[:3, :3] = [
@@ -157,10 +224,54 @@ def pose_matrix(pose: tuple[float, ...]) -> np.ndarray:
     return out
 
 
+def capture_frame(capture: Capture, points: np.ndarray, cfg: MeshingConfig) -> str:
+    """"camera" or "world": the config's, else the file's word, else from the points ((N, 3)
+    finite, relative to the sensor): a georeferenced cloud, or one with points behind the
+    sensor (a lidar all round it; a camera sees only z > 0), is a world frame."""
+    if cfg.frame != "auto":
+        return cfg.frame
+    if capture.frame is not None:
+        return capture.frame
+    if is_georeferenced(points) or np.mean(points[:, 2] <= 0.0) > 0.05:
+        return "world"
+    return "camera"
+
+
+def gravity_prior(capture: Capture, frame: str, cfg: MeshingConfig) -> tuple[np.ndarray, str]:
+    """(up (3,) unit in the capture frame, where it came from)."""
+    if cfg.up is not None:
+        up, source = np.asarray(cfg.up, dtype=np.float64), "given (up)"
+    elif getattr(capture, "base_from_camera", None) is not None:
+        # The camera's pose in a z-up robot frame (a calibration file's local_transform).
+        up, source = np.asarray(capture.base_from_camera)[2, :3], "the calibration's camera pose"
+    elif capture.up is not None:
+        up, source = np.asarray(capture.up, dtype=np.float64), "the IMU"
+    elif frame == "camera":
+        up, source = np.asarray(CAMERA_UP), "assumed: camera roughly level (up = -y)"
+    else:
+        up, source = np.asarray(Z_UP), "assumed: world frame, z up"
+    norm = np.linalg.norm(up)
+    if not np.isfinite(norm) or norm < 1e-9:
+        raise CaptureError(f"up {up.tolist()}: expected a non-zero direction x,y,z")
+    return up / norm, source
+
+
+def _rotation_to_z(up: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation taking the unit vector up to +z (the smallest such rotation)."""
+    z = np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(up, z), float(up @ z)
+    if c < -1 + 1e-12:
+        return np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
 def reconstruct(capture: Capture, cfg: MeshingConfig = MeshingConfig()) -> Reconstruction:
     """The terrain mesh of a capture, world frame; CaptureError when a stage has nothing left."""
     times: dict[str, float] = {}
     counts: dict[str, int] = {"points": int(capture.valid.sum())}
+    warnings: list[str] = []
+    notes: list[str] = list(capture.notes)
     t = time.perf_counter()
 
     def stage(name: str, n: int | None = None) -> None:
@@ -173,40 +284,157 @@ def reconstruct(capture: Capture, cfg: MeshingConfig = MeshingConfig()) -> Recon
             if n == 0:
                 raise CaptureError(f"{capture.source}: no points left after the {name} stage")
 
+    raw = capture.finite_points()
+    frame = capture_frame(capture, raw - np.asarray(capture.sensor_origin), cfg)
     origin = np.asarray(capture.sensor_origin, dtype=np.float64)
-    pts = capture.finite_points() - origin
-    near, far = cfg.depth_range
-    pts = pts[(pts[:, 2] >= near) & (pts[:, 2] <= far)]
+    pts = raw - origin if frame == "camera" else raw
+    if frame == "camera":
+        near, far = cfg.depth_range or CAMERA_DEPTH_RANGE
+        inside = (pts[:, 2] >= near) & (pts[:, 2] <= far)
+    elif cfg.depth_range is not None:
+        near, far = cfg.depth_range
+        dist = np.linalg.norm(raw - origin, axis=1)
+        inside = (dist >= near) & (dist <= far)
+    else:
+        inside = np.ones(len(pts), dtype=bool)
+    advice = _depth_scale_advice(capture, cfg.depth_range or CAMERA_DEPTH_RANGE)
+    if advice is not None and inside.mean() < 0.5:
+        raise CaptureError(f"{capture.source}: {advice}")
+    pts = pts[inside]
     stage("depth range", len(pts))
     pts = voxel_downsample(pts, cfg.voxel)
     stage("voxel", len(pts))
     pts = remove_outliers(pts, cfg.outlier_neighbours, cfg.outlier_std)
     stage("outliers", len(pts))
+    ground = None
+    up, up_source = gravity_prior(capture, frame, cfg)
+    gcfg = GroundConfig(threshold=cfg.ground_threshold, iterations=cfg.ground_iterations,
+                        seed=cfg.seed)  # fmt: skip
+    near_point = None if cfg.ground_point is None else np.asarray(cfg.ground_point) - (
+        origin if frame == "camera" else 0.0
+    )
     if cfg.camera_pose is not None:
         wfc = pose_matrix(cfg.camera_pose)
+        if frame != "camera":
+            notes.append("a camera pose was given: the cloud is taken as in the camera's frame")
+        frame, up_source = "camera", "the camera pose given"
+    elif frame == "camera":
+        ground = choose_ground(pts, up, gcfg, near=near_point)
+        counts["ground inliers"] = ground.support
+        warnings.extend(ground.warnings)
+        wfc = world_from_ground(ground.normal, ground.offset, (cfg.depth_range or CAMERA_DEPTH_RANGE)[1])
     else:
-        normal, d, inliers = fit_ground(pts, cfg.ground_threshold, cfg.ground_iterations, cfg.seed)
-        counts["ground inliers"] = inliers
-        wfc = world_from_ground(normal, d)
-    world = pts @ wfc[:3, :3].T + wfc[:3, 3]
+        wfc, ground = _world_frame_transform(pts, up, gcfg, cfg, near_point, notes)
+        if ground is not None:
+            counts["ground inliers"] = ground.support
+    if frame == "camera":
+        wfc = wfc @ _translation(-origin)  # the transform takes the file's own coordinates
+    world = (pts + (origin if frame == "camera" else 0.0)) @ wfc[:3, :3].T + wfc[:3, 3]
     if cfg.crop is not None:
         lo, hi = np.asarray(cfg.crop[0]), np.asarray(cfg.crop[1])
         world = world[np.all((world >= lo) & (world <= hi), axis=1)]
     stage("ground", len(world))
-    camera = wfc[:3, 3]
+    camera = wfc[:3, 3] if frame == "camera" else _overhead(world)
     if cfg.method == "grid":
-        mesh = grid_mesh(world, cfg.cell or cfg.voxel[0], camera, cfg.fill_holes)
+        cell = cfg.cell or cfg.voxel[0]
+        if cfg.cell is None:
+            spacing = _point_spacing(world)
+            if spacing > 2.0 * cell:
+                notes.append(f"points are {spacing:.3g} m apart: height field cells of "
+                             f"{spacing:.3g} m instead of {cell:g} m")  # fmt: skip
+                cell = spacing
+        mesh = grid_mesh(world, cell, camera, cfg.fill_holes, source=capture.source)
     else:
         mesh = surface_mesh(world, camera, cfg)
     stage("mesh")
     if len(mesh.faces) == 0:
         raise CaptureError(f"{capture.source}: meshing produced no triangles")
     counts["triangles"] = len(mesh.faces)
-    return Reconstruction(mesh=mesh, world_from_camera=wfc, counts=counts, times=times)
+    below = float(np.percentile(world[:, 2], 1)) if frame == "camera" else 0.0
+    if below < -0.25:
+        warnings.append(
+            f"1 % of the terrain lies more than {-below:.2f} m below the ground chosen: the "
+            f"ground may be a raised surface (a table), or the up direction wrong"
+        )
+    return Reconstruction(
+        mesh=mesh, world_from_camera=wfc, counts=counts, times=times, frame=frame,
+        up_source=up_source, ground=ground, warnings=tuple(warnings), notes=tuple(notes),
+    )  # fmt: skip
+
+
+def _translation(t: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, 3] = t
+    return out
+
+
+def _overhead(world: np.ndarray) -> np.ndarray:
+    """A viewpoint high above a world-frame cloud ((N, 3)): facets then face up."""
+    centre = np.median(world, axis=0)
+    return np.array([centre[0], centre[1], world[:, 2].max() + 1e4])
+
+
+def _world_frame_transform(
+    pts: np.ndarray, up: np.ndarray, gcfg: GroundConfig, cfg: MeshingConfig,
+    near: np.ndarray | None, notes: list[str],
+) -> tuple[np.ndarray, GroundChoice | None]:  # fmt: skip
+    """A world-frame cloud ((N, 3)) keeps its axes (turned only when `up` is not +z); its
+    ground goes to z = 0: the lowest well-supported level plane when there is one, else the
+    cloud's 2nd percentile of height (hilly terrain); a georeferenced cloud's centre goes to
+    x = y = 0 (the offset is in the notes and in world_from_camera)."""
+    rot = _rotation_to_z(up)
+    turned = pts @ rot.T
+    ground = None
+    try:
+        choice = choose_ground(turned, np.array([0.0, 0.0, 1.0]),
+                               GroundConfig(**{**gcfg.__dict__, "prior_tolerance_deg": 15.0}),
+                               near=None if near is None else rot @ near,
+                               toward_sensor=False)  # fmt: skip
+    except CaptureError:
+        choice = None
+    centre = np.median(turned, axis=0)
+    if choice is not None and (near is not None or not choice.warnings):
+        n, d = choice.normal, choice.offset
+        z0 = -(n[0] * centre[0] + n[1] * centre[1] + d) / n[2]
+        ground = choice
+    else:
+        z0 = float(np.percentile(turned[:, 2], 2))
+        notes.append("no level ground plane: the ground height is the terrain's 2nd percentile")
+    recentre = is_georeferenced(pts) if cfg.recentre is None else cfg.recentre
+    shift = np.array([-centre[0], -centre[1], -z0]) if recentre else np.array([0.0, 0.0, -z0])
+    if recentre:
+        notes.append(
+            f"recentred: the capture-frame point ({centre[0]:.3f}, {centre[1]:.3f}, {z0:.3f}) "
+            f"is the world origin"
+        )
+    out = np.eye(4)
+    out[:3, :3] = rot
+    out[:3, 3] = shift
+    return out, ground
+
+
+def _point_spacing(world: np.ndarray) -> float:
+    """Median distance [m] from a point to its nearest neighbour in x, y (of up to 20,000
+    evenly strided points of world, (N, 3))."""
+    from scipy.spatial import cKDTree
+
+    xy = world[:: max(1, len(world) // 20000), :2]
+    if len(xy) < 2:
+        return 0.0
+    dist, _ = cKDTree(xy).query(xy, k=2)
+    return float(np.median(dist[:, 1]))
+
+
+def _depth_scale_advice(capture: Capture, depth_range: tuple[float, float]) -> str | None:
+    """The depth-scale check of perception/_capture.py when it exists (depth images)."""
+    from . import _capture
+
+    advise = getattr(_capture, "depth_scale_advice", None)
+    return None if advise is None else advise(capture, depth_range)
 
 
 def grid_mesh(
-    points: np.ndarray, cell: float, camera: np.ndarray, fill_holes: int
+    points: np.ndarray, cell: float, camera: np.ndarray, fill_holes: int, source: str = "the cloud"
 ) -> trimesh.Trimesh:
     """2.5D height field of world points ((N, 3) [m]) triangulated: each cell's highest point
     (the surface a robot stands on), two triangles per 2x2 block of occupied cells. Cells the
@@ -216,6 +444,13 @@ def grid_mesh(
     xy0 = points[:, :2].min(axis=0)
     ij = np.floor((points[:, :2] - xy0) / cell).astype(np.int64)
     nx, ny = ij.max(axis=0) + 1
+    if nx * ny > MAX_GRID_CELLS:
+        w, h = points[:, :2].max(axis=0) - xy0
+        raise CaptureError(
+            f"{source}: the terrain spans {w:.1f} m x {h:.1f} m, {nx * ny / 1e6:.0f} million "
+            f"cells of {cell:g} m (at most {MAX_GRID_CELLS / 1e6:.0f} million): crop it "
+            f"(crop / --crop) or use a larger voxel (--voxel)"
+        )
     z = np.full((ny, nx), -np.inf)
     np.maximum.at(z, (ij[:, 1], ij[:, 0]), points[:, 2])
     z[~np.isfinite(z)] = np.nan
@@ -297,17 +532,20 @@ class CaptureSettings:
     flags."""
 
     meshing: MeshingConfig = MeshingConfig()
-    intrinsics: str | None = None
-    """Preset name or file path (depth images)."""
+    intrinsics: str | PinholeNumbers | None = None
+    """Preset name, calibration file path, or the numbers fx, fy, cx, cy[, width, height]
+    (depth images; default: a calibration file beside the image)."""
     depth_scale: float | None = None
     """Depth units per metre (depth images; default 1000 or the sidecar's)."""
-    units: Literal["m", "mm"] = "m"
+    units: Literal["m", "mm"] | None = None
+    """Point cloud units; None: metres unless the cloud can only be millimetres."""
     topic: str | None = None
     """Bag topic."""
 
 
 SETTING_KEYS = ("voxel", "method", "intrinsics", "depth_scale", "units", "topic", "camera_pose",
-                "crop", "depth_range", "cell", "outlier_std", "ground_threshold", "seed")  # fmt: skip
+                "crop", "depth_range", "cell", "outlier_std", "ground_threshold", "seed",
+                "frame", "up", "ground_point", "recentre")  # fmt: skip
 
 
 def _num(k: str, v, lo: float = 0.0) -> float:
@@ -350,7 +588,35 @@ _MESHING_PARSERS = {
     "outlier_std": _num,
     "ground_threshold": _num,
     "seed": _seed,
+    "frame": lambda k, v: _choice(k, v, FRAMES),
+    "up": lambda k, v: _vec(k, v, 3),
+    "ground_point": lambda k, v: _vec(k, v, 3),
+    "recentre": lambda k, v: _bool(k, v),
 }
+
+
+def _bool(k: str, v) -> bool:
+    if not isinstance(v, bool):
+        raise CaptureError(f"{k}: expected true or false, got {v!r}")
+    return v
+
+
+def _pinhole_numbers(k: str, v: dict) -> PinholeNumbers:
+    """{fx, fy, cx, cy[, width, height]} [px], every number > 0."""
+    names = ("fx", "fy", "cx", "cy", "width", "height")
+    unknown = [n for n in v if n not in names]
+    missing = [n for n in names[:4] if n not in v]
+    if unknown or missing:
+        raise CaptureError(
+            f"{k}: expected a mapping {{fx, fy, cx, cy[, width, height]}}; "
+            + (f"unknown {', '.join(map(str, unknown))}" if unknown else
+               f"missing {', '.join(missing)}")  # fmt: skip
+        )
+    for n in ("width", "height"):
+        if n in v and (isinstance(v[n], bool) or not isinstance(v[n], int) or v[n] < 1):
+            raise CaptureError(f"{k}.{n}: expected a whole number of pixels >= 1, got {v[n]!r}")
+    return PinholeNumbers(**{n: _num(f"{k}.{n}", v[n]) for n in names[:4]},
+                          width=v.get("width"), height=v.get("height"))  # fmt: skip
 
 
 def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
@@ -366,16 +632,22 @@ def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
             raise CaptureError(f"{k}: unknown key; accepted keys: {', '.join(SETTING_KEYS)}")
     meshing = {k: parse(k, data[k]) for k, parse in _MESHING_PARSERS.items() if k in data}
     intr = data.get("intrinsics")
-    if intr is not None and not isinstance(intr, str):
-        raise CaptureError(f"intrinsics: expected a preset name or a file name, got {intr!r}")
+    if isinstance(intr, dict):
+        intr = _pinhole_numbers("intrinsics", intr)
+    elif intr is not None and not isinstance(intr, str):
+        raise CaptureError(
+            f"intrinsics: expected a preset name, a file name or a mapping {{fx, fy, cx, cy"
+            f"[, width, height]}}, got {intr!r}"
+        )
     topic = data.get("topic")
     if topic is not None and not isinstance(topic, str):
         raise CaptureError(f"topic: expected a topic name, got {topic!r}")
     return CaptureSettings(
         meshing=MeshingConfig(**meshing),
-        intrinsics=None if intr is None else (intr if intr in PRESETS else str(resolve(intr))),
+        intrinsics=intr if intr is None or isinstance(intr, PinholeNumbers) or intr in PRESETS
+        else str(resolve(intr)),
         depth_scale=_num("depth_scale", data["depth_scale"]) if "depth_scale" in data else None,
-        units=_choice("units", data.get("units", "m"), ("m", "mm")),  # type: ignore[arg-type]
+        units=_choice("units", data["units"], ("m", "mm")) if "units" in data else None,  # type: ignore[arg-type]
         topic=topic,
     )
 

@@ -1,6 +1,11 @@
 """Worlds to plan and drive in: scene files, OpenSCAD terrains, meshes and the scene library."""
 
+from ._adjust import scaled_scene as scaled_scene
+from ._adjust import with_scad_timeout as with_scad_timeout
 from ._errors import SceneError as SceneError
+from ._mesh import looks_like_millimetres as looks_like_millimetres
+from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
+from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
 from ._openscad import render_scad as render_scad
 from ._scene import LIBRARY as LIBRARY
 from ._scene import MESH_SUFFIXES as MESH_SUFFIXES

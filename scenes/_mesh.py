@@ -32,6 +32,29 @@ def read_mesh(path, label: str) -> trimesh.Trimesh:
     return loaded
 
 
+def terrain_extent(mesh: trimesh.Trimesh) -> float:
+    """The largest side of the box round the mesh's finite vertices that faces use [m as read]."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    used = np.zeros(len(vertices), dtype=bool)
+    used[np.asarray(mesh.faces, dtype=np.int64).ravel()] = True
+    used &= np.all(np.isfinite(vertices), axis=1)
+    if not used.any():
+        return 0.0
+    return float(np.max(np.ptp(vertices[used], axis=0)))
+
+
+def looks_like_millimetres(mesh: trimesh.Trimesh) -> bool:
+    """True if the mesh, read as metres, is too large to be a terrain piece: a model in
+    millimetres (as most CAD and 3D-printing models are), to load with `scale: 0.001`."""
+    return terrain_extent(mesh) > MAX_TERRAIN_EXTENT
+
+
+def scaled_mesh(mesh: trimesh.Trimesh, scale: tuple[float, float, float]) -> trimesh.Trimesh:
+    """A copy of mesh with its vertices scaled about its origin by (sx, sy, sz) (positive)."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
+    return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False)
+
+
 def clean_terrain_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
     """A copy with non-finite vertices, duplicate vertices and degenerate faces removed and the
     faces wound consistently with normals outward (closed meshes) or upward (open surfaces).
@@ -52,11 +75,11 @@ def clean_terrain_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
     out.remove_unreferenced_vertices()
     if len(out.faces) == 0:
         raise SceneError(f"{label}: every triangle of the mesh is degenerate (zero area)")
-    extent = float(np.max(out.extents))
-    if extent > MAX_TERRAIN_EXTENT:
+    if looks_like_millimetres(out):
         raise SceneError(
-            f"{label}: the mesh is {extent:.0f} m across; scenes are in metres, so this is "
-            f"most likely a model in millimetres (scale it by 0.001)"
+            f"{label}: the mesh is {terrain_extent(out):.0f} m across; scenes are in metres, so "
+            f"this is most likely a model in millimetres: add `scale: 0.001` to this terrain "
+            f"object (or --scale 0.001)"
         )
     if out.is_watertight:
         trimesh.repair.fix_normals(out)  # consistent winding, outward (may flip all)

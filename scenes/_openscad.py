@@ -27,8 +27,13 @@ from ._errors import SceneError
 
 ScadValue = float | int | bool | str
 
-DEFAULT_TIMEOUT = 60.0
-"""Wall-time limit of one OpenSCAD render [s] unless a scene sets its own."""
+DEFAULT_TIMEOUT = 600.0
+"""Wall-time limit of one OpenSCAD render [s] unless a scene sets its own: ordinary public
+models (text(), includes, a few hundred CSG operations) take 2-4 minutes in OpenSCAD 2021.01's
+CGAL, so a minute stopped most of them."""
+MAX_TIMEOUT = 24 * 3600.0
+"""Largest render time limit accepted [s]; past it the OS timer overflows, and no render that
+long is meant."""
 
 # Built-in modules and functions that read a file named by their first positional argument
 # (OpenSCAD 2021.01, including the deprecated import_* modules). Any call's `file = ...`
@@ -202,19 +207,149 @@ def scad_dependencies(scad_file: Path) -> list[Path]:
     return deps
 
 
-def scad_variables(scad_file: Path) -> set[str]:
-    """Names assigned at the top level of a model: the parameters `-D` can override."""
-    code = ScadSource.read(Path(scad_file)).code
-    names, depth = set(), 0
-    for m in re.finditer(r"[{}]|^[ \t]*([A-Za-z_$]\w*)\s*=(?!=)", code, re.M):
-        tok = m.group(0)
-        if tok == "{":
+def scad_variables(scad_file: Path) -> dict[str, str]:
+    """The variables `-D` can override: name -> source text of its default value, for every
+    assignment at the top level of the model and of the files it `include`s (in file order, the
+    last assignment winning, as in OpenSCAD).
+
+    Module and function parameters, call arguments and assignments inside modules, functions
+    and blocks are not variables of the model: `-D` leaves them unchanged.
+    """
+    return dict(_top_level_assignments(Path(scad_file).resolve(), set()))
+
+
+def _top_level_assignments(path: Path, seen: set[Path]) -> list[tuple[str, str]]:
+    seen.add(path)
+    code = ScadSource.read(path).code
+    out: list[tuple[str, str]] = []
+    depth, i, n, statement_start = 0, 0, len(code), True
+    while i < n:
+        c = code[i]
+        if c.isspace():
+            i += 1
+            continue
+        if statement_start and depth == 0:
+            inc = _INCLUDE.match(code, i)
+            if inc:
+                # An include pastes the file's text here; a file the dependency scan will
+                # refuse (outside the folder, missing) is left to it, with its better message.
+                target = (path.parent / inc.group(2)).resolve()
+                if (
+                    inc.group(1) == "include"
+                    and target.is_relative_to(path.parent)
+                    and target.is_file()
+                    and target not in seen
+                ):
+                    out += _top_level_assignments(target, seen)
+                i = inc.end()
+                continue
+            assign = _ASSIGNMENT.match(code, i)
+            if assign:
+                end = _statement_end(code, assign.end())
+                out.append((assign.group(1), code[assign.end() : end].strip()))
+                i = end + 1
+                continue
+        statement_start = False
+        if c == '"':
+            i = _string_end(code, i)
+        elif c in "([{":
             depth += 1
-        elif tok == "}":
+        elif c in ")]}":
+            depth = max(depth - 1, 0)
+            statement_start = depth == 0 and c == "}"  # a module body or a block at the top
+        elif c == ";" and depth == 0:
+            statement_start = True
+        i += 1
+    return out
+
+
+_INCLUDE = re.compile(r"(include|use)\s*<([^>]*)>")
+_ASSIGNMENT = re.compile(r"([A-Za-z_$][\w$]*)\s*=(?!=)")
+
+
+def _string_end(code: str, start: int) -> int:
+    """Index of the closing quote of the string literal opening at start."""
+    j = start + 1
+    while j < len(code) and code[j] != '"':
+        j += 2 if code[j] == "\\" else 1
+    return j
+
+
+def _statement_end(code: str, start: int) -> int:
+    """Index of the `;` ending the statement that continues at start (len(code) if none)."""
+    depth, i = 0, start
+    while i < len(code):
+        c = code[i]
+        if c == '"':
+            i = _string_end(code, i)
+        elif c in "([{":
+            depth += 1
+        elif c in ")]}":
             depth -= 1
-        elif depth == 0:
-            names.add(m.group(1))
-    return names
+        elif c == ";" and depth <= 0:
+            return i
+        i += 1
+    return len(code)
+
+
+_NUMBER = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def scad_value_kind(expr: str) -> str | None:
+    """"number", "string" or "bool" for a default value whose type can be read off its text
+    (a literal, or arithmetic on number literals); None for any other expression."""
+    expr = expr.strip()
+    if expr in ("true", "false"):
+        return "bool"
+    if _STRING.fullmatch(expr):
+        return "string"
+    bare = _NUMBER.sub("0", expr)
+    if "0" in bare and re.fullmatch(r"[0\s+\-*/%()]+", bare):
+        return "number"
+    return None
+
+
+def _kind_of(value: ScadValue) -> str:
+    if isinstance(value, bool):
+        return "bool"
+    return "string" if isinstance(value, str) else "number"
+
+
+_KIND_NAMES = {"number": "a number", "string": "a string", "bool": "a boolean (true or false)"}
+
+
+def param_problem(name: str, value: ScadValue, variables: Mapping[str, str], model: str) -> str:
+    """Why `-D name=value` would not do what a user means on a model with these variables
+    (scad_variables), or "" if it would: no such top-level variable, or a value of another type
+    than the default's (OpenSCAD would take "wide" for a width without a word)."""
+    if name not in variables:
+        return (
+            f"{name!r} is not a variable of the model; its variables: "
+            f"{', '.join(sorted(variables)) or '(none)'} (the top-level assignments of {model}; "
+            f"module and function parameters cannot be set)"
+        )
+    default = variables[name]
+    kind = scad_value_kind(default)
+    if kind is not None and kind != _kind_of(value):
+        return (
+            f"{name!r} defaults to {default} in {model}, so it takes {_KIND_NAMES[kind]}; "
+            f"got {value!r}, {_KIND_NAMES[_kind_of(value)]}"
+        )
+    return ""
+
+
+def timeout_problem(timeout: object) -> str:
+    """Why timeout is not a usable render time limit [s], or "" if it is."""
+    if (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, int | float)
+        or not 0 < timeout <= MAX_TIMEOUT
+    ):
+        return (
+            f"expected a number of seconds above 0 and at most {MAX_TIMEOUT:.0f} (24 h), "
+            f"got {timeout!r}"
+        )
+    return ""
 
 
 # -- running OpenSCAD --------------------------------------------------------------------------
@@ -299,14 +434,15 @@ def render_scad(
     scad_file = Path(scad_file).resolve()
     if not scad_file.is_file():
         raise SceneError(f"{scad_file}: no such OpenSCAD file")
+    problem = timeout_problem(timeout)
+    if problem:
+        raise SceneError(f"{scad_file}: render time limit: {problem}")
     params = dict(params or {})
     known = scad_variables(scad_file)
-    for name in params:
-        if name not in known:
-            raise SceneError(
-                f"{scad_file}: parameter {name!r} is not a variable of the model; "
-                f"its variables: {', '.join(sorted(known)) or '(none)'}"
-            )
+    for name, value in params.items():
+        problem = param_problem(name, value, known, scad_file.name)
+        if problem:
+            raise SceneError(f"{scad_file}: parameter {problem}")
     deps = scad_dependencies(scad_file)
     root = scad_file.parent
     defines = [f"{k}={_scad_literal(v)}" for k, v in sorted(params.items())]
@@ -332,7 +468,8 @@ def render_scad(
         except subprocess.TimeoutExpired:
             raise SceneError(
                 f"{scad_file}: OpenSCAD did not finish within its time limit of {timeout:g} s "
-                f"and was stopped"
+                f"and was stopped; a slow model may take more: give this terrain object "
+                f"`timeout: SECONDS` (or --scad-timeout SECONDS), at most {MAX_TIMEOUT:.0f}"
             ) from None
         mesh = work / "out" / "mesh.stl"
         if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,10 +22,12 @@ from planning import PlannerConfig
 from sim import DriverConfig, SimConfig
 
 from ._errors import SceneError
-from ._openscad import DEFAULT_TIMEOUT, scad_variables
+from ._openscad import DEFAULT_TIMEOUT, param_problem, scad_variables, timeout_problem
 
 LIBRARY = Path(__file__).parent / "library"
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
+TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
+"""Files that are a scene of their own wherever a scene is taken."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,6 +42,9 @@ class TerrainObject:
     """Translation of the object's origin [m]."""
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     """Rotation as a unit quaternion, xyzw (the report's order)."""
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Factors applied to the model's coordinates along x, y, z before it is placed (0.001
+    turns a model in millimetres into metres)."""
     timeout: float = DEFAULT_TIMEOUT
     """Time limit of the OpenSCAD render [s] (scad only)."""
     key: str = "terrain[0]"
@@ -67,12 +73,13 @@ class Scene:
     """Terrain objects, in world frame."""
     ground: float | None = 0.0
     """Height of an endless ground plane [m], or None for no ground."""
-    start: tuple[float, float, float]
-    """Robot start pose: x [m], y [m], yaw [rad]."""
-    goal: tuple[float, float, float]
-    """Goal pose: x [m], y [m], yaw [rad] (the yaw only guides the planner)."""
-    bounds: tuple[tuple[float, float], tuple[float, float]]
-    """((xmin, ymin), (xmax, ymax)) the robot's centre may plan in [m]."""
+    start: tuple[float, float, float] | None = None
+    """Robot start pose: x [m], y [m], yaw [rad]; None: picked when the world is built
+    (scenes/_autopose.py)."""
+    goal: tuple[float, float, float] | None = None
+    """Goal pose: x [m], y [m], yaw [rad] (the yaw only guides the planner); None: picked."""
+    bounds: tuple[tuple[float, float], tuple[float, float]] | None = None
+    """((xmin, ymin), (xmax, ymax)) the robot's centre may plan in [m]; None: the terrain's."""
     routes: tuple[tuple[str, tuple[tuple[float, float], tuple[float, float]]], ...] = ()
     """Named regions ((xmin, ymin), (xmax, ymax)) a path may cross, used to label it."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
@@ -88,8 +95,39 @@ def list_scenes() -> list[str]:
 
 
 def resolve_scene(name_or_path: str | Path) -> Path:
-    """A library scene name or a path to a scene file -> the scene file's path."""
+    """A library scene name, a path to a scene file, or a terrain file (a capture, a mesh or a
+    .scad: a scene of its own) -> the file's path."""
+    p = Path(name_or_path)
+    if p.suffix.lower() in TERRAIN_SUFFIXES:
+        if not p.is_file():
+            raise SceneError(f"{p}: no such file")
+        return p.resolve()
     return resolve_in_library(name_or_path, LIBRARY, "scene", SceneError)
+
+
+def ply_has_faces(path: Path) -> bool:
+    """A .ply with faces is a mesh; without, a point cloud (a capture)."""
+    with open(path, "rb") as f:
+        head = f.read(4096).split(b"end_header", 1)[0]
+    m = re.search(rb"element face (\d+)", head)
+    return bool(m and int(m.group(1)) > 0)
+
+
+def terrain_file_scene(path: Path) -> Scene:
+    """A scene of one terrain file: a capture (its floor is the ground: no ground plane), or a
+    mesh or .scad model on a ground plane at z = 0; start, goal and bounds are picked when the
+    world is built."""
+    suffix = path.suffix.lower()
+    if suffix == ".scad":
+        obj = TerrainObject(source=path, key="terrain[0]")
+    elif suffix in MESH_SUFFIXES and (suffix != ".ply" or ply_has_faces(path)):
+        obj = TerrainObject(source=path, key="terrain[0]")
+    else:
+        obj = TerrainObject(source=path, key="terrain[0]", capture=CaptureSettings())
+    return Scene(
+        name=path.stem, path=path, description=f"{path.name}, start and goal picked automatically",
+        terrain=(obj,), ground=None if obj.kind == "capture" else 0.0,
+    )  # fmt: skip
 
 
 # -- YAML files in a library (scenes, experiment specs) ---------------------------------------
@@ -234,10 +272,26 @@ def _capture_of(ctx: YamlFields, data: dict, key: str) -> CaptureSettings:
         raise ctx.fail(f"{key}.perception.{field}", what) from None
 
 
+def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
+    """`scale: s` or `scale: [sx, sy, sz]`, each positive and finite."""
+    factors = [value] * 3 if not isinstance(value, list | tuple) else value
+    if len(factors) != 3 or not all(
+        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf
+        for f in factors
+    ):
+        raise ctx.fail(
+            key,
+            f"expected a positive number (0.001 for a model in millimetres) or a list of 3 "
+            f"positive numbers [x, y, z], got {value!r}",
+        )
+    return tuple(float(f) for f in factors)  # type: ignore[return-value]
+
+
 def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     data = ctx.mapping(
         value, key,
-        ("scad", "mesh", "capture", "params", "timeout", "perception", "position", "orientation"),
+        ("scad", "mesh", "capture", "params", "timeout", "perception", "scale", "position",
+         "orientation"),
     )  # fmt: skip
     kinds = [k for k in ("scad", "mesh", "capture") if k in data]
     if len(kinds) != 1:
@@ -267,20 +321,19 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         raise ctx.fail(
             f"{key}.params", f"expected a mapping of OpenSCAD variable overrides, got {params!r}"
         )
-    variables = scad_variables(source) if kind == "scad" else set()
+    variables = scad_variables(source) if kind == "scad" else {}
     for name, v in params.items():
         if not isinstance(v, int | float | bool | str):
             raise ctx.fail(
                 f"{key}.params.{name}", f"expected a number, boolean or string, got {v!r}"
             )
-        if name not in variables:
-            raise ctx.fail(
-                f"{key}.params.{name}",
-                f"{source.name} has no such variable; its variables: {', '.join(sorted(variables))}",
-            )
-    timeout = ctx.number(data.get("timeout", DEFAULT_TIMEOUT), f"{key}.timeout")
-    if timeout <= 0:
-        raise ctx.fail(f"{key}.timeout", f"expected a positive number of seconds, got {timeout!r}")
+        problem = param_problem(name, v, variables, source.name)
+        if problem:
+            raise ctx.fail(f"{key}.params.{name}", problem)
+    timeout = data.get("timeout", DEFAULT_TIMEOUT)
+    if timeout_problem(timeout):
+        raise ctx.fail(f"{key}.timeout", timeout_problem(timeout))
+    scale = _scale(ctx, data.get("scale", 1.0), f"{key}.scale")
     position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
     norm = math.sqrt(sum(c * c for c in q))
@@ -294,27 +347,31 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         params=tuple(sorted(params.items())),
         position=position,  # type: ignore[arg-type]
         orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
-        timeout=timeout,
+        scale=scale,
+        timeout=float(timeout),
         key=key,
         capture=capture,
     )
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
-    """Read and validate a scene file (or a library scene by name)."""
+    """Read and validate a scene file (or a library scene by name, or a terrain file as a scene
+    of its own)."""
     path = resolve_scene(name_or_path)
+    if path.suffix.lower() in TERRAIN_SUFFIXES:
+        return terrain_file_scene(path)
     ctx = YamlFields(path)
     raw = read_yaml(path, "scene", SceneError)
     keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
             "planner", "sim", "driver", "seed")  # fmt: skip
-    data = ctx.mapping(raw, "", keys, required=("terrain", "robot", "goal", "bounds"))
+    data = ctx.mapping(raw, "", keys, required=("terrain",))
     terrain = data["terrain"]
     ground = data.get("ground", 0.0)
     if not isinstance(terrain, list) or (not terrain and ground is None):
         raise ctx.fail(
             "terrain", "expected a list of terrain objects (it may be empty only with a ground)"
         )
-    robot = ctx.mapping(data["robot"], "robot", ("start",), required=("start",))
+    robot = ctx.mapping(data.get("robot") or {}, "robot", ("start",))
     routes = ctx.mapping(data.get("routes") or {}, "routes", tuple(data.get("routes") or {}))
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -328,18 +385,21 @@ def load_scene(name_or_path: str | Path) -> Scene:
         description=description,
         terrain=tuple(_terrain_object(ctx, t, f"terrain[{i}]") for i, t in enumerate(terrain)),
         ground=None if ground is None else ctx.number(ground, "ground"),
-        start=_pose(ctx, robot["start"], "robot.start"),
-        goal=_pose(ctx, data["goal"], "goal"),
-        bounds=ctx.box(data["bounds"], "bounds"),
+        start=None if robot.get("start") is None else _pose(ctx, robot["start"], "robot.start"),
+        goal=None if data.get("goal") is None else _pose(ctx, data["goal"], "goal"),
+        bounds=None if data.get("bounds") is None else ctx.box(data["bounds"], "bounds"),
         routes=tuple((str(k), ctx.box(v, f"routes.{k}")) for k, v in routes.items()),
         planner=ctx.config(PlannerConfig, data.get("planner") or {}, "planner"),
         sim=ctx.config(SimConfig, data.get("sim") or {}, "sim"),
         driver=ctx.config(DriverConfig, data.get("driver") or {}, "driver"),
         seed=seed,
     )
-    (lo, hi) = scene.bounds
+    if (scene.start is None) != (scene.goal is None):
+        given = "robot.start" if scene.start is not None else "goal"
+        raise ctx.fail(given, "give both robot.start and goal, or neither (both then picked)")
+    (lo, hi) = scene.bounds or ((-math.inf, -math.inf), (math.inf, math.inf))
     for label, pose in (("robot.start", scene.start), ("goal", scene.goal)):
-        if not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
+        if pose is not None and not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
             raise ctx.fail(
                 label, f"({pose[0]}, {pose[1]}) lies outside bounds {list(lo)}..{list(hi)}"
             )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -11,6 +12,7 @@ import trimesh
 from perception import CaptureError, mesh_capture
 from planning import (
     VALID,
+    PlanningError,
     Footprint,
     HeightField,
     StandableMap,
@@ -23,8 +25,9 @@ from planning import (
 )
 from sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
 
+from ._autopose import auto_bounds, pick_start_goal
 from ._errors import SceneError
-from ._mesh import clean_terrain_mesh, read_mesh
+from ._mesh import clean_terrain_mesh, read_mesh, scaled_mesh
 from ._openscad import render_scad
 from ._scene import Scene, TerrainObject
 
@@ -42,6 +45,8 @@ class World:
     """Terrain triangles, world frame [m] (without the ground plane)."""
     heightfield: HeightField
     robot: RobotConfig
+    notes: tuple[str, ...] = ()
+    """What was chosen for the user (bounds, start and goal picked automatically)."""
 
     @functools.cached_property
     def footprint(self) -> Footprint:
@@ -52,9 +57,13 @@ class World:
         """Where the robot can stand within the scene's bounds, and the holes between those
         places (computed once, ~50 ms): the terrain sampler's support and the route labels."""
         sc = self.scene
+        # A hole smaller than the robot's own footprint is noise to go through or over, not
+        # an obstacle to go round.
+        fp = self.footprint
         return standable_map(
-            self.heightfield, self.footprint, sc.planner.validity, sc.bounds, sc.start[:2]
-        )
+            self.heightfield, fp, sc.planner.validity, sc.bounds, sc.start[:2],
+            min_hole_area=self.robot.body_length * self.robot.body_width * 4,
+        )  # fmt: skip
 
     def route(self, path_xy: np.ndarray) -> str:
         """The route a path ((K, 2) [m]) takes: the first of the scene's named route regions it
@@ -100,6 +109,8 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
             raise SceneError(f"{label}: {exc}") from None
     else:
         raw = read_mesh(source, label)
+    if obj.scale != (1.0, 1.0, 1.0):  # before the unit check: a model in mm passes once scaled
+        raw = scaled_mesh(raw, obj.scale)
     mesh = clean_terrain_mesh(raw, label)
     transform = np.eye(4)
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
@@ -130,6 +141,18 @@ def build_world(
     mesh: the scene's terrain if already built (build_terrain_mesh), not to build it twice."""
     robot = robot or RobotConfig()
     mesh = build_terrain_mesh(scene) if mesh is None else mesh
+    notes = []
+    if scene.bounds is None:
+        if len(mesh.faces) == 0:
+            raise SceneError(f"{scene.path}: give bounds: the scene has no terrain to take them from")
+        bounds, note = auto_bounds(mesh.bounds)
+        if bounds[0][0] >= bounds[1][0] or bounds[0][1] >= bounds[1][1]:
+            raise SceneError(
+                f"{scene.path}: the terrain ({mesh.extents[0]:.2f} m x {mesh.extents[1]:.2f} m) "
+                f"is too small for the robot"
+            )
+        scene = dataclasses.replace(scene, bounds=bounds)
+        notes += [note] if note else []
     margin = 0.15  # the robot's feet reach this far past its centre's bounds [m]
     (lo, hi) = scene.bounds
     hf = heightfield_from_mesh(
@@ -141,6 +164,22 @@ def build_world(
         ground_height=scene.ground,
     )
     world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
+    if scene.start is None:
+        try:
+            picked = pick_start_goal(world, seed=scene.seed)
+            notes.append(picked.note)
+            start, goal = picked.start, picked.goal
+        except PlanningError as exc:
+            if check_poses:
+                raise SceneError(f"{scene.path}: {exc}") from None
+            # The app shows such a world and says why its markers are invalid.
+            notes.append(str(exc))
+            (xa, ya), (xb, yb) = scene.bounds
+            start = goal = ((xa + xb) / 2, (ya + yb) / 2, 0.0)
+        scene = dataclasses.replace(scene, start=start, goal=goal)
+        world = dataclasses.replace(world, scene=scene)
+    if notes:
+        world = dataclasses.replace(world, notes=tuple(notes))
     for key, pose in (("robot.start", scene.start), ("goal", scene.goal)) if check_poses else ():
         problem = pose_problem(world, pose)
         if problem:

@@ -179,6 +179,12 @@ class Simulation:
         bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
         z0 = self.surface_height(x, y)
         if not np.isfinite(z0):
+            # A capture's mesh may have a sensor dropout under the centre alone: the highest
+            # surface under the feet then (the planner checked that the feet stand).
+            c, s = np.cos(yaw), np.sin(yaw)
+            feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
+            z0 = max(self.surface_height(*f) for f in feet)
+        if not np.isfinite(z0):
             raise SimError(f"no terrain under the start position ({x:.3f}, {y:.3f})")
         quat = bc.getQuaternionFromEuler((0.0, 0.0, yaw))
         bc.resetBasePositionAndOrientation(

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+import yaml
 
-from scenes import SceneError, build_world, load_scene, render_scad
-from scenes._openscad import _sandbox_available, confined
+from scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
+from scenes._openscad import _sandbox_available, confined, scad_variables
 
 LIBRARY = Path(__file__).resolve().parent.parent / "scenes" / "library"
 
@@ -218,3 +219,122 @@ def test_the_heightmap_worlds_height_field_reproduces_the_data_file():
     xy = np.stack([xs[on], ys[on]], axis=-1)
     assert on.sum() > 4000
     np.testing.assert_allclose(world.heightfield.sample(xy), data[on], atol=1e-6)
+
+
+# -- models in millimetres, parameters that do something, time limits ----------------------------
+
+
+def scad_scene(folder: Path, obj: dict) -> Path:
+    """A scene file in folder with one terrain object (start and goal on a 1 x 1 m top)."""
+    data = {
+        "terrain": [obj], "ground": None, "robot": {"start": [0.5, 0.2, 90]},
+        "goal": [0.5, 0.8, 90], "bounds": [[0.3, 0.1], [0.7, 0.9]],
+    }  # fmt: skip
+    path = folder / "scene.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_scad_model_in_millimetres_is_refused_and_loads_with_scale(tmp_path, fresh_cache):
+    (tmp_path / "plate.scad").write_text("size = [1000, 1000, 100];\ncube(size);\n")
+    with pytest.raises(
+        SceneError,
+        match=r"terrain\[0\]\.scad: the mesh is 1000 m across; .*millimetres: add `scale: "
+        r"0\.001` to this terrain object \(or --scale 0\.001\)",
+    ):
+        build_terrain_mesh(load_scene(scad_scene(tmp_path, {"scad": "plate.scad"})))
+    scene = load_scene(scad_scene(tmp_path, {"scad": "plate.scad", "scale": 0.001}))
+    assert scene.terrain[0].scale == (0.001, 0.001, 0.001)
+    world = build_world(scene)  # the robot stands on the 10 cm high plate
+    np.testing.assert_allclose(world.mesh.bounds, [[0, 0, 0], [1, 1, 0.1]], atol=1e-9)
+
+
+MODULE_MODEL = """\
+// a typical public model: one top-level setting, module parameters, a multi-line call
+height = 2;
+module post(width = 3,
+            depth = 4) {
+  inner = width / 2;
+  cube([width, depth, height]);
+}
+function twice(x = 1) = 2 * x;
+post(
+  width = 5,
+  depth = twice(1));
+"""
+
+
+def test_module_and_call_arguments_are_not_parameters(tmp_path, fresh_cache):
+    scad = tmp_path / "post.scad"
+    scad.write_text(MODULE_MODEL)
+    assert scad_variables(scad) == {"height": "2"}
+    for name in ("width", "depth", "inner", "x"):
+        with pytest.raises(
+            SceneError,
+            match=rf"parameter '{name}' is not a variable of the model; its variables: height "
+            r"\(the top-level assignments of post\.scad; module and function parameters",
+        ):
+            render_scad(scad, {name: 1})
+    # The one real parameter does what it says: the post is 5 x 2 x 7.
+    mesh = trimesh.load(render_scad(scad, {"height": 7}))
+    np.testing.assert_allclose(mesh.extents, [5, 2, 7])
+    with pytest.raises(SceneError, match=r"terrain\[0\]\.params\.width: 'width' is not a var"):
+        load_scene(scad_scene(tmp_path, {"scad": "post.scad", "params": {"width": 9}}))
+
+
+def test_variables_of_an_included_file_are_parameters_and_the_last_assignment_wins(tmp_path):
+    (tmp_path / "settings.scad").write_text('label = "A";\nrows = 3;\nmodule m(k = 1) { j = 2; }\n')
+    (tmp_path / "m.scad").write_text(
+        'include <settings.scad>\nuse <lib.scad>\nrows = 4;\nif (rows > 3) { inside = 1; }\n'
+    )
+    (tmp_path / "lib.scad").write_text("hidden = 1;\n")
+    assert scad_variables(tmp_path / "m.scad") == {"label": '"A"', "rows": "4"}
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("tall", r"'height' defaults to 2 in post\.scad, so it takes a number; got 'tall', a str"),
+        (True, r"'height' defaults to 2 .* a number; got True, a boolean"),
+    ],
+)
+def test_a_value_of_another_type_than_the_default_is_refused(
+    tmp_path, fresh_cache, value, expected
+):
+    (tmp_path / "post.scad").write_text(MODULE_MODEL)
+    with pytest.raises(SceneError, match=expected):
+        render_scad(tmp_path / "post.scad", {"height": value})
+    with pytest.raises(SceneError, match=r"terrain\[0\]\.params\.height: " + expected):
+        load_scene(scad_scene(tmp_path, {"scad": "post.scad", "params": {"height": value}}))
+    assert not list(fresh_cache.rglob("*.stl"))
+
+
+def test_string_and_boolean_defaults_take_their_own_type_only(tmp_path):
+    (tmp_path / "m.scad").write_text('label = "x";\nsolid = true;\nr = 2 * 3;\ncube(r);\n')
+    with pytest.raises(SceneError, match=r"'label' defaults to \"x\" .* a string; got 5, a number"):
+        load_scene(scad_scene(tmp_path, {"scad": "m.scad", "params": {"label": 5}}))
+    with pytest.raises(SceneError, match=r"'solid' defaults to true .*; got 'no', a string"):
+        load_scene(scad_scene(tmp_path, {"scad": "m.scad", "params": {"solid": "no"}}))
+    scene = load_scene(
+        scad_scene(tmp_path, {"scad": "m.scad", "params": {"label": "y", "solid": False, "r": 1.5}})
+    )
+    assert dict(scene.terrain[0].params) == {"label": "y", "r": 1.5, "solid": False}
+
+
+@pytest.mark.parametrize("timeout", [1.0e9, 0, -5, float("inf"), "slow", True])
+def test_an_absurd_time_limit_is_refused_cleanly(tmp_path, fresh_cache, timeout):
+    (tmp_path / "m.scad").write_text("cube(1);\n")
+    with pytest.raises(SceneError, match=r"terrain\[0\]\.timeout: expected a number of seconds "
+                       r"above 0 and at most 86400 \(24 h\)"):  # fmt: skip
+        load_scene(scad_scene(tmp_path, {"scad": "m.scad", "timeout": timeout}))
+    if not isinstance(timeout, str):
+        with pytest.raises(SceneError, match=r"m\.scad: render time limit: expected a number"):
+            render_scad(tmp_path / "m.scad", timeout=timeout)
+
+
+def test_the_default_time_limit_suits_slow_public_models_and_a_scene_can_set_one(tmp_path):
+    (tmp_path / "m.scad").write_text("cube(1);\n")
+    assert load_scene(scad_scene(tmp_path, {"scad": "m.scad"})).terrain[0].timeout >= 600
+    assert load_scene(scad_scene(tmp_path, {"scad": "m.scad", "timeout": 3600})).terrain[
+        0
+    ].timeout == 3600.0

@@ -12,7 +12,15 @@ import trimesh
 import yaml
 from conftest import roachplan
 
-from scenes import LIBRARY, SceneError, build_world, list_scenes, load_scene
+from scenes import (
+    LIBRARY,
+    SceneError,
+    build_world,
+    list_scenes,
+    load_scene,
+    looks_like_millimetres,
+    scaled_scene,
+)
 
 # -- every scene in the library -------------------------------------------------------------
 
@@ -101,7 +109,7 @@ def test_the_valid_example_loads(tmp_path, box_stl):
         (edited(sim={"solver_iterations": 2.5}), ["sim.solver_iterations", "integer"]),
         (edited(seed="zero"), ["seed", "non-negative integer", "'zero'"]),
         (edited(goal=[0.0, "north"]), ["goal[1]", "number", "'north'"]),
-        (edited(robot__start=KeyError), ["robot.start", "missing"]),
+        (edited(robot__start=KeyError), ["goal", "give both robot.start and goal, or neither"]),
         (
             edited(terrain__0__mesh="nothere.stl"),
             ["terrain[0].mesh", "nothere.stl", "does not exist"],
@@ -239,3 +247,84 @@ def test_the_readme_example_is_a_valid_scene(tmp_path):
     hf = world.heightfield
     assert hf.sample(np.array([-0.45, 0.0])) > 0.199 and hf.sample(np.array([-0.35, 0.0])) == 0.0
     assert hf.sample(np.array([0.8, 1.7])) == pytest.approx(0.025)
+
+
+# -- models in millimetres: `scale:` and --scale ---------------------------------------------------
+
+
+@pytest.fixture
+def millimetre_stl(tmp_path) -> Path:
+    """The 1 x 1 x 0.1 m block of box_stl, as CAD exports it: in millimetres."""
+    path = tmp_path / "block.stl"
+    box = trimesh.creation.box((1000.0, 1000.0, 100.0))
+    box.apply_translation((0, 0, 50))
+    box.export(path)
+    return path
+
+
+def test_a_mesh_in_millimetres_loads_with_scale(tmp_path, millimetre_stl):
+    with pytest.raises(
+        SceneError,
+        match=r"terrain\[0\]\.mesh: the mesh is 1000 m across; scenes are in metres, so this is "
+        r"most likely a model in millimetres: add `scale: 0\.001` to this terrain object",
+    ):
+        build_world(load_scene(write_scene(tmp_path, VALID)))
+    assert looks_like_millimetres(trimesh.load(millimetre_stl))
+    world = build_world(load_scene(write_scene(tmp_path, edited(terrain__0__scale=0.001))))
+    np.testing.assert_allclose(world.mesh.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 0.1]], atol=1e-9)
+    assert not looks_like_millimetres(world.mesh)
+
+
+def test_scale_applies_per_axis_before_the_placement(tmp_path, box_stl):
+    data = edited(
+        terrain__0__scale=[2, 1, 0.5],
+        terrain__0__position=[0.5, 0, 1],
+        terrain__0__orientation=[0, 0, 0.7071068, 0.7071068],  # 90 deg about z: x -> y
+        bounds=[[0.2, -0.6], [0.8, 0.6]], robot__start=[0.5, -0.5, 90], goal=[0.5, 0.5, 90],
+    )  # fmt: skip
+    mesh = build_world(load_scene(write_scene(tmp_path, data))).mesh
+    # The 2 x 1 x 0.05 m block, turned to lie along y, its centre moved to (0.5, 0).
+    np.testing.assert_allclose(mesh.bounds, [[0, -1, 1], [1, 1, 1.05]], atol=1e-6)
+
+
+@pytest.mark.parametrize("scale", [0, -0.001, "0.001", True, [1, 1], [1, 0, 1], [1, "a", 1], None])
+def test_a_bad_scale_is_refused_with_the_key(tmp_path, box_stl, scale):
+    path = write_scene(tmp_path, edited(terrain__0__scale=scale))
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    assert str(err.value).startswith(
+        f"{path}: terrain[0].scale: expected a positive number (0.001 for a model in millimetres) "
+        f"or a list of 3 positive numbers [x, y, z], got {scale!r}"
+    )
+
+
+def test_scaled_scene_scales_every_terrain_object_on_top_of_its_own_scale(tmp_path, box_stl):
+    data = edited(terrain__0__scale=[1, 2, 1])
+    data["terrain"].append({"mesh": "block.stl", "position": [3, 0, 0]})
+    scene = scaled_scene(load_scene(write_scene(tmp_path, data)), 0.5)
+    assert [o.scale for o in scene.terrain] == [(0.5, 1.0, 0.5), (0.5, 0.5, 0.5)]
+    assert scene.terrain[1].position == (3.0, 0.0, 0.0)
+    with pytest.raises(SceneError, match=r"--scale: expected a positive number"):
+        scaled_scene(scene, -1.0)
+
+
+def test_scene_build_takes_scale_and_scad_timeout(tmp_path, millimetre_stl):
+    path = write_scene(tmp_path, VALID)
+    out = roachplan("scene", "build", str(path), "-o", str(tmp_path / "mm.stl"))
+    assert out.returncode == 2
+    assert "add `scale: 0.001` to this terrain object (or --scale 0.001)" in out.stderr
+    out = roachplan(
+        "scene", "build", str(path), "-o", str(tmp_path / "m.stl"), "--scale", "0.001",
+        "--scad-timeout", "900",
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    mesh = trimesh.load(tmp_path / "m.stl", force="mesh")
+    np.testing.assert_allclose(mesh.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 0.1]], atol=1e-6)
+    for flag, value, expected in (
+        ("--scale", "-1", "--scale: expected a positive number"),
+        ("--scad-timeout", "1e9", "--scad-timeout: expected a number of seconds above 0 and at "
+         "most 86400"),
+    ):  # fmt: skip
+        out = roachplan("scene", "build", str(path), "-o", str(tmp_path / "x.stl"), flag, value)
+        assert out.returncode == 2 and f"roachplan: error: {expected}" in out.stderr
+        assert "Traceback" not in out.stderr

@@ -1,0 +1,283 @@
+"""Which surface of a capture is the ground: a gravity prior, not the largest plane.
+
+A room capture's largest plane is often a wall, and a table capture's a background surface
+(3 of 7 real room/table clouds). So the ground is chosen as a person would: gravity points
+roughly along the camera's +y (a level camera's "up" is -y) unless a calibration, an IMU or
+the user says otherwise; among the planes found in the cloud, the horizontal ones are those
+parallel to the best-supported plane near that prior; the ground is the lowest of them that is
+well supported (the floor under a desk, not the desk; never a wall).
+
+All directions here are in the capture's frame (a camera's: x right, y down, z forward).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._errors import CaptureError
+
+CAMERA_UP = (0.0, -1.0, 0.0)
+"""A level camera's up in its optical frame (x right, y down, z forward)."""
+Z_UP = (0.0, 0.0, 1.0)
+"""Up in a world or robot frame (REP 103: z up)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroundConfig:
+    """How the ground plane is searched for."""
+
+    threshold: float = 0.015
+    """RANSAC inlier distance of a plane [m]."""
+    iterations: int = 1000
+    """RANSAC iterations per plane."""
+    max_planes: int = 8
+    """Planes extracted one after the other (each plane's inliers removed)."""
+    prior_tolerance_deg: float = 60.0
+    """A plane whose up-facing normal is within this angle of the gravity prior may be the
+    ground: a camera pitched down 46 deg at a desk still qualifies, a wall (90 deg) or a
+    surface above the camera (> 90 deg) does not."""
+    parallel_deg: float = 6.0
+    """Planes within this angle of the chosen up are horizontal (parallel to the ground)."""
+    min_area: float = 0.25
+    """A horizontal plane needs this much area (occupied 5 cm cells) [m^2] to be the ground:
+    50 cm x 50 cm, a few robot lengths; smaller patches below the floor are noise."""
+    min_fraction: float = 0.02
+    """...and this fraction of the points."""
+    level_gap: float = 0.05
+    """Level planes closer than this [m] to a larger one are fragments of it (a noisy floor
+    far from the camera comes out of RANSAC as several slightly tilted slabs), not a level of
+    their own."""
+    seed: int = 0
+    """Seed of RANSAC."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plane:
+    """A plane found in a cloud: n.p + d = 0, n unit, facing up (n . prior_up > 0 when it can)."""
+
+    normal: np.ndarray
+    """(3,) unit normal, capture frame."""
+    offset: float
+    """d [m]: the origin (the sensor) is at signed distance d from the plane."""
+    support: int
+    """Inlier points."""
+    area: float
+    """Area its inliers cover, counted in occupied 5 cm cells [m^2]."""
+    angle_deg: float
+    """Angle between the normal and the gravity prior [deg]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroundChoice:
+    """The ground plane and how it was chosen."""
+
+    normal: np.ndarray
+    """(3,) unit up normal of the ground, capture frame."""
+    offset: float
+    """d [m] with n.p + d = 0: the sensor's height above the ground when positive."""
+    support: int
+    """Points on the ground plane."""
+    fraction: float
+    """Share of the cloud's points on the ground plane."""
+    area: float
+    """Area of the ground seen [m^2]."""
+    planes: tuple[Plane, ...]
+    """Every plane that was found, in extraction order."""
+    warnings: tuple[str, ...] = ()
+    """Why the choice may be wrong, for the user to check."""
+
+
+def find_planes(
+    points: np.ndarray, up: np.ndarray, cfg: GroundConfig, toward_sensor: bool = True
+) -> list[Plane]:
+    """Up to cfg.max_planes planes of points ((N, 3), capture frame [m]), by sequential seeded
+    RANSAC (Open3D). toward_sensor: each normal faces the sensor (the origin), so a surface
+    seen from below (a ceiling, a table's underside) faces away from up and cannot be the
+    ground; else (a world-frame cloud, whose origin may be anywhere) each faces up ((3,))."""
+    import open3d as o3d
+
+    if len(points) < 3:
+        raise CaptureError("too few points left to find the ground plane")
+    o3d.utility.random.seed(cfg.seed)
+    rest = points
+    planes: list[Plane] = []
+    min_points = max(50, int(0.01 * len(points)))
+    while len(planes) < cfg.max_planes and len(rest) >= min_points:
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
+        (a, b, c, d), inliers = cloud.segment_plane(cfg.threshold, 3, cfg.iterations)
+        inliers = np.asarray(inliers, dtype=np.int64)
+        if len(inliers) < min_points:
+            break
+        n = np.array([a, b, c])
+        norm = np.linalg.norm(n)
+        n, d = n / norm, d / norm
+        if (d < 0) if toward_sensor else (n @ up < 0):
+            n, d = -n, -d
+        planes.append(
+            Plane(
+                normal=n, offset=float(d), support=len(inliers), area=_area(rest[inliers], n),
+                angle_deg=float(np.degrees(np.arccos(np.clip(n @ up, -1.0, 1.0)))),
+            )
+        )  # fmt: skip
+        keep = np.ones(len(rest), dtype=bool)
+        keep[inliers] = False
+        rest = rest[keep]
+    return planes
+
+
+def _area(points: np.ndarray, normal: np.ndarray, cell: float = 0.05) -> float:
+    """Area [m^2] covered by points ((N, 3)) lying on a plane with this normal: occupied cells
+    of a cell x cell grid in the plane."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    uv = np.floor(np.column_stack([points @ u, points @ v]) / cell).astype(np.int64)
+    return len(np.unique(uv, axis=0)) * cell * cell
+
+
+def choose_ground(
+    points: np.ndarray,
+    up: np.ndarray,
+    cfg: GroundConfig,
+    near: np.ndarray | None = None,
+    toward_sensor: bool = True,
+) -> GroundChoice:
+    """The ground plane of points ((N, 3), capture frame [m]) under the gravity prior up ((3,)).
+
+    1. Planes are found one after another (find_planes).
+    2. Candidates face up within prior_tolerance_deg of the prior; the best-supported group of
+       mutually parallel candidates gives the refined up (the floor and a desk agree on it; a
+       sloping surface does not).
+    3. The horizontal planes (within parallel_deg of the refined up) that are well supported
+       (min_area, min_fraction) are ground candidates; the lowest one (farthest below the
+       sensor) is the ground.
+    near: a point ((3,), capture frame [m]) on the intended ground: then the plane through it
+    is the ground whatever its orientation (the user's re-levelling click).
+    """
+    up = np.asarray(up, dtype=np.float64)
+    up = up / np.linalg.norm(up)
+    # Planes are searched in an even subsample (RANSAC's cost grows with the points; 30,000
+    # still put dozens in every 5 cm cell of a surface); the chosen one is refitted on all.
+    planes = find_planes(points[:: max(1, len(points) // 30000)], up, cfg, toward_sensor)
+    if not planes:
+        raise CaptureError("no plane found in the capture: nothing to take as the ground")
+    total = len(points[:: max(1, len(points) // 30000)])
+    warnings: list[str] = []
+    if near is not None:
+        return _ground_through(points, planes, np.asarray(near, dtype=np.float64), cfg, up)
+    candidates = [p for p in planes if p.angle_deg <= cfg.prior_tolerance_deg]
+    if not candidates:
+        best = min(planes, key=lambda p: p.angle_deg)
+        warnings.append(
+            f"no plane faces up within {cfg.prior_tolerance_deg:g} deg of the assumed gravity; "
+            f"took the closest ({best.angle_deg:.0f} deg off); if that is wrong, give the up "
+            f"direction (--up) or the camera pose, or click the ground in the page"
+        )
+        candidates = [best]
+
+    def group(p: Plane) -> list[Plane]:
+        return [q for q in candidates if _angle(p.normal, q.normal) <= cfg.parallel_deg]
+
+    scores = [sum(q.support for q in group(p)) for p in candidates]
+    order = np.argsort(scores)[::-1]
+    lead = candidates[int(order[0])]
+    members = group(lead)
+    refined = np.sum([q.support * q.normal for q in members], axis=0)
+    refined /= np.linalg.norm(refined)
+    rivals = [candidates[int(k)] for k in order[1:]
+              if _angle(candidates[int(k)].normal, refined) > cfg.parallel_deg]  # fmt: skip
+    if rivals and max(sum(q.support for q in group(r)) for r in rivals) >= 0.5 * scores[order[0]]:
+        r = max(rivals, key=lambda r: sum(q.support for q in group(r)))
+        warnings.append(
+            f"two surface orientations are nearly as well supported: the ground chosen is "
+            f"{_angle(refined, up):.0f} deg from the assumed gravity, another "
+            f"{r.angle_deg:.0f} deg; check the result, or give --up or the camera pose"
+        )
+    horizontal: list[Plane] = []
+    for p in sorted(planes, key=lambda p: -p.support):
+        level = _angle(p.normal, refined) <= cfg.parallel_deg
+        if level and all(abs(p.offset - q.offset) >= cfg.level_gap for q in horizontal):
+            horizontal.append(p)
+    well = [p for p in horizontal
+            if p.area >= cfg.min_area and p.support >= cfg.min_fraction * total]  # fmt: skip
+    if not well:
+        well = [max(horizontal, key=lambda p: p.support)]
+        warnings.append(
+            f"the ground seen is small ({well[0].area:.2f} m^2, "
+            f"{100 * well[0].support / total:.0f} % of the points)"
+        )
+    ground = max(well, key=lambda p: p.offset)  # the lowest: farthest below the sensor
+    if ground.offset <= 0:
+        warnings.append("the sensor is not above the ground chosen: check the up direction")
+    higher = [p for p in well if p is not ground and p.support > ground.support]
+    if higher:
+        h = max(higher, key=lambda p: p.support)
+        warnings.append(
+            f"the ground is the lowest level surface ({100 * ground.support / total:.0f} % of "
+            f"the points), {ground.offset - h.offset:.2f} m below a larger one "
+            f"({100 * h.support / total:.0f} %); if the robot stands on that one, click it in "
+            f"the page or give the camera pose"
+        )
+    if ground.angle_deg > 50.0:
+        warnings.append(
+            f"the ground is tilted {ground.angle_deg:.0f} deg from the assumed gravity: a steep "
+            f"camera, or the wrong surface"
+        )
+    n, d = _refit(points, ground, cfg.threshold)
+    support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
+    return GroundChoice(
+        normal=n, offset=d, support=support, fraction=support / len(points), area=ground.area,
+        planes=tuple(planes), warnings=tuple(warnings),
+    )  # fmt: skip
+
+
+def _ground_through(
+    points: np.ndarray, planes: list[Plane], near: np.ndarray, cfg: GroundConfig, up: np.ndarray
+) -> GroundChoice:
+    """The plane through a point the user picked: the found plane nearest it when it lies on
+    one (within 3 thresholds), else a plane fitted to the points within 25 cm of it."""
+    total = len(points)
+    dist = [abs(p.normal @ near + p.offset) for p in planes]
+    k = int(np.argmin(dist))
+    if dist[k] <= 3 * cfg.threshold:
+        n, d = _refit(points, planes[k], cfg.threshold)
+        area = planes[k].area
+    else:
+        local = points[np.linalg.norm(points - near, axis=1) <= 0.25]
+        if len(local) < 10:
+            raise CaptureError(
+                f"no points within 25 cm of the picked point {near.round(3).tolist()}: pick a "
+                f"point on the captured surface"
+            )
+        centre = local.mean(axis=0)
+        n = np.linalg.svd(local - centre, full_matrices=False)[2][2]
+        if n @ up < 0:
+            n = -n
+        d = float(-n @ centre)
+        area = _area(local, n)
+    support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
+    return GroundChoice(
+        normal=n, offset=float(d), support=support, fraction=support / total, area=area,
+        planes=tuple(planes), warnings=(),
+    )  # fmt: skip
+
+
+def _refit(points: np.ndarray, plane: Plane, threshold: float) -> tuple[np.ndarray, float]:
+    """Least-squares plane of the points within threshold of plane (the RANSAC plane is only
+    as good as its best 3-point sample); its normal keeps the plane's side."""
+    near = points[np.abs(points @ plane.normal + plane.offset) <= threshold]
+    if len(near) < 3:
+        return plane.normal, plane.offset
+    centre = near.mean(axis=0)
+    n = np.linalg.svd(near - centre, full_matrices=False)[2][2]
+    if n @ plane.normal < 0:
+        n = -n
+    return n, float(-n @ centre)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two unit vectors [deg]."""
+    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))

@@ -1,0 +1,45 @@
+"""Scene-wide changes a command line asks for: scale every model, give renders more time."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from ._errors import SceneError
+from ._openscad import timeout_problem
+from ._scene import Scene
+
+
+def scaled_scene(scene: Scene, factor: float | tuple[float, float, float]) -> Scene:
+    """The scene with every terrain object's model scaled by factor (on top of its own
+    `scale:`), about the model's origin, before it is placed: `--scale 0.001` loads models in
+    millimetres. Positions, bounds, start and goal stay in metres."""
+    factors = tuple(factor) if isinstance(factor, tuple | list) else (factor,) * 3
+    if len(factors) != 3 or not all(
+        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf
+        for f in factors
+    ):
+        raise SceneError(
+            f"--scale: expected a positive number (0.001 for models in millimetres), got {factor!r}"
+        )
+    return dataclasses.replace(
+        scene,
+        terrain=tuple(
+            dataclasses.replace(o, scale=tuple(s * f for s, f in zip(o.scale, factors)))
+            for o in scene.terrain
+        ),
+    )
+
+
+def with_scad_timeout(scene: Scene, timeout: float) -> Scene:
+    """The scene with every OpenSCAD object's render time limit set to timeout [s]."""
+    problem = timeout_problem(timeout)
+    if problem:
+        raise SceneError(f"--scad-timeout: {problem}")
+    return dataclasses.replace(
+        scene,
+        terrain=tuple(
+            dataclasses.replace(o, timeout=float(timeout)) if o.kind == "scad" else o
+            for o in scene.terrain
+        ),
+    )

@@ -1,0 +1,167 @@
+"""Start and goal for a terrain nobody placed them on (a capture, a mesh, a model).
+
+They go inside the largest connected region where the robot can stand, as far apart as that
+region allows up to a cap (a trial's drive time grows with the distance), each valid, and
+joined by a plan (the planner must be able to connect them: a region 4-connected at 4 cm can
+still hold a neck the robot cannot turn through).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from planning import VALID, PlanningError, check_states, plan_path, standable_map
+
+MAX_AUTO_DISTANCE = 4.0
+"""Longest start-goal distance picked automatically [m]: on a room's floor the far wall is
+reached; on a 300 m lidar survey the trial still takes seconds, not hours."""
+MIN_AUTO_DISTANCE = 1.0
+"""Start and goal are at least this far apart where the region is that large [m]."""
+MAX_AUTO_EXTENT = 10.0
+"""Largest side of the planning area chosen automatically [m] (the height field is 1 cm)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class AutoPoses:
+    start: tuple[float, float, float]
+    """x [m], y [m], yaw [rad]."""
+    goal: tuple[float, float, float]
+    distance: float
+    """Straight-line distance start-goal [m]."""
+    region_area: float
+    """Area of the region they are in [m^2]."""
+    note: str
+    """How they were chosen, for the user."""
+
+
+def auto_bounds(mesh_bounds: np.ndarray, margin: float = 0.15):
+    """((xmin, ymin), (xmax, ymax)) for the robot's centre over a terrain whose mesh has these
+    (2, 3) bounds [m]: margin inside its edges, at most MAX_AUTO_EXTENT a side around its
+    centre; and a note when the terrain was larger."""
+    lo, hi = np.asarray(mesh_bounds)[0][:2] + margin, np.asarray(mesh_bounds)[1][:2] - margin
+    note = ""
+    centre = (lo + hi) / 2
+    if np.any(hi - lo > MAX_AUTO_EXTENT):
+        half = np.minimum((hi - lo) / 2, MAX_AUTO_EXTENT / 2)
+        note = (f"the terrain is {(hi - lo)[0]:.0f} m x {(hi - lo)[1]:.0f} m: planning within "
+                f"{2 * half[0]:.0f} m x {2 * half[1]:.0f} m at its centre (set bounds, or crop)")  # fmt: skip
+        lo, hi = centre - half, centre + half
+    return ((float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))), note
+
+
+def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
+    """Start and goal on the world's terrain (see the module docstring); PlanningError saying
+    why when there is nowhere to stand or no two places a plan joins."""
+    sc, hf, fp = world.scene, world.heightfield, world.footprint
+    vcfg = sc.planner.validity
+    bounds = sc.bounds
+    (xa, ya), (xb, yb) = bounds
+    sm = standable_map(hf, fp, vcfg, bounds, ((xa + xb) / 2, (ya + yb) / 2))
+    labels, n = ndimage.label(sm.standable)
+    if n == 0:
+        raise PlanningError(
+            "the robot can stand nowhere on this terrain (no place is flat, wide and clear "
+            "enough for its six feet): check the ground found, or give start and goal"
+        )
+    sizes = ndimage.sum(np.ones_like(labels), labels, index=np.arange(1, n + 1))
+    region = labels == (1 + int(np.argmax(sizes)))
+    area = float(region.sum()) * sm.cell**2
+    # Away from the region's edge where it is wide enough (up to 3 cells, 12 cm): a pose on
+    # the rim of a noisy capture is valid by a hair, and one beside a chair leg is a collision
+    # waiting for the first step.
+    for rounds in (3, 2, 1):
+        inner = ndimage.binary_erosion(region, iterations=rounds)
+        inner_labels, m = ndimage.label(inner)
+        if m:
+            sizes_in = ndimage.sum(np.ones_like(inner_labels), inner_labels, np.arange(1, m + 1))
+            inner = inner_labels == (1 + int(np.argmax(sizes_in)))
+            if inner.sum() * sm.cell**2 >= 0.25 * area:
+                region = inner
+                break
+    cells = np.argwhere(region)  # (K, 2) rows j, i
+    centroid = cells.mean(axis=0)
+    first = tuple(cells[np.argmin(np.sum((cells - centroid) ** 2, axis=1))])
+    a = _farthest(region, first)[0]
+    _, dist = _farthest(region, a)
+    cap = MAX_AUTO_DISTANCE / sm.cell
+    xy = lambda c: np.array([sm.x0 + c[1] * sm.cell, sm.y0 + c[0] * sm.cell])  # noqa: E731
+    pa = xy(a)
+    reach = np.where(np.isfinite(dist), dist, -1.0)
+    failures = []
+    for attempt in range(tries):
+        limit = cap * (0.7**attempt)
+        ok = (reach >= 0) & (reach <= limit)
+        centres = np.column_stack([sm.x0 + np.nonzero(ok)[1] * sm.cell,
+                                   sm.y0 + np.nonzero(ok)[0] * sm.cell])  # fmt: skip
+        if len(centres) < 2:
+            break
+        pb = centres[np.argmax(np.linalg.norm(centres - pa, axis=1))]
+        heading = float(np.arctan2(pb[1] - pa[1], pb[0] - pa[0]))
+        start = _valid_pose(world, pa, heading)
+        goal = _valid_pose(world, pb, heading)
+        if start is None or goal is None:
+            failures.append("no valid heading at a picked place")
+            continue
+        planner = _quick(sc.planner)
+        try:
+            result = plan_path(hf, fp, start, goal, bounds=bounds, cfg=planner, seed=seed)
+        except PlanningError as exc:
+            failures.append(str(exc))
+            continue
+        if result.found:
+            d = float(np.linalg.norm(pb - pa))
+            note = (f"start and goal picked automatically {d:.2f} m apart in the largest "
+                    f"region the robot can stand in ({area:.1f} m^2)")  # fmt: skip
+            if d < MIN_AUTO_DISTANCE:
+                note += f"; it allows no more than {d:.2f} m"
+            return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
+        failures.append(f"{planner.name} found no path in {planner.time_limit:g} s")
+    raise PlanningError(
+        f"could not pick a start and goal the planner joins in the largest standable region "
+        f"({area:.2f} m^2): {'; '.join(failures[-2:]) or 'the region is a single place'}; "
+        f"give start and goal"
+    )
+
+
+def _quick(cfg):
+    """The scene's planner with a short budget: the check only asks whether a path exists."""
+    import dataclasses
+
+    return dataclasses.replace(cfg, time_limit=min(cfg.time_limit, 5.0))
+
+
+def _valid_pose(world, xy: np.ndarray, heading: float) -> tuple[float, float, float] | None:
+    """(x, y, yaw) at xy with the yaw nearest heading (in 16 steps) where the robot stands."""
+    sc = world.scene
+    yaws = heading + np.array([0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6, 7, -7, 8]) * np.pi / 8
+    states = np.column_stack([np.full(len(yaws), xy[0]), np.full(len(yaws), xy[1]), yaws])
+    code = check_states(world.heightfield, world.footprint, sc.planner.validity, states).code
+    ok = np.flatnonzero(code == VALID)
+    if not len(ok):
+        return None
+    yaw = float(np.arctan2(np.sin(yaws[ok[0]]), np.cos(yaws[ok[0]])))
+    return (round(float(xy[0]), 4), round(float(xy[1]), 4), yaw)
+
+
+def _farthest(mask: np.ndarray, source: tuple[int, int]) -> tuple[tuple[int, int], np.ndarray]:
+    """Breadth-first (4-connected) distances [cells] within mask ((ny, nx) bool) from source
+    (j, i): (the farthest cell, (ny, nx) distances, inf outside the source's component)."""
+    dist = np.full(mask.shape, np.inf)
+    dist[source] = 0.0
+    queue = deque([source])
+    far = source
+    ny, nx = mask.shape
+    while queue:
+        j, i = queue.popleft()
+        d = dist[j, i] + 1
+        for dj, di in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            a, b = j + dj, i + di
+            if 0 <= a < ny and 0 <= b < nx and mask[a, b] and dist[a, b] == np.inf:
+                dist[a, b] = d
+                queue.append((a, b))
+                far = (a, b)
+    return far, dist
