@@ -15,6 +15,7 @@ from typing import Any
 
 from planning import PlannerConfig
 from scenes import (
+    TERRAIN_SUFFIXES,
     Scene,
     SceneError,
     YamlFields,
@@ -105,11 +106,12 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     data = f.mapping(raw, "", _KEYS, required=("scene",))
     if not isinstance(data["scene"], str):
         raise f.fail(
-            "scene", f"expected a library scene name or a .yaml path, got {data['scene']!r}"
+            "scene", f"expected a library scene name, a scene .yaml or a terrain file (a capture, "
+            f"mesh or .scad), got {data['scene']!r}"
         )
     scene_ref = data["scene"]
-    if scene_ref.endswith((".yaml", ".yml")):
-        scene_ref = str((path.parent / scene_ref).resolve())
+    if Path(scene_ref).suffix.lower() in (".yaml", ".yml", *TERRAIN_SUFFIXES):
+        scene_ref = str((path.parent / scene_ref).resolve())  # a scene file or a terrain file
     try:
         scene = load_scene(scene_ref)
     except SceneError as exc:

@@ -9,6 +9,8 @@ from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
 from ._openscad import render_scad as render_scad
 from ._scene import LIBRARY as LIBRARY
 from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
+from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
+from ._scene import terrain_file_scene as terrain_file_scene
 from ._scene import Scene as Scene
 from ._scene import TerrainObject as TerrainObject
 from ._scene import YamlFields as YamlFields

@@ -55,7 +55,9 @@ def scaled_mesh(mesh: trimesh.Trimesh, scale: tuple[float, float, float]) -> tri
     return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False)
 
 
-def clean_terrain_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
+def clean_terrain_mesh(
+    mesh: trimesh.Trimesh, label: str, check_units: bool = True
+) -> trimesh.Trimesh:
     """A copy with non-finite vertices, duplicate vertices and degenerate faces removed and the
     faces wound consistently with normals outward (closed meshes) or upward (open surfaces).
 
@@ -75,7 +77,9 @@ def clean_terrain_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
     out.remove_unreferenced_vertices()
     if len(out.faces) == 0:
         raise SceneError(f"{label}: every triangle of the mesh is degenerate (zero area)")
-    if looks_like_millimetres(out):
+    # A capture's units were judged by perception from the sensor's range (a 300 m lidar
+    # survey in metres is real); a model's only by its size.
+    if check_units and looks_like_millimetres(out):
         raise SceneError(
             f"{label}: the mesh is {terrain_extent(out):.0f} m across; scenes are in metres, so "
             f"this is most likely a model in millimetres: add `scale: 0.001` to this terrain "

@@ -111,7 +111,7 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
         raw = read_mesh(source, label)
     if obj.scale != (1.0, 1.0, 1.0):  # before the unit check: a model in mm passes once scaled
         raw = scaled_mesh(raw, obj.scale)
-    mesh = clean_terrain_mesh(raw, label)
+    mesh = clean_terrain_mesh(raw, label, check_units=obj.kind != "capture")
     transform = np.eye(4)
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position

@@ -176,3 +176,14 @@ def test_nowhere_to_stand_is_a_clear_error(tmp_path):
     done = roachplan("trial", "--scene", str(y))
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "stand nowhere" in done.stderr or "could not pick" in done.stderr
+
+
+def test_a_millimetre_model_as_a_scene_is_refused_then_scaled(tmp_path):
+    scad = tmp_path / "slab.scad"
+    scad.write_text("translate([-1500, -300, -20]) cube([3000, 600, 20]);")
+    done = roachplan("trial", "--scene", str(scad))
+    assert done.returncode == 2 and "scale: 0.001" in done.stderr and "Traceback" not in done.stderr
+    done = roachplan("trial", "--scene", str(scad), "--scale", "0.001", "--json")
+    assert done.returncode == 0, done.stderr
+    r = json.loads(done.stdout)
+    assert r["outcome"] == "success" and math.dist(r["start"][:2], r["goal"][:2]) >= 1.0
