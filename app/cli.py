@@ -31,8 +31,10 @@ def _cmd_trial(args: argparse.Namespace) -> int:
 
     if args.from_dir is not None or args.trial is not None:
         return _rerun_trial(args)
-    scene = load_scene(args.scene or "double_bridge")
+    scene = _scene_options(load_scene(args.scene or "double_bridge"), args)
     world = build_world(scene)
+    for note in world.notes:
+        print(f"roachplan: {note}", file=sys.stderr)
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     result = run_trial(world, seed=seed, planner=planner)
@@ -153,8 +155,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     if args.count < 1:
         raise PlanningError(f"--count {args.count}: must be 1 or more")
-    scene = load_scene(args.scene)
+    scene = _scene_options(load_scene(args.scene), args)
     world = build_world(scene)
+    for note in world.notes:
+        print(f"roachplan: {note}", file=sys.stderr)
+    scene = world.scene  # with the start and goal picked, if the scene file had none
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     start, goal = _pose(args.start, "--start"), _pose(args.goal, "--goal")
@@ -585,9 +590,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=8080)
     p.set_defaults(func=_cmd_serve)
 
+    terrain_help = ("library scene name, scene .yaml, or a terrain file (capture, mesh, .scad) "
+                    "as a scene with start and goal picked")  # fmt: skip
     p = sub.add_parser("trial", help="one headless plan-and-drive trial")
-    p.add_argument("--scene", default=None, help="library scene name or scene .yaml "
-                   "(default: double_bridge)")  # fmt: skip
+    p.add_argument("--scene", default=None, help=f"{terrain_help} (default: double_bridge)")
+    p.add_argument("--scale", type=float, default=None, metavar="S",
+                   help="scale every terrain model by S (0.001: millimetres)")
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the scene's)")
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
     p.add_argument("--from", dest="from_dir", default=None, metavar="DIR",
@@ -600,7 +608,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_perception_parsers(sub)
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
-    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--scene", default="double_bridge", help=terrain_help)
+    p.add_argument("--scale", type=float, default=None, metavar="S",
+                   help="scale every terrain model by S (0.001: millimetres)")
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None, help="default: the scene's")
     p.add_argument("--seed", type=int, default=None, help="first seed (default: the scene's)")
     p.add_argument("--count", type=int, default=1, help="number of distinct paths, by route")
