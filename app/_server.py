@@ -35,7 +35,8 @@ from sim import Frame
 
 from ._panel import energy_plot, summary_markdown, trials_csv, trials_markdown
 from ._picking import ray_hit_heightfield
-from ._uploads import MAX_UPLOAD_BYTES, prepare_upload_scene, scene_from_upload
+from ._load_panel import LoadPanel, PanelCmd, needs_millimetre_scale, view_of_upload
+from ._uploads import MAX_UPLOAD_BYTES, prepare_upload_scene, public_message
 
 # -- commands (what callbacks enqueue) ----------------------------------------------------------
 
@@ -135,6 +136,8 @@ def _load_job(conn, ref: str, from_upload: bool) -> None:
         else:
             world = build_world(load_scene(ref), check_poses=False)
         world.regions  # noqa: B018 - computed here, once, and sent along
+        if from_upload:  # the capture's camera, to re-level it in the page
+            conn.send(("capture", view_of_upload(world.scene)))
         conn.send(("world", world))
     except Exception as exc:
         conn.send(("error", f"{exc}"))
@@ -276,13 +279,7 @@ class RoachApp:
                 "Load file",
                 hint=f"capture, .scad, mesh or scene .yaml (<= {MAX_UPLOAD_BYTES >> 20} MB)",
             )
-            self.mesh_method = gui.add_dropdown(
-                "Capture meshing", ("grid", "poisson", "ball-pivot")
-            )
-            self.voxel = gui.add_number("Voxel [m]", 0.02, min=0.005, max=0.2, step=0.005)
-            self.intrinsics = gui.add_dropdown(
-                "Depth PNG camera", ("kinect2-qhd", "kinect2-sd", "kinect2-hd")
-            )
+            self.load_panel = LoadPanel(gui, put)
         with gui.add_folder("Start and goal"):
             self.click_mode = gui.add_dropdown("Click places", ("nothing", "start", "goal"))
             self.start_yaw = gui.add_slider("Start yaw [deg]", -180, 180, 1, 90)
@@ -324,6 +321,7 @@ class RoachApp:
             lambda ev: put(UploadCmd(ev.client_id, ev.target.value.name, ev.target.value.content))
         )
         self.click_mode.on_update(lambda ev: self._set_click_mode())
+        self.load_panel.pick_ground.on_update(lambda ev: self._set_click_mode())
         for slider in (self.start_yaw, self.goal_yaw):
             slider.on_update(lambda ev: put(MarkersCmd(ev.client_id)))
         self.plan_button.on_click(lambda ev: put(PlanCmd(ev.client_id)))
@@ -340,7 +338,7 @@ class RoachApp:
         scene does not orbit on click)."""
         scene = self.server.scene
         scene.remove_click_callback()
-        if self.click_mode.value != "nothing":
+        if self.click_mode.value != "nothing" or self.load_panel.pick_ground.value:
             scene.on_click()(
                 lambda ev: self.commands.put(
                     PlaceCmd(ev.client_id, ev.ray_origin, ev.ray_direction)
@@ -509,10 +507,9 @@ class RoachApp:
                     ref = self.uploads.get(cmd.name, cmd.name)
                     self._load(cmd, ref, from_upload=cmd.name in self.uploads, label=cmd.name)
             case UploadCmd():
-                settings = {"method": self.mesh_method.value, "voxel": float(self.voxel.value),
-                            "intrinsics": self.intrinsics.value}  # fmt: skip
-                path = scene_from_upload(cmd.name, cmd.data, self.upload_dir, settings)
-                self._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
+                self.load_panel.upload(self, cmd)
+            case PanelCmd():
+                self.load_panel.handle(self, cmd)
             case PlaceCmd():
                 self._do_place(cmd)
             case MarkersCmd():
@@ -535,16 +532,28 @@ class RoachApp:
         if self.batch is not None:
             raise RuntimeError("a batch of trials is running; cancel it before changing the scene")
         self.status.content = f"Loading {label} ..."
-        world = None
+        world = view = None
         for kind, payload in _run_in_child(_load_job, ref, from_upload):
             if kind == "error":
+                payload = public_message(payload, self.upload_dir)
                 self.status.content = (
                     f"Could not load {label}; the scene `{self.world.scene.name}` stays."
                 )
                 self.scene_picker.value = self._picker_label()
+                mm = from_upload and needs_millimetre_scale(payload)
+                self.load_panel.offer_scale((Path(ref), label) if mm else None)
+                if mm:
+                    payload += "  \nPress **Scale x0.001** (Scene panel) to load it in metres."
                 self._notify(cmd.client_id, f"Could not load {label}", payload, error=True)
                 return
+            if kind == "capture":
+                view = payload
+                continue
             world = payload
+        self.load_panel.offer_scale(None)
+        self.load_panel.show_capture(view)
+        if world.notes:
+            self._notify(cmd.client_id, f"Loaded {label}", " ".join(world.notes))
         self.world = world
         if from_upload:
             self.uploads[label] = ref
@@ -559,12 +568,15 @@ class RoachApp:
         return next((k for k, v in self.uploads.items() if v == path), self.world.scene.name)
 
     def _do_place(self, cmd: PlaceCmd) -> None:
-        which = self.click_mode.value
-        if which == "nothing":
+        which, picking = self.click_mode.value, self.load_panel.pick_ground.value
+        if which == "nothing" and not picking:
             return
         hit = ray_hit_heightfield(self.world.heightfield, cmd.ray_origin, cmd.ray_direction)
         if hit is None:
             self._notify(cmd.client_id, "Missed", "That click does not hit the terrain.")
+            return
+        if picking:  # the load panel's "Pick ground": re-level the capture there
+            self.load_panel.relevel_at_click(self, cmd, hit)
             return
         self.controls[which].position = tuple(float(v) for v in hit)
         self._check_markers()

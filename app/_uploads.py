@@ -10,12 +10,12 @@ it is written into a fresh folder under the app's upload directory under a sanit
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from perception import CAPTURE_SUFFIXES
@@ -25,7 +25,13 @@ MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
 SCAD_TIMEOUT = 60.0
 """Time limit of an uploaded model's OpenSCAD render [s]."""
-UPLOAD_SUFFIXES = tuple(sorted({".scad", ".yaml", ".yml", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
+UPLOAD_SUFFIXES = tuple(
+    sorted({".scad", ".yaml", ".yml", ".zip", *MESH_SUFFIXES, *CAPTURE_SUFFIXES})
+)
+MIN_GROUND_SPAN = 2.0
+"""Smallest side of the planning area of a model on a ground plane [m]."""
+DEPTH_IMAGE_SUFFIXES = (".png", ".pgm", ".ppm")
+"""Captures that need intrinsics (a pending calibration applies to them)."""
 
 
 def safe_name(name: str) -> str:
@@ -34,13 +40,18 @@ def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]", "_", base).lstrip(".") or "upload"
 
 
-def scene_from_upload(name: str, data: bytes, root: Path, capture: dict) -> Path:
+def scene_from_upload(
+    name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None
+) -> Path:
     """Write an uploaded file into a fresh folder under root and return the scene .yaml that
-    uses it. capture: perception settings for captures (method, voxel, intrinsics).
+    uses it. capture: perception settings for captures (method, voxel, intrinsics, ...).
+    calibration: a calibration file uploaded before a depth image (copied beside it and used as
+    its intrinsics).
 
     A .yaml is the scene itself; a .scad or mesh becomes a terrain object on a ground plane; a
-    capture becomes a capture object without a ground (the captured floor is the ground). The
-    start and goal are placeholders until `with_poses` sets them.
+    .zip holds a .scad (at its top level) with its includes and data files; a capture becomes a
+    capture object without a ground (the captured floor is the ground). Start, goal and bounds
+    are left out: `prepare_upload_scene` picks them.
     """
     if len(data) > MAX_UPLOAD_BYTES:
         raise SceneError(
@@ -60,10 +71,22 @@ def scene_from_upload(name: str, data: bytes, root: Path, capture: dict) -> Path
         path.write_bytes(data)
         _check_sources_inside(path, folder)
         return path
-    (folder / fname).write_bytes(data)
-    if suffix == ".ply" and _ply_has_faces(data):
+    if suffix != ".zip":
+        (folder / fname).write_bytes(data)
+    if suffix == ".zip":
+        from ._archive import extract_scad_zip
+
+        obj = {"scad": extract_scad_zip(name, data, folder), "timeout": SCAD_TIMEOUT}
+    elif suffix == ".ply" and _ply_has_faces(data):
         obj = {"mesh": fname}
     elif suffix in CAPTURE_SUFFIXES:
+        capture = dict(capture)
+        if calibration is not None and suffix in DEPTH_IMAGE_SUFFIXES:
+            calib = safe_name(calibration.name)
+            if calib == fname:
+                calib = f"calibration-{calib}"
+            shutil.copy(calibration, folder / calib)
+            capture["intrinsics"] = calib
         obj = {"capture": fname, "perception": capture}
     elif suffix == ".scad":
         obj = {"scad": fname, "timeout": SCAD_TIMEOUT}
@@ -74,9 +97,6 @@ def scene_from_upload(name: str, data: bytes, root: Path, capture: dict) -> Path
         "description": f"Loaded from {name}",
         "terrain": [obj],
         "ground": None if is_capture else 0.0,
-        "robot": {"start": [0.0, 0.0, 0.0]},
-        "goal": [0.0, 0.0, 0.0],
-        "bounds": [[-100.0, -100.0], [100.0, 100.0]],
         "seed": 0,
     }
     path = folder / f"{Path(fname).stem}.yaml"
@@ -110,47 +130,51 @@ def _check_sources_inside(path: Path, folder: Path) -> None:
 
 
 def prepare_upload_scene(scene_path: Path):
-    """Build the world of a scene made by scene_from_upload: bounds from the terrain, a start
-    and a goal where the robot can stand, 2/3 of the terrain apart along its longer side (left
-    as the terrain's centre when none is found: the app then says why the markers are invalid).
-    Rewrites the scene file; returns the World. An uploaded .yaml keeps its own poses."""
-    from planning import VALID, check_states
+    """Build the world of an uploaded scene. What the file leaves out (bounds, start, goal) is
+    picked by build_world (scenes/_autopose.py: inside the largest standable region, joined by a
+    plan; both at the centre, with the reason in world.notes, when none is found) and written
+    back into the file, so batch workers and `roachplan trial` rebuild the same world without
+    picking again. Returns the World (its notes say what was picked)."""
     from scenes import build_terrain_mesh, build_world, load_scene
 
     raw = yaml.safe_load(scene_path.read_text())
-    if not raw.get("description", "").startswith("Loaded from"):
-        return build_world(load_scene(scene_path), check_poses=False)
-    mesh = build_terrain_mesh(load_scene(scene_path))
-    margin = 0.15
-    lo, hi = mesh.bounds[0][:2] + margin, mesh.bounds[1][:2] - margin
-    if np.any(hi <= lo):
-        raise SceneError(
-            f"{scene_path.name}: the terrain is too small for the robot ({mesh.extents.round(3).tolist()} m)"
-        )
-    centre = (lo + hi) / 2
-    raw["bounds"] = [lo.round(3).tolist(), hi.round(3).tolist()]
-    raw["robot"] = {"start": [*centre.round(3).tolist(), 0.0]}
-    raw["goal"] = [*centre.round(3).tolist(), 0.0]
-    scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
-    world = build_world(load_scene(scene_path), check_poses=False, mesh=mesh)
-    axis = 0 if (hi - lo)[0] >= (hi - lo)[1] else 1
-    yaw = 0.0 if axis == 0 else np.pi / 2
-    t = np.linspace(lo[axis], hi[axis], 80)
-    states = np.column_stack([np.tile(centre, (len(t), 1)), np.full(len(t), yaw)])
-    states[:, axis] = t
-    ok = (
-        check_states(world.heightfield, world.footprint, world.scene.planner.validity, states).code
-        == VALID
-    )
-    span = (hi - lo)[axis]
-    picks = np.flatnonzero(ok & (np.abs(t - centre[axis]) <= span / 3 + 1e-9))
-    if len(picks) < 2:
-        picks = np.flatnonzero(ok)
-    if len(picks) < 2:
-        return world
-    a, b = states[picks[0]], states[picks[-1]]
-    raw["robot"] = {"start": [round(float(a[0]), 3), round(float(a[1]), 3), float(np.degrees(yaw))]}
-    raw["goal"] = [round(float(b[0]), 3), round(float(b[1]), 3), float(np.degrees(yaw))]
-    scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
-    # Only the poses changed: the same terrain and height field, with the scene as now written.
-    return dataclasses.replace(world, scene=load_scene(scene_path))
+    scene = load_scene(scene_path)
+    mesh = build_terrain_mesh(scene)
+    if scene.bounds is None and scene.ground is not None and len(mesh.faces):
+        # A small model on a ground plane (a step, a rock) is walked onto from the ground
+        # round it: the area is the model with at least MIN_GROUND_SPAN of ground.
+        c = mesh.bounds.mean(axis=0)[:2]
+        half = [max(e / 2, MIN_GROUND_SPAN / 2) for e in mesh.extents[:2]]
+        raw["bounds"] = [[round(float(c[i] - half[i]), 4) for i in (0, 1)],
+                         [round(float(c[i] + half[i]), 4) for i in (0, 1)]]  # fmt: skip
+        scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
+        scene = load_scene(scene_path)
+    world = build_world(scene, check_poses=False, mesh=mesh)
+    sc = world.scene
+    filled = {}
+    if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:
+        filled["robot"] = {**(raw.get("robot") or {}), "start": _pose_yaml(sc.start)}
+        filled["goal"] = _pose_yaml(sc.goal)
+    if raw.get("bounds") is None:
+        filled["bounds"] = [[round(float(v), 4) for v in corner] for corner in sc.bounds]
+    if filled:
+        scene_path.write_text(yaml.safe_dump({**raw, **filled}, sort_keys=False))
+        # Only what was picked was written: the same terrain, with the scene as now written.
+        world = dataclasses.replace(world, scene=load_scene(scene_path))
+    return world
+
+
+def _pose_yaml(pose) -> list[float]:
+    """(x [m], y [m], yaw [rad]) as a scene file writes it: [x, y, yaw_deg]."""
+    return [round(float(pose[0]), 4), round(float(pose[1]), 4), round(math.degrees(pose[2]), 3)]
+
+
+def public_message(message: str, root: Path) -> str:
+    """An error message without the app's internal upload folders: a file in an upload is
+    named by its own name."""
+    text = str(message)
+    root = Path(root)
+    for base in {str(root), str(root.resolve())}:
+        text = re.sub(re.escape(base) + r"/upload-[^/\s]+/", "", text)
+        text = text.replace(base + "/", "")
+    return text

@@ -1,0 +1,70 @@
+"""A .zip of an OpenSCAD model with its data files: unpacked safely, the model found and built;
+unsafe archives refused with the member named. Messages never show the app's upload folders."""
+
+from __future__ import annotations
+
+import io
+import stat
+import zipfile
+
+import pytest
+import yaml
+from test_perception import REAL
+
+from app._uploads import prepare_upload_scene, public_message, scene_from_upload
+from scenes import SceneError
+
+
+def _zip(files: dict[str, bytes], links: tuple[str, ...] = ()) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+        for name in links:
+            info = zipfile.ZipInfo(name)
+            info.external_attr = (stat.S_IFLNK | 0o777) << 16
+            z.writestr(info, "/etc/passwd")
+    return buf.getvalue()
+
+
+def test_a_zip_with_a_scad_and_its_data_file_builds(tmp_path):
+    scad = (REAL / "openscad" / "example010.scad").read_bytes()
+    dat = (REAL / "openscad" / "example010.dat").read_bytes()
+    data = _zip({"example010.scad": scad, "example010.dat": dat})
+    path = scene_from_upload("terrain.zip", data, tmp_path, {})
+    assert yaml.safe_load(path.read_text())["terrain"][0]["scad"] == "example010.scad"
+    raw_text = path.read_text()
+    assert "robot" not in yaml.safe_load(raw_text)  # picked when built, then written back
+    try:
+        world = prepare_upload_scene(path)
+    except SceneError as exc:  # OpenSCAD's example is in millimetre-ish units
+        assert "scale: 0.001" in str(exc)
+        return
+    raw = yaml.safe_load(path.read_text())
+    assert len(raw["robot"]["start"]) == 3 and len(raw["bounds"]) == 2 and world.notes
+
+
+@pytest.mark.parametrize(
+    ("files", "links", "why"),
+    [({"../evil.scad": b"cube(1);"}, (), "outside the archive"),
+     ({"/abs.scad": b"cube(1);"}, (), "outside the archive"),
+     ({"a.scad": b"cube(1);"}, ("link.dat",), "symbolic link"),
+     ({"a.scad": b"cube(1);", "b.scad": b"cube(2);"}, (), "exactly one .scad")],
+)  # fmt: skip
+def test_unsafe_or_unclear_archives_are_refused(tmp_path, files, links, why):
+    with pytest.raises(SceneError, match=why):
+        scene_from_upload("m.zip", _zip(files, links), tmp_path, {})
+
+
+def test_the_model_is_the_file_no_other_includes(tmp_path):
+    data = _zip({"main.scad": b"include <lib.scad>\nblock();\n",
+                 "lib.scad": b"module block() cube([1, 1, 0.1]);\n"})  # fmt: skip
+    path = scene_from_upload("m.zip", data, tmp_path, {})
+    assert yaml.safe_load(path.read_text())["terrain"][0]["scad"] == "main.scad"
+    world = prepare_upload_scene(path)
+    assert abs(world.mesh.extents[2] - 0.1) < 1e-6
+
+
+def test_messages_name_the_file_not_the_upload_folder(tmp_path):
+    msg = f"{tmp_path}/upload-ab_12/cube.yaml: terrain[0].scad: too big"
+    assert public_message(msg, tmp_path) == "cube.yaml: terrain[0].scad: too big"
