@@ -21,7 +21,7 @@ import numpy as np
 import trimesh
 
 from ._camera import PinholeNumbers
-from ._capture import Capture, is_georeferenced
+from ._capture import Capture, depth_scale_advice, is_georeferenced
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
 
@@ -241,7 +241,7 @@ def gravity_prior(capture: Capture, frame: str, cfg: MeshingConfig) -> tuple[np.
     """(up (3,) unit in the capture frame, where it came from)."""
     if cfg.up is not None:
         up, source = np.asarray(cfg.up, dtype=np.float64), "given (up)"
-    elif getattr(capture, "base_from_camera", None) is not None:
+    elif capture.base_from_camera is not None:
         # The camera's pose in a z-up robot frame (a calibration file's local_transform).
         up, source = np.asarray(capture.base_from_camera)[2, :3], "the calibration's camera pose"
     elif capture.up is not None:
@@ -297,7 +297,7 @@ def reconstruct(capture: Capture, cfg: MeshingConfig = MeshingConfig()) -> Recon
         inside = (dist >= near) & (dist <= far)
     else:
         inside = np.ones(len(pts), dtype=bool)
-    advice = _depth_scale_advice(capture, cfg.depth_range or CAMERA_DEPTH_RANGE)
+    advice = depth_scale_advice(capture, cfg.depth_range or CAMERA_DEPTH_RANGE)
     if advice is not None and inside.mean() < 0.5:
         raise CaptureError(f"{capture.source}: {advice}")
     pts = pts[inside]
@@ -423,14 +423,6 @@ def _point_spacing(world: np.ndarray) -> float:
         return 0.0
     dist, _ = cKDTree(xy).query(xy, k=2)
     return float(np.median(dist[:, 1]))
-
-
-def _depth_scale_advice(capture: Capture, depth_range: tuple[float, float]) -> str | None:
-    """The depth-scale check of perception/_capture.py when it exists (depth images)."""
-    from . import _capture
-
-    advise = getattr(_capture, "depth_scale_advice", None)
-    return None if advise is None else advise(capture, depth_range)
 
 
 def grid_mesh(
