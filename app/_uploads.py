@@ -16,6 +16,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from perception import CAPTURE_SUFFIXES
@@ -136,20 +137,27 @@ def prepare_upload_scene(scene_path: Path):
     back into the file, so batch workers and `roachplan trial` rebuild the same world without
     picking again. Returns the World (its notes say what was picked)."""
     from scenes import build_terrain_mesh, build_world, load_scene
+    from scenes._autopose import auto_bounds
 
     raw = yaml.safe_load(scene_path.read_text())
     scene = load_scene(scene_path)
     mesh = build_terrain_mesh(scene)
+    notes = []
     if scene.bounds is None and scene.ground is not None and len(mesh.faces):
         # A small model on a ground plane (a step, a rock) is walked onto from the ground
-        # round it: the area is the model with at least MIN_GROUND_SPAN of ground.
-        c = mesh.bounds.mean(axis=0)[:2]
-        half = [max(e / 2, MIN_GROUND_SPAN / 2) for e in mesh.extents[:2]]
-        raw["bounds"] = [[round(float(c[i] - half[i]), 4) for i in (0, 1)],
-                         [round(float(c[i] + half[i]), 4) for i in (0, 1)]]  # fmt: skip
+        # round it: the area is the model with at least MIN_GROUND_SPAN of ground, and, as for
+        # any terrain, at most auto_bounds' window at its centre (a 45 m model at 1 cm would
+        # be a 20-million-cell height field).
+        lo, hi = mesh.bounds[0][:2], mesh.bounds[1][:2]
+        c, half = (lo + hi) / 2, np.maximum((hi - lo) / 2, MIN_GROUND_SPAN / 2)
+        bounds, note = auto_bounds(np.array([[*(c - half), 0.0], [*(c + half), 0.0]]), margin=0.0)
+        notes += [note] if note else []
+        raw["bounds"] = [[round(v, 4) for v in corner] for corner in bounds]
         scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
         scene = load_scene(scene_path)
     world = build_world(scene, check_poses=False, mesh=mesh)
+    if notes:
+        world = dataclasses.replace(world, notes=(*notes, *world.notes))
     sc = world.scene
     filled = {}
     if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:

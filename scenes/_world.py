@@ -33,6 +33,9 @@ from ._scene import Scene, TerrainObject
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
+MAX_PLANNING_AREA = 400.0
+"""Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
+and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +158,14 @@ def build_world(
         notes += [note] if note else []
     margin = 0.15  # the robot's feet reach this far past its centre's bounds [m]
     (lo, hi) = scene.bounds
+    area = (hi[0] - lo[0]) * (hi[1] - lo[1])
+    if area > MAX_PLANNING_AREA:
+        raise SceneError(
+            f"{scene.path}: bounds: {hi[0] - lo[0]:.1f} m x {hi[1] - lo[1]:.1f} m is more than "
+            f"{MAX_PLANNING_AREA:.0f} m^2 to plan over at {HEIGHTFIELD_RESOLUTION * 100:.0f} cm; "
+            f"give bounds at most {MAX_PLANNING_AREA ** 0.5:.0f} m x {MAX_PLANNING_AREA ** 0.5:.0f} m "
+            f"around the part the robot is to cross"
+        )
     hf = heightfield_from_mesh(
         mesh.vertices,
         mesh.faces,

@@ -149,6 +149,13 @@ def test_a_start_off_the_terrain_is_refused(tmp_path, box_stl):
         build_world(load_scene(write_scene(tmp_path, data)))
 
 
+def test_bounds_too_large_to_plan_over_are_refused_before_any_memory_is_used(tmp_path, box_stl):
+    # 100 m x 100 m at 1 cm would be 100 M height-field cells (tens of GB).
+    data = edited(bounds=[[-50, -50], [50, 50]], ground=0.0)
+    with pytest.raises(SceneError, match=r"bounds: 100\.0 m x 100\.0 m .* give bounds at most"):
+        build_world(load_scene(write_scene(tmp_path, data)))
+
+
 def test_a_start_where_the_robot_cannot_stand_names_the_condition_and_leg(tmp_path, box_stl):
     # Facing +x at the block's edge: the rear legs hang over nothing.
     data = edited(robot__start=[-0.47, 0.0, 0], bounds=[[-0.5, -0.35], [0.3, 0.35]])

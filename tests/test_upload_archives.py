@@ -13,6 +13,7 @@ from test_perception import REAL
 
 from app._uploads import prepare_upload_scene, public_message, scene_from_upload
 from scenes import SceneError
+from scenes._autopose import MAX_AUTO_EXTENT
 
 
 def _zip(files: dict[str, bytes], links: tuple[str, ...] = ()) -> bytes:
@@ -42,6 +43,10 @@ def test_a_zip_with_a_scad_and_its_data_file_builds(tmp_path):
         return
     raw = yaml.safe_load(path.read_text())
     assert len(raw["robot"]["start"]) == 3 and len(raw["bounds"]) == 2 and world.notes
+    # The model is 45 m across: planning stays within the centre window, said in a note.
+    (x0, y0), (x1, y1) = raw["bounds"]
+    assert max(x1 - x0, y1 - y0) <= MAX_AUTO_EXTENT + 1e-6
+    assert any("at its centre" in n for n in world.notes)
 
 
 @pytest.mark.parametrize(
