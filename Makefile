@@ -10,7 +10,7 @@ PORT   ?= 8080
 RUN_DEBS  := openscad libusb-1.0-0
 TEST_DEBS := $(RUN_DEBS) chromium
 
-.PHONY: setup run test bench lint clean
+.PHONY: setup run test fuzz bench lint clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,11 @@ run: setup
 test: $(STAMP)
 	@scripts/install-system-deps.sh $(TEST_DEBS)
 	$(BIN)/python -m pytest
+
+# Long property-based fuzzing of the readers and the scene loader; SEED=N repeats a run.
+SEED ?= $(shell date +%s)
+fuzz: $(STAMP)
+	ROACHPLAN_FUZZ=1 $(BIN)/python -m pytest -q tests/test_fuzz_*.py --hypothesis-seed=$(SEED)
 
 bench: setup
 	$(BIN)/python benchmarks/bench_trial.py

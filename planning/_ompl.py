@@ -31,6 +31,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from ._drivable import drivable_path
 from ._heightfield import HeightField
 from ._isolated import Method, run_isolated
 from ._ompl_import import ob, og, ou
@@ -65,6 +66,10 @@ assert set(PLANNER_NAMES) == set(_OMPL_CLASS)
 ou.setLogLevel(ou.LOG_WARN)
 
 
+DRIVABLE_ATTEMPTS = 5
+"""Routes searched, at most, for one the robot can follow (drivable plans) [-]."""
+
+
 class PlanningError(ValueError):
     """A planning request that cannot be planned as asked (e.g. an invalid start)."""
 
@@ -93,6 +98,13 @@ class PlannerConfig:
     budget instead of stopping at their first solution."""
     waypoint_spacing: float = 0.05
     """Spacing of the waypoints handed to the driver [m]."""
+    turning_radius: float | None = 0.16
+    """Drivable plans (issue 18): turn the planner's route into arcs of this radius [m] and
+    straight lines, every state checked (planning/_drivable.py). The roach's tightest turn,
+    at the driver's largest motor ratio of 3, has a radius of about 0.12 m on flat ground
+    (curvature 7.46 ln 3 = 8.2 /m, `roachplan calibrate-turning`); 0.16 m leaves the tracking
+    driver a third more to correct with, and rough ground. None: the planner's raw path, as
+    the report drove it (`reference: true`)."""
     keep_roadmap: bool = False
     """Return the planner's graph (roadmap or tree) with the plan, for display."""
     validity: ValidityConfig = field(default_factory=ValidityConfig)
@@ -413,11 +425,36 @@ def _plan_here(
     planner.setup()
     deadline = t0 + cfg.time_limit
 
-    if cfg.name in ("prm", "prmstar") and not cfg.optimize:
-        states = _solve_prm(si, planner, cfg, deadline)
-    else:
-        planner.solve(_budget_ptc(cfg.max_iterations, deadline))
-        states = pdef.getSolutionPath().getStates() if pdef.hasExactSolution() else None
+    def inside_and_valid(st: np.ndarray) -> np.ndarray:
+        # OMPL keeps its own states within the bounds; a Dubins curve must be kept there.
+        inside = np.all((st[:, :2] >= lo) & (st[:, :2] <= hi), axis=1)
+        return inside & check(st) if inside.all() else np.zeros(len(st), dtype=bool)
+
+    undrivable = 0  # routes found that no drivable path follows
+    while True:
+        if cfg.name in ("prm", "prmstar") and not cfg.optimize:
+            states = _solve_prm(si, planner, cfg, deadline)
+        else:
+            planner.solve(_budget_ptc(cfg.max_iterations, deadline))
+            states = pdef.getSolutionPath().getStates() if pdef.hasExactSolution() else None
+        if states is None:
+            break
+        xyyaw = _simplified(si, states, cfg)
+        if cfg.turning_radius is None:
+            break
+        drivable = drivable_path(
+            xyyaw[:, :2], start[2], cfg.turning_radius, inside_and_valid, cfg.check_resolution
+        )
+        if drivable is not None:
+            break
+        # A route with a turn too tight for the space round it: search again from scratch
+        # (the planner's random stream goes on, so the next route differs), within the budget.
+        undrivable += 1
+        states = None
+        if undrivable >= DRIVABLE_ATTEMPTS or time.perf_counter() > deadline:
+            break
+        planner.clear()
+        pdef.clearSolutionPaths()
     stats = dict(
         validity_checks=check.states, validity_time=check.seconds,
         sampler_calls=sum(smp.calls for smp in samplers),
@@ -426,20 +463,33 @@ def _plan_here(
         stats["roadmap"] = _graph_segments(si, planner)
     if states is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
+        message = f"{cfg.name} found no path within its {why}"
+        if undrivable:
+            message = (f"{cfg.name} found {undrivable} route(s), but none the robot can follow "
+                       f"with turns of radius {cfg.turning_radius:g} m")  # fmt: skip
         return PlanResult(
             found=False, planner=cfg.name, seed=seed, states=np.zeros((0, 3)),
             path_xyz=np.zeros((0, 3)), plan_time=time.perf_counter() - t0,
-            message=f"{cfg.name} found no path within its {why}", **stats,
+            message=message, **stats,
         )  # fmt: skip
-    xyyaw = _simplified(si, states, cfg)
+    path_xyz = None
+    if cfg.turning_radius is not None:
+        # The curve is sampled every check_resolution; the driver gets every waypoint_spacing.
+        every = max(1, round(cfg.waypoint_spacing / cfg.check_resolution))
+        keep = np.unique(np.r_[np.arange(0, len(drivable), every), len(drivable) - 1])
+        xyyaw = drivable[keep]
+        path_xyz = np.column_stack([xyyaw[:, :2], hf.sample(xyyaw[:, :2])])
     return PlanResult(
         found=True,
         planner=cfg.name,
         seed=seed,
         states=xyyaw,
-        path_xyz=waypoints_on_surface(hf, xyyaw[:, :2], cfg.waypoint_spacing),
+        path_xyz=(waypoints_on_surface(hf, xyyaw[:, :2], cfg.waypoint_spacing)
+                  if path_xyz is None else path_xyz),
         plan_time=time.perf_counter() - t0,
-        message=f"{len(xyyaw)} states",
+        message=f"{len(xyyaw)} states" + (
+            f", drivable with turns of radius {cfg.turning_radius:g} m"
+            if cfg.turning_radius is not None else ""),
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
         **stats,
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -22,7 +23,22 @@ class SimConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class DriverConfig:
-    """Path follower (Tong 2018, algorithm 1) and differential-drive P-controller (algorithm 2)."""
+    """How the roach follows a path: `tracking` (pure pursuit along the path's arc length, the
+    default) or `reference` (Tong 2018's algorithm 1, waypoint by waypoint, with the
+    differential-drive P-controller of algorithm 2)."""
+
+    kind: Literal["tracking", "reference"] = "tracking"
+    """tracking: steer onto the point `lookahead` metres further along the path than the
+    robot's progress, which only grows, so a passed waypoint is never chased back;
+    reference: algorithms 1 and 2 exactly as the report gives them (tables 7.1-7.3)."""
+    lookahead: float = 0.2
+    """tracking: distance along the path from the robot's progress to the point it steers to
+    [m]. Shorter tracks tighter and oscillates; about twice the body length is the usual
+    pure-pursuit choice."""
+    turn_slope: float = 7.46
+    """tracking: d curvature / d ln(motor ratio) of the robot [1/m], from the turning
+    calibration (`roachplan calibrate-turning`): the motor ratio that drives a curvature k is
+    exp(k / turn_slope)."""
 
     omega0: float = 20.0
     """Base leg speed of both sides [rad/s]."""

@@ -1,5 +1,12 @@
-"""Path following (Tong 2018, algorithm 1) and the exponential differential-drive P-controller
-(algorithm 2), and the drive loop that turns a planned path into a trial outcome."""
+"""Path following, and the drive loop that turns a planned path into a trial outcome.
+
+Two followers: `reference`, Tong 2018's algorithm 1 (steer to the next waypoint, advance past
+the ones within r_path) with the exponential differential-drive P-controller of algorithm 2,
+kept exactly as the report gives them for tables 7.1-7.3; and `tracking` (the default, issue
+18), pure pursuit on the path's arc length: the robot's progress along the path only grows, so
+a waypoint it has passed is never chased back (algorithm 1 circles one it keeps overshooting),
+and the turn it is asked for is converted to a motor ratio through the calibrated turning
+model instead of a tuned gain."""
 
 from __future__ import annotations
 
@@ -13,7 +20,7 @@ import numpy as np
 from ._config import DriverConfig
 from ._simulation import Simulation
 
-Outcome = Literal["success", "fell", "flipped", "stuck", "timeout"]
+Outcome = Literal["success", "fell", "flipped", "stuck", "timeout", "missed"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -37,7 +44,8 @@ class DriveResult:
     outcome: Outcome
     """success: within r_end of the goal in time; fell: dropped off the planned surface (or
     the simulation diverged); flipped: on its back; stuck: no progress for stuck_time;
-    timeout: still going at time_limit."""
+    timeout: still going at time_limit; missed: went past the goal wider than r_end (tracking
+    driver: it cannot turn in place to come back)."""
     reason: str
     """Human-readable cause of the outcome."""
     drive_time: float
@@ -124,22 +132,21 @@ def drive_path(
     """Drive the (already reset) robot along path_xyz ((N, 3) world frame [m], z on the terrain
     surface) until it arrives, falls, flips, gets stuck or runs out of time.
 
-    Every control_period the controller reads the body pose, checks the outcome, advances the
-    waypoint (algorithm 1) and sets the motor speeds (algorithm 2); in between, the simulation
-    steps with nothing of ours but the leg targets and the energy meter.
+    Every control_period the controller reads the body pose, checks the outcome, lets the
+    follower (cfg.kind) advance along the path and set the motor speeds; in between, the
+    simulation steps with nothing of ours but the leg targets and the energy meter.
     """
     path = np.asarray(path_xyz, dtype=float)
     if path.ndim != 2 or path.shape[1] != 3 or len(path) < 2:
         raise ValueError(f"path must be (N>=2, 3), got {path.shape}")
-    path_xy = [tuple(q) for q in path[:, :2].tolist()]
     steps_per_control = max(1, round(cfg.control_period / sim.cfg.timestep))
     omega_max = min(sim.robot.max_motor_speed, cfg.max_ratio * cfg.omega0)
+    follower = _Reference(path, cfg) if cfg.kind == "reference" else _Tracking(path, cfg)
     standing = sim.robot.standing_height
     trajectory: list[tuple[float, float, float, float]] = []
     next_frame = 0.0
-    i = 1
-    # Progress: the waypoint index advanced, or the robot got stuck_distance closer to its
-    # waypoint, since last_progress [s].
+    # Progress: the follower advanced (reference: to its next waypoint), or its gap to go got
+    # stuck_distance smaller, since last_progress [s].
     last_progress, best_gap = 0.0, math.inf
     outcome: Outcome = "timeout"
     reason = f"did not reach the goal within {cfg.time_limit:g} s"
@@ -158,25 +165,22 @@ def drive_path(
         if failure is not None:
             outcome, reason = failure
             break
-        i_before = i
-        i, arrived = next_waypoint(path_xy, i, pos[:2], cfg.r_path, cfg.r_end)
-        if arrived:
-            outcome, reason = "success", "reached the goal"
+        ended = follower.update(pos)
+        if ended is not None:
+            outcome, reason = ended
             break
-        gap = math.dist(path_xy[i], pos[:2])
-        if i != i_before or gap < best_gap - cfg.stuck_distance:
+        gap = follower.gap
+        if follower.advanced or gap < best_gap - cfg.stuck_distance:
             last_progress, best_gap = t, gap
         elif t - last_progress >= cfg.stuck_time:
             outcome = "stuck"
-            reason = (
-                f"no progress for {cfg.stuck_time:g} s at ({pos[0]:.2f}, {pos[1]:.2f}), "
-                f"{gap:.2f} m from waypoint {i} of {len(path_xy) - 1}"
+            reason = f"no progress for {cfg.stuck_time:g} s at ({pos[0]:.2f}, {pos[1]:.2f}), " + (
+                follower.where()
             )
             break
         if t >= cfg.time_limit:
             break
-        theta = heading_error(pos, quat, path_xy[i])
-        sim.set_leg_speeds(*motor_speeds(theta, cfg.omega0, cfg.gain, omega_max))
+        sim.set_leg_speeds(*follower.speeds(pos, quat, omega_max))
         sim.advance(steps_per_control)
     if trajectory[-1][0] != sim.time:
         trajectory.append((sim.time, *pos))
@@ -188,3 +192,100 @@ def drive_path(
         energy_per_leg=tuple(sim.energy_per_leg.tolist()),
         trajectory=tuple(trajectory),
     )
+
+
+class _Reference:
+    """Algorithms 1 and 2 of Tong 2018, as the report gives them."""
+
+    def __init__(self, path: np.ndarray, cfg: DriverConfig) -> None:
+        self.path_xy = [tuple(q) for q in path[:, :2].tolist()]
+        self.cfg = cfg
+        self.i = 1
+        self.advanced = False
+        self.gap = math.inf
+
+    def update(self, pos) -> tuple[Outcome, str] | None:
+        i_before = self.i
+        self.i, arrived = next_waypoint(self.path_xy, self.i, pos[:2], self.cfg.r_path, self.cfg.r_end)
+        if arrived:
+            return "success", "reached the goal"
+        self.advanced = self.i != i_before
+        self.gap = math.dist(self.path_xy[self.i], pos[:2])
+        return None
+
+    def where(self) -> str:
+        return f"{self.gap:.2f} m from waypoint {self.i} of {len(self.path_xy) - 1}"
+
+    def speeds(self, pos, quat, omega_max: float) -> tuple[float, float]:
+        theta = heading_error(pos, quat, self.path_xy[self.i])
+        return motor_speeds(theta, self.cfg.omega0, self.cfg.gain, omega_max)
+
+
+class _Tracking:
+    """Pure pursuit on the path's arc length (see the module docstring)."""
+
+    def __init__(self, path: np.ndarray, cfg: DriverConfig) -> None:
+        self.xy = path[:, :2]
+        seg = np.diff(self.xy, axis=0)
+        self.seg_len = np.linalg.norm(seg, axis=1)
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        self.total = float(self.cum[-1])
+        last = np.nonzero(self.seg_len > 1e-9)[0]
+        d = seg[last[-1]] / self.seg_len[last[-1]] if len(last) else np.array([1.0, 0.0])
+        self.end, self.end_dir = self.xy[-1], d
+        self.cfg = cfg
+        self.s = 0.0
+        """Progress: arc length of the robot's nearest point on the path, never decreasing [m]."""
+        self.advanced = False
+        self.gap = self.total
+
+    def _project(self, p: np.ndarray) -> float:
+        """Arc length of the point of the path nearest p among the segments from the progress
+        to a lookahead and a bit beyond (not the whole path: a path that comes back near
+        itself must not pull the progress forward or back)."""
+        k0 = max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1)
+        k1 = int(np.searchsorted(self.cum, self.s + 2 * self.cfg.lookahead + 0.1, side="right"))
+        k1 = min(max(k1, k0 + 1), len(self.seg_len))
+        a, length = self.xy[k0:k1], self.seg_len[k0:k1]
+        d = self.xy[k0 + 1 : k1 + 1] - a
+        u = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(length**2, 1e-18), 0.0, 1.0)
+        dist = np.linalg.norm(a + d * u[:, None] - p, axis=1)
+        k = int(np.argmin(dist))
+        return float(self.cum[k0 + k] + u[k] * length[k])
+
+    def _point_at(self, s: float) -> np.ndarray:
+        if s >= self.total:  # past the end: on the straight line on through the goal
+            return self.end + self.end_dir * (s - self.total)
+        k = min(int(np.searchsorted(self.cum, s, side="right")) - 1, len(self.seg_len) - 1)
+        u = (s - self.cum[k]) / max(self.seg_len[k], 1e-18)
+        return self.xy[k] + (self.xy[k + 1] - self.xy[k]) * u
+
+    def update(self, pos) -> tuple[Outcome, str] | None:
+        p = np.asarray(pos[:2], dtype=float)
+        off = float(np.linalg.norm(p - self.end))
+        if off < self.cfg.r_end:
+            return "success", "reached the goal"
+        s = max(self.s, self._project(p))
+        self.advanced, self.s = False, s
+        self.gap = self.total - s
+        past = float(np.dot(p - self.end, self.end_dir))
+        if s >= self.total and past > self.cfg.r_end:
+            return "missed", (
+                f"passed the goal {off:.2f} m from it (success is within {self.cfg.r_end:g} m) "
+                f"at ({pos[0]:.2f}, {pos[1]:.2f})"
+            )
+        return None
+
+    def where(self) -> str:
+        return f"{self.s:.2f} m along the {self.total:.2f} m path"
+
+    def speeds(self, pos, quat, omega_max: float) -> tuple[float, float]:
+        cfg = self.cfg
+        target = self._point_at(self.s + cfg.lookahead)
+        theta = heading_error(pos, quat, target)
+        reach = max(math.dist(pos[:2], target), 1e-6)
+        # The arc through the target (pure pursuit); a target behind asks for the tightest turn.
+        curvature = 2 * math.sin(theta) / reach if abs(theta) < math.pi / 2 else math.inf
+        ratio = math.exp(min(abs(curvature) / cfg.turn_slope, math.log(cfg.max_ratio)))
+        fast = min(cfg.omega0 * ratio, omega_max)
+        return (cfg.omega0, fast) if theta > 0 else (fast, cfg.omega0)

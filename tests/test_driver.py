@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -70,3 +73,27 @@ def test_roach_walks_forward_on_flat_ground_and_turns_toward_the_faster_side():
 def test_drive_config_defaults_are_the_reports():
     cfg = DriverConfig()
     assert cfg.r_end == 0.05 and cfg.time_limit == 60.0
+
+
+REFERENCE_DRIVES = Path(__file__).parent / "data" / "reference_drives.json"
+
+
+@pytest.mark.parametrize("k", [0, 1])
+def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
+    """Two STRIDE paths on kinect_bridge driven by algorithms 1-2 (one success, one that gets
+    stuck circling a waypoint), recorded before the tracking driver existed."""
+    import dataclasses
+
+    from experiments._trial import drive
+    from scenes import build_world, load_scene
+
+    rec = json.loads(REFERENCE_DRIVES.read_text())["drives"][k]
+    world = build_world(load_scene(rec["scene"]))
+    scene = world.scene
+    world = dataclasses.replace(
+        world, scene=dataclasses.replace(scene, driver=dataclasses.replace(scene.driver, kind="reference"))
+    )
+    result = drive(world, np.array(rec["path"]))
+    assert (result.outcome, result.reason) == (rec["outcome"], rec["reason"])
+    assert result.drive_time == rec["drive_time"] and result.energy == rec["energy"]
+    assert [list(p) for p in result.trajectory[-3:]] == rec["trajectory_tail"]
