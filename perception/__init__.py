@@ -30,3 +30,7 @@ from ._synthetic import NoiseModel as NoiseModel
 from ._synthetic import look_at as look_at
 from ._synthetic import render_depth as render_depth
 from ._synthetic import save_depth as save_depth
+from ._yaml import MAX_YAML_BYTES as MAX_YAML_BYTES
+from ._yaml import load_yaml as load_yaml
+from ._yaml import load_yaml_documents as load_yaml_documents
+from ._yaml import short_repr as short_repr

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._errors import CaptureError
+from ._yaml import load_yaml_documents, short_repr
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -97,6 +98,11 @@ CALIBRATION_FORMATS = (
     "ROS CameraInfo YAML (camera_calibration's camera_matrix, or a message's width, height, K/k)"
 )
 """What a calibration file may be, for messages."""
+MAX_CALIBRATION_BYTES = 1024**2
+"""Largest calibration file read [bytes]; the biggest real one (a ROS CameraInfo dump) is a
+few kilobytes."""
+MAX_IMAGE_SIDE = 100_000
+"""Widest or tallest image any intrinsics may describe [px]: no depth camera comes near."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -146,22 +152,49 @@ def load_calibration(
     if name in PRESETS:
         return Calibration(PRESETS[name], None, PRESET_DEPTH_SCALES.get(name))
     path = Path(spec)
-    if not path.is_file():
+    try:
+        exists = path.exists()
+    except (OSError, ValueError):  # a name too long, or with a NUL byte
+        exists = False
+    if not exists:
         raise CaptureError(
-            f"intrinsics {name!r}: no such file, and not a preset; accepted: a preset "
+            f"intrinsics {short_repr(name)}: no such file, and not a preset; accepted: a preset "
             f"({', '.join(PRESETS)}) or a calibration file: {CALIBRATION_FORMATS}"
         )
-    text = path.read_text(errors="replace")
+    if not path.is_file():
+        raise CaptureError(f"{path}: not a calibration file (a folder, pipe or device)")
+    try:
+        size_bytes = path.stat().st_size
+        if size_bytes > MAX_CALIBRATION_BYTES:
+            raise CaptureError(
+                f"{path}: a calibration file of {size_bytes} bytes; at most "
+                f"{MAX_CALIBRATION_BYTES // 1024} KiB are read: {CALIBRATION_FORMATS}"
+            )
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise CaptureError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    return parse_calibration(text, path, size)
+
+
+def parse_calibration(text: str, path: Path, size: tuple[int, int] | None = None) -> Calibration:
+    """A calibration file's text -> what it says (see load_calibration); path names the file
+    in messages and its suffix picks the format with the text's first characters. Any text
+    gives a Calibration or a CaptureError."""
     suffix = path.suffix.lower()
+    if "\0" in text:
+        raise CaptureError(
+            f"{path}: not a calibration file (binary content): {CALIBRATION_FORMATS}"
+        )
     if suffix == ".xml" or text.lstrip().startswith("<"):
-        return Calibration(_from_pcl_xml(path, text), None, xml_depth_scale(path))
+        return Calibration(_from_pcl_xml(path, text), None, xml_depth_scale(text))
     if suffix in (".yaml", ".yml") or text.lstrip().startswith("%YAML"):
         return _from_yaml(path, text, size)
     try:
         data = json.loads(text)
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         raise CaptureError(
-            f"{path}: not JSON ({exc}); accepted calibration files: {CALIBRATION_FORMATS}"
+            f"{path}: not JSON ({str(exc)[:120] or 'nested too deep'}); accepted calibration "
+            f"files: {CALIBRATION_FORMATS}"
         ) from None
     intr = intrinsics_from_mapping(data, str(path), size)
     return Calibration(intr, None, _scale_of(data, path, ("depth_scale",)))
@@ -178,7 +211,7 @@ def intrinsics_from_mapping(
             f"calibration files: {CALIBRATION_FORMATS}"
         )
     if "intrinsic_matrix" in data:  # Open3D PinholeCameraIntrinsic, column-major
-        k = np.asarray(data["intrinsic_matrix"], dtype=float).reshape(3, 3).T
+        k = _matrix(where, "intrinsic_matrix", data["intrinsic_matrix"], ((3, 3),)).T
         data = {**data, "fx": k[0, 0], "fy": k[1, 1], "cx": k[0, 2], "cy": k[1, 2]}
     if size is not None:
         data = {"width": size[0], "height": size[1], **data}
@@ -188,16 +221,25 @@ def intrinsics_from_mapping(
             f"{where}: intrinsics lack {', '.join(missing)}; accepted calibration files: "
             f"{CALIBRATION_FORMATS}"
         )
+    for k in ("width", "height", "fx", "fy", "cx", "cy"):
+        if isinstance(data[k], bool) or not isinstance(data[k], int | float | str | np.number):
+            raise CaptureError(
+                f"{where}: intrinsics {k}: expected a number, got {short_repr(data[k])}"
+            )
     try:
         out = Intrinsics(
             width=int(data["width"]), height=int(data["height"]), fx=float(data["fx"]),
             fy=float(data["fy"]), cx=float(data["cx"]), cy=float(data["cy"]),
         )  # fmt: skip
-    except (TypeError, ValueError) as exc:
-        raise CaptureError(f"{where}: intrinsics must be numbers ({exc})") from None
-    if (min(out.width, out.height) < 1 or not min(out.fx, out.fy) > 0
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise CaptureError(f"{where}: intrinsics must be numbers ({str(exc)[:120]})") from None
+    if (not 1 <= min(out.width, out.height) <= max(out.width, out.height) <= MAX_IMAGE_SIDE
+            or not min(out.fx, out.fy) > 0
             or not np.isfinite([out.fx, out.fy, out.cx, out.cy]).all()):  # fmt: skip
-        raise CaptureError(f"{where}: intrinsics need width, height >= 1 and fx, fy > 0: {out}")
+        raise CaptureError(
+            f"{where}: intrinsics need width and height of 1-{MAX_IMAGE_SIDE} px and finite "
+            f"fx, fy > 0: {out}"
+        )
     return out
 
 
@@ -210,29 +252,27 @@ _FLAT_PREFIXES = ("Camera.", "Camera1.")  # ORB-SLAM settings (e.g. its TUM1.yam
 
 def _yaml_mapping(path: Path, text: str):
     """The first document of a (possibly OpenCV-flavoured) YAML file."""
-    import yaml
-
     lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("%YAML")]
-    try:  # a `rostopic echo` dump may hold many messages: the first one is enough
-        return next((d for d in yaml.safe_load_all(_OPENCV_TAG.sub("", "\n".join(lines)))
-                     if d is not None), None)  # fmt: skip
-    except yaml.YAMLError as exc:
-        raise CaptureError(f"{path}: not valid YAML ({exc})") from None
+    # A `rostopic echo` dump may hold many messages: the first one is enough.
+    documents = load_yaml_documents(_OPENCV_TAG.sub("", "\n".join(lines)), str(path), CaptureError)
+    return next((d for d in documents if d is not None), None)
 
 
 def is_calibration_yaml(path: Path) -> bool:
     """Whether a YAML file beside a depth image is a camera calibration (and not, say, a scene);
     a file that does not parse counts, so that its error is shown."""
     try:
-        data = _yaml_mapping(path, path.read_text(errors="replace"))
-    except CaptureError:
+        if path.stat().st_size > MAX_CALIBRATION_BYTES:
+            return True  # so that load_calibration says why it is refused
+        data = _yaml_mapping(path, path.read_bytes().decode("utf-8", errors="replace"))
+    except (CaptureError, OSError):
         return True
     return isinstance(data, dict) and any(
         k in data for k in (*_MATRIX_KEYS, "fx", "intrinsic_matrix", "Camera.fx", "Camera1.fx")
     )
 
 
-def _matrix(path: Path, key: str, value, shapes: tuple[tuple[int, int], ...]) -> np.ndarray:
+def _matrix(path, key: str, value, shapes: tuple[tuple[int, int], ...]) -> np.ndarray:
     """{rows, cols, data} (OpenCV, camera_calibration) or a list of numbers -> a matrix of one
     of the shapes."""
     rows = cols = None
@@ -240,7 +280,7 @@ def _matrix(path: Path, key: str, value, shapes: tuple[tuple[int, int], ...]) ->
         rows, cols, value = value.get("rows"), value.get("cols"), value.get("data")
     try:
         a = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError, RecursionError):
         a = np.zeros(0)
     want = [s for s in shapes if s[0] * s[1] == a.size and rows in (None, s[0])
             and cols in (None, s[1])]  # fmt: skip
@@ -248,7 +288,7 @@ def _matrix(path: Path, key: str, value, shapes: tuple[tuple[int, int], ...]) ->
         shown = " or ".join(f"{r}x{c}" for r, c in shapes)
         raise CaptureError(
             f"{path}: {key}: expected a {shown} matrix ({{rows, cols, data}} or a list of "
-            f"numbers, row by row), got {repr(value)[:80]}"
+            f"numbers, row by row), got {short_repr(value)}"
         )
     return a.reshape(want[0])
 
@@ -258,8 +298,11 @@ def _scale_of(data: dict, path: Path, keys: tuple[str, ...]) -> float | None:
     for k in keys:
         if data.get(k) is not None:
             v = data[k]
-            if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0:
-                raise CaptureError(f"{path}: {k}: expected units per metre > 0, got {v!r}")
+            if (isinstance(v, bool) or not isinstance(v, int | float)
+                    or not 0 < v < float("inf")):  # fmt: skip
+                raise CaptureError(
+                    f"{path}: {k}: expected units per metre > 0, got {short_repr(v)}"
+                )
             return float(v)
     return None
 
@@ -333,17 +376,24 @@ def _from_pcl_xml(path: Path, text: str) -> Intrinsics:
         vals = {k: float(get[tag]) for k, tag in keys.items()}
     except (KeyError, TypeError, ValueError):
         raise CaptureError(f"{path}: <depth> needs {', '.join(keys.values())}") from None
+    if not (np.isfinite(list(vals.values())).all()
+            and 0 < min(vals["cx"], vals["cy"]) < MAX_IMAGE_SIDE / 2):  # fmt: skip
+        raise CaptureError(
+            f"{path}: <depth>: expected finite numbers and a principal point inside the image, "
+            f"got {', '.join(f'{k} {v:g}' for k, v in vals.items())}"
+        )
     # PCL's grabber files carry no image size: the principal point is at the centre.
-    return Intrinsics(
-        width=round(2 * vals["cx"]), height=round(2 * vals["cy"]), **vals
-    )  # fmt: skip
+    size = {"width": max(round(2 * vals["cx"]), 1), "height": max(round(2 * vals["cy"]), 1)}
+    return intrinsics_from_mapping({**size, **vals}, str(path))
 
 
-def xml_depth_scale(path: Path) -> float | None:
-    """Depth units per metre from PCL's <z_multiplication_factor> (metres per unit), if any."""
+def xml_depth_scale(text: str) -> float | None:
+    """Depth units per metre from a PCL grabber XML's <z_multiplication_factor> (metres per
+    unit), if it has a usable one."""
     try:
-        root = ET.fromstring(f"<root>{path.read_text().split('?>', 1)[-1]}</root>")
+        root = ET.fromstring(f"<root>{text.split('?>', 1)[-1]}</root>")
         z = float(root.find("depth").find("z_multiplication_factor").text)
-    except (ET.ParseError, AttributeError, TypeError, ValueError, OSError):
+    except (ET.ParseError, AttributeError, TypeError, ValueError):
         return None
-    return 1.0 / z if z > 0 else None
+    scale = 1.0 / z if z > 0 else None
+    return scale if scale is not None and np.isfinite(scale) else None

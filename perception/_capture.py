@@ -1,18 +1,26 @@
 """Captures: what a depth camera saw, read from the files people bring.
 
-Point clouds: PCL's .pcd (ascii, binary, binary_compressed; organized or not, via pypcd4),
-.ply (Open3D), .xyz/.pts (text), .npy ((N, 3) or organized (H, W, 3)). Depth images: 16-bit
+Point clouds: PCL's .pcd (ascii, binary, binary_compressed; organized or not), .ply (ascii
+or binary), .xyz/.pts (text), .npy ((N, 3) or organized (H, W, 3)). Depth images: 16-bit
 PNG or netpbm PGM/PPM with a depth scale (units per metre) and pinhole intrinsics (a preset, a
 calibration file, or numbers; see _camera.load_calibration). ROS bags (ROS 1 .bag, ROS 2
 .db3/.mcap) with sensor_msgs/PointCloud2 or a depth sensor_msgs/Image + CameraInfo, read with
-`rosbags` (no ROS installation). Everything comes out as points in the camera frame, metres
-(x right, y down, z forward for depth images).
+`rosbags` (no ROS installation); a ROS 2 bag may also be given as its folder. Everything
+comes out as points in the camera frame, metres (x right, y down, z forward for depth images).
+
+Every reader checks its header against the file's real size before allocating anything
+(_headers), and refuses more than MAX_CLOUD_POINTS points or MAX_DEPTH_PIXELS pixels.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import io
+import os
+import re
 import struct
+import sys
+import tempfile
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -31,15 +39,29 @@ from ._camera import (
     load_calibration,
 )
 from ._errors import CaptureError
+from ._headers import (
+    HEAD_BYTES,
+    MAX_CLOUD_POINTS,
+    PcdHeader,
+    PlyHeader,
+    check_pixels,
+    parse_netpbm_header,
+    parse_pcd_header,
+    parse_ply_header,
+    parse_png_header,
+)
+from ._yaml import short_repr
 
 CLOUD_SUFFIXES = (".pcd", ".ply", ".xyz", ".pts", ".npy")
 DEPTH_SUFFIXES = (".png", ".pgm", ".ppm")
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 CAPTURE_SUFFIXES = CLOUD_SUFFIXES + DEPTH_SUFFIXES + BAG_SUFFIXES
 SIDECAR_SUFFIXES = (".json", ".xml", ".yaml", ".yml")
-MAX_DEPTH_PIXELS = 100_000_000
-"""Largest depth image read [pixels], checked on the header before decoding: a small file can
-claim (PNG's compression, a netpbm header that lies) an image that would fill the memory."""
+MAX_TEXT_BYTES = 4 * 1024**3
+"""Largest text point list read [bytes] (about 100 million lines of x y z)."""
+MAX_BAG_CHUNK_BYTES = 1024**3
+"""Largest decompressed chunk of a ROS 1 bag [bytes]; a bag's chunk holds a few seconds of
+messages, and a bz2 or lz4 block can otherwise decompress to any size."""
 Units = Literal["m", "mm"]
 IntrinsicsSpec = str | Path | Mapping | PinholeNumbers
 
@@ -87,7 +109,8 @@ def load_capture(
     topic: str | None = None,
     units: Units | None = None,
 ) -> Capture:
-    """Read a capture file; CaptureError names the file and what is wrong with it.
+    """Read a capture file (or a ROS 2 bag's folder); CaptureError names the file and what is
+    wrong with it: every reader checks its header against the file's size before allocating.
 
     intrinsics / depth_scale: for depth images (.png, .pgm, .ppm). intrinsics: a preset name, a
     calibration file, or numbers {fx, fy, cx, cy[, width, height]}; default: a calibration file
@@ -99,21 +122,29 @@ def load_capture(
     can only be millimetres (see check_capture).
     """
     path = Path(path)
-    if not path.exists():
-        raise CaptureError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix not in CAPTURE_SUFFIXES:
-        raise CaptureError(
-            f"{path}: unknown capture type {suffix!r}; accepted: {', '.join(CAPTURE_SUFFIXES)}"
-        )
-    if suffix in DEPTH_SUFFIXES:
-        cap = _load_depth_image(path, intrinsics, depth_scale)
-    elif suffix in BAG_SUFFIXES:
-        cap = _load_bag(path, topic, depth_scale)
-    else:
-        cap = {".pcd": _load_pcd, ".ply": _load_ply, ".npy": _load_npy}.get(suffix, _load_text)(
-            path
-        )
+    try:  # a folder we may not enter: is_dir raises PermissionError
+        is_bag = suffix in BAG_SUFFIXES or (path.is_dir() and (path / "metadata.yaml").is_file())
+        if topic is not None and not is_bag:
+            raise CaptureError(
+                f"{path}: a topic ({short_repr(topic)}; --topic, `topic:` in a scene) was given, "
+                f"but only a bag ({', '.join(BAG_SUFFIXES)}, or a ROS 2 bag's folder) has topics"
+            )
+        if is_bag and path.is_dir():
+            cap = _load_bag(path, topic, depth_scale)
+        else:
+            _check_file(path)
+            if suffix in DEPTH_SUFFIXES:
+                cap = _load_depth_image(path, intrinsics, depth_scale)
+            elif is_bag:
+                cap = _load_bag(path, topic, depth_scale)
+            else:
+                read = {".pcd": _load_pcd, ".ply": _load_ply, ".npy": _load_npy}
+                cap = read.get(suffix, _load_text)(path)
+    except OSError as exc:  # unreadable (permissions, an I/O error): not a traceback
+        raise CaptureError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    except MemoryError:
+        raise CaptureError(f"{path}: too large to read into this machine's memory") from None
     if units == "mm":
         cap = dataclasses.replace(
             cap, points=cap.points * 1e-3,
@@ -178,6 +209,29 @@ def depth_to_points(depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
 # -- formats --------------------------------------------------------------------------------
 
 
+def _check_file(path: Path) -> None:
+    """A capture is a regular, non-empty file of a known type (a folder, FIFO or device would
+    block a reader or read forever)."""
+    if not path.exists():
+        raise CaptureError(f"{path}: no such file")
+    if path.is_dir():
+        raise CaptureError(
+            f"{path}: is a folder; expected a capture file ({', '.join(CAPTURE_SUFFIXES)}) or a "
+            f"ROS 2 bag's folder (with a metadata.yaml)"
+        )
+    if not path.is_file():
+        raise CaptureError(
+            f"{path}: not a regular file (a pipe or device); expected a capture file"
+        )
+    suffix = path.suffix.lower()
+    if suffix not in CAPTURE_SUFFIXES:
+        raise CaptureError(
+            f"{path}: unknown capture type {suffix!r}; accepted: {', '.join(CAPTURE_SUFFIXES)}"
+        )
+    if path.stat().st_size == 0:
+        raise CaptureError(f"{path}: the file is empty (0 bytes): the capture has no points")
+
+
 def _head(path: Path, n: int) -> bytes:
     """The first n bytes of a file (without reading a large capture whole)."""
     with open(path, "rb") as f:
@@ -191,68 +245,230 @@ def _sniff(path: Path, magic: tuple[bytes, ...], what: str) -> None:
 
 
 def _load_pcd(path: Path) -> Capture:
-    from pypcd4 import PointCloud
-
-    head = _head(path, 256)
-    if not (head.startswith(b"#") or head.startswith(b"VERSION") or head.startswith(b"FIELDS")):
-        raise CaptureError(f"{path}: not a PCD file (no PCD header; starts with {head[:16]!r})")
-    try:
-        pc = PointCloud.from_path(path)
-    except Exception as exc:  # noqa: BLE001 - pypcd4 raises many kinds on a damaged file
-        raise CaptureError(f"{path}: cannot read this PCD file: {exc}") from None
-    missing = [f for f in "xyz" if f not in pc.fields]
-    if missing:
-        raise CaptureError(f"{path}: the PCD has fields {pc.fields}; it needs x, y and z")
-    pts = np.asarray(pc.numpy(("x", "y", "z")), dtype=np.float64)
-    w, h = pc.metadata.width, pc.metadata.height
-    vp = pc.metadata.viewpoint
-    organized = h > 1 and w * h == len(pts)
+    """PCL's .pcd: the header is parsed and checked against the file's size first (pypcd4, which
+    reads these too, trusts its header: a truncated file came out short, a lying one empty)."""
+    h = parse_pcd_header(_head(path, HEAD_BYTES + 8), path.stat().st_size, str(path))
+    with open(path, "rb") as f:
+        f.seek(h.data_offset)
+        if h.data == "ascii":
+            pts = _pcd_ascii(path, f, h)
+        elif h.data == "binary":
+            data = f.read(h.points * h.point_step)
+            rows = np.frombuffer(data, dtype=_pcd_dtype(h), count=h.points)
+            pts = np.stack([rows[k].astype(np.float64) for k in "xyz"], axis=1)
+        else:
+            pts = _pcd_compressed(path, f, h)
+    vp = h.viewpoint
+    organized = h.height > 1
     return Capture(
-        points=pts, shape=(h, w) if organized else None, source=str(path),
-        sensor_origin=(float(vp[0]), float(vp[1]), float(vp[2])),
+        points=pts, shape=(h.height, h.width) if organized else None, source=str(path),
+        sensor_origin=(vp[0], vp[1], vp[2]),
         frame="camera" if organized else None,  # organized: a camera's pixels, optical frame
     )  # fmt: skip
 
 
-def _load_ply(path: Path) -> Capture:
-    import open3d as o3d
+def _pcd_dtype(h: PcdHeader) -> np.dtype:
+    """One binary point's x, y, z within its point_step bytes."""
+    return np.dtype({"names": list("xyz"), "formats": [h.field(k).dtype for k in "xyz"],
+                     "offsets": [h.byte_offset(k) for k in "xyz"], "itemsize": h.point_step})  # fmt: skip
 
-    _sniff(path, (b"ply",), "PLY")
-    cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False)
-    pts = np.asarray(cloud.points, dtype=np.float64)
+
+def _pcd_compressed(path: Path, f, h: PcdHeader) -> np.ndarray:
+    """binary_compressed: the 8-byte sizes, then LZF of the fields one after another (all
+    points' x, then all y, ...). lzf is pypcd4's own dependency."""
+    import lzf
+
+    f.seek(8, os.SEEK_CUR)
+    size = h.points * h.point_step
+    try:  # the sizes were checked: this allocates at most `size`, which the file can hold
+        raw = lzf.decompress(f.read(h.compressed_size), size)
+    except ValueError:
+        raw = None
+    if raw is None or len(raw) != size:
+        raise CaptureError(
+            f"{path}: the PCD's compressed data is damaged: it does not decode (LZF) to the "
+            f"{size} bytes its header describes"
+        )
+    return np.stack([np.frombuffer(raw, dtype=h.field(k).dtype, count=h.points,
+                                   offset=h.points * h.byte_offset(k)).astype(np.float64)
+                     for k in "xyz"], axis=1)  # fmt: skip
+
+
+def _pcd_ascii(path: Path, f, h: PcdHeader) -> np.ndarray:
+    values = _read_rows(path, f, h.points, "PCD ascii data")
+    if values.shape != (h.points, h.values_per_point):
+        raise CaptureError(
+            f"{path}: the PCD header says {h.points} points of {h.values_per_point} values "
+            f"(FIELDS {' '.join(x.name for x in h.fields)[:60]}), the ascii data has "
+            f"{values.shape[0]} rows of {values.shape[1]} values"
+        )
+    return values[:, [h.column(k) for k in "xyz"]]
+
+
+def _read_rows(path: Path, f, rows: int, what: str, usecols=None) -> np.ndarray:
+    """Up to `rows` whitespace-separated rows of numbers from a binary file object, as (R, C)
+    float64; CaptureError for a row that is not numbers or has another number of them."""
+    try:
+        with warnings.catch_warnings():  # an empty input warns; the caller counts the rows
+            warnings.simplefilter("ignore", UserWarning)
+            out = np.loadtxt(io.TextIOWrapper(f, encoding="ascii"), dtype=np.float64, ndmin=2,
+                             max_rows=rows, comments=None, usecols=usecols)  # fmt: skip
+    except UnicodeDecodeError:
+        raise CaptureError(f"{path}: the {what} holds non-text bytes") from None
+    except ValueError as exc:
+        raise CaptureError(f"{path}: bad {what}: {str(exc)[:200]}") from None
+    return out
+
+
+def _load_ply(path: Path) -> Capture:
+    """A .ply's vertices. The header is parsed and checked against the file's size first; the
+    usual layouts (vertices of scalar properties, after elements of fixed size or in ascii) are
+    read here with numpy, others by Open3D with its messages captured (it prints to the
+    terminal and returns an empty cloud when it fails)."""
+    h = parse_ply_header(_head(path, HEAD_BYTES), path.stat().st_size, str(path))
+    before = h.elements[: h.elements.index(h.vertex)]
+    vertex = h.vertex
+    if vertex.fixed and h.format == "ascii":
+        with open(path, "rb") as f:
+            f.seek(h.data_offset)
+            for _ in range(sum(e.count for e in before)):  # ascii: one line per entry
+                f.readline()
+            names = [p.name for p in vertex.properties]
+            pts = _read_rows(path, f, vertex.count, "PLY ascii vertex data")
+            if pts.shape != (vertex.count, len(names)):
+                raise CaptureError(
+                    f"{path}: the PLY header says {vertex.count} vertices of {len(names)} "
+                    f"properties, the ascii data has {pts.shape[0]} rows of {pts.shape[1]} values"
+                )
+            pts = pts[:, [names.index(k) for k in "xyz"]]
+    elif vertex.fixed and all(e.fixed for e in before):
+        dtype = np.dtype([(p.name, h.endian + p.type) for p in vertex.properties])
+        with open(path, "rb") as f:
+            f.seek(h.data_offset + sum(e.count * e.min_bytes for e in before))
+            rows = np.frombuffer(f.read(vertex.count * dtype.itemsize), dtype=dtype)
+        pts = np.stack([rows[k].astype(np.float64) for k in "xyz"], axis=1)
+    else:
+        pts = _ply_by_open3d(path, h)
     return Capture(points=pts, shape=None, source=str(path))
 
 
+def _ply_by_open3d(path: Path, h: PlyHeader) -> np.ndarray:
+    import open3d as o3d
+
+    with _captured_output() as said:
+        cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False)
+    pts = np.asarray(cloud.points, dtype=np.float64)
+    told = " ".join(re.sub(r"\x1b\[[0-9;]*m|\[Open3D \w+\]", "", said.getvalue()).split())
+    # When RPly fails part way Open3D still returns the vertex count, of uninitialised values.
+    if len(pts) != h.vertex.count or re.search(r"fail|error", told, re.IGNORECASE):
+        raise CaptureError(
+            f"{path}: the PLY could not be read (Open3D: {told[:300] or 'no message'}; the header says "
+            f"{', '.join(f'{e.count} {e.name}' for e in h.elements)[:120]})"
+        )
+    return pts
+
+
+class _captured_output:  # noqa: N801 - used as a context manager, like contextlib's
+    """Collect what a C library prints on the process's stdout and stderr (file descriptors 1
+    and 2, which Python's sys.stdout cannot redirect) into .getvalue()."""
+
+    def __enter__(self) -> _captured_output:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self._file = tempfile.TemporaryFile()
+        self._saved = [os.dup(1), os.dup(2)]
+        for fd in (1, 2):
+            os.dup2(self._file.fileno(), fd)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for fd, saved in zip((1, 2), self._saved, strict=True):
+            os.dup2(saved, fd)
+            os.close(saved)
+        self._file.seek(0)
+        self._text = self._file.read(20_000).decode("utf-8", "replace")
+        self._file.close()
+
+    def getvalue(self) -> str:
+        return self._text
+
+
 def _load_text(path: Path) -> Capture:
+    """x y z [...] per line; # comments; a .pts may start with its point count."""
+    size = path.stat().st_size
+    if size > MAX_TEXT_BYTES:
+        raise CaptureError(
+            f"{path}: a text point list of {size / 1e9:.1f} GB; at most "
+            f"{MAX_TEXT_BYTES / 1e9:.1f} GB are read (use a binary .pcd or .ply)"
+        )
+    head = _head(path, 65536)
+    if b"\0" in head:
+        raise CaptureError(f"{path}: not a text point list (binary content)")
     try:
-        lines = path.read_text().splitlines()
-    except UnicodeDecodeError:
-        raise CaptureError(f"{path}: not a text point list (binary content)") from None
-    rows = [ln.split() for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
-    if rows and len(rows[0]) == 1:  # .pts files may start with the point count
-        rows = rows[1:]
-    try:
-        pts = np.array([[float(v) for v in r[:3]] for r in rows if len(r) >= 3], dtype=np.float64)
-    except ValueError as exc:
-        raise CaptureError(f"{path}: expected lines of 'x y z [...]' numbers ({exc})") from None
-    if len(rows) and len(pts) != len(rows):
-        raise CaptureError(f"{path}: every line needs at least x y z")
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not just a character cut at the end of the sample
+            raise CaptureError(f"{path}: not a text point list (binary content)") from None
+    skip = 0
+    for line in head.splitlines(keepends=True):  # .pts: a first line of one number is the count
+        if line.strip() and not line.lstrip().startswith(b"#"):
+            if len(line.split()) == 1:
+                skip += len(line)
+            break
+        skip += len(line)
+    with open(path, "rb") as f:
+        f.seek(skip if skip < len(head) else 0)
+        try:
+            with warnings.catch_warnings():  # an empty list warns; it is refused below
+                warnings.simplefilter("ignore", UserWarning)
+                pts = np.loadtxt(io.TextIOWrapper(f, encoding="utf-8"), dtype=np.float64,
+                                 ndmin=2, comments="#", usecols=(0, 1, 2),
+                                 max_rows=MAX_CLOUD_POINTS + 1)  # fmt: skip
+        except UnicodeDecodeError:
+            raise CaptureError(f"{path}: not a text point list (binary content)") from None
+        except ValueError as exc:
+            raise CaptureError(
+                f"{path}: expected lines of 'x y z [...]' numbers, every line at least x y z "
+                f"({str(exc)[:200]})"
+            ) from None
+    if len(pts) > MAX_CLOUD_POINTS:
+        raise CaptureError(f"{path}: more than {MAX_CLOUD_POINTS} points; clouds of at most "
+                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
     return Capture(points=pts.reshape(-1, 3), shape=None, source=str(path))
 
 
 def _load_npy(path: Path) -> Capture:
+    """A NumPy array of numbers, (N, >= 3) or organized (H, W, >= 3); its header is read and
+    checked against the file's size before anything is allocated."""
     _sniff(path, (b"\x93NUMPY",), "NumPy .npy")
-    try:
-        a = np.load(path, allow_pickle=False)
-    except ValueError as exc:
-        raise CaptureError(f"{path}: cannot read this .npy ({exc})") from None
-    if a.ndim == 3 and a.shape[2] >= 3:
-        h, w = a.shape[:2]
-        return Capture(points=a[..., :3].reshape(-1, 3).astype(np.float64), shape=(h, w),
-                       source=str(path))  # fmt: skip
-    if a.ndim == 2 and a.shape[1] >= 3:
-        return Capture(points=a[:, :3].astype(np.float64), shape=None, source=str(path))
-    raise CaptureError(f"{path}: expected an (N, 3) or (H, W, 3) array, got shape {a.shape}")
+    fmt = np.lib.format
+    with open(path, "rb") as f:
+        try:
+            version = fmt.read_magic(f)
+            read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}
+            if version not in read:
+                raise ValueError(f"format version {version[0]}.{version[1]} (1.0 and 2.0 are read)")
+            shape, _, dtype = read[version](f)
+        except ValueError as exc:
+            raise CaptureError(f"{path}: cannot read this .npy ({str(exc)[:200]})") from None
+        offset = f.tell()
+    if dtype.names is not None or dtype.kind not in "iuf":
+        raise CaptureError(f"{path}: an array of {dtype}; expected numbers (integers or floats)")
+    if not ((len(shape) == 3 and shape[2] >= 3) or (len(shape) == 2 and shape[1] >= 3)):
+        raise CaptureError(f"{path}: expected an (N, 3) or (H, W, 3) array, got shape {shape}")
+    points = int(np.prod(shape[:-1]))
+    if points > MAX_CLOUD_POINTS:
+        raise CaptureError(f"{path}: shape {shape} is {points} points; clouds of at most "
+                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
+    need = int(np.prod(shape)) * dtype.itemsize
+    if path.stat().st_size - offset < need:
+        raise CaptureError(
+            f"{path}: the .npy header says shape {shape} of {dtype} ({need} bytes), but "
+            f"{path.stat().st_size - offset} bytes follow it: the file is truncated"
+        )
+    a = np.load(path, mmap_mode="r", allow_pickle=False)
+    pts = np.array(a[..., :3], dtype=np.float64).reshape(-1, 3)
+    return Capture(points=pts, shape=shape[:2] if len(shape) == 3 else None, source=str(path))
 
 
 def _sidecars(path: Path) -> list[Path]:
@@ -313,26 +529,12 @@ def _load_depth_image(path: Path, intrinsics, depth_scale: float | None) -> Capt
                    base_from_camera=calib.base_from_camera, depth_scale=depth_scale)  # fmt: skip
 
 
-def _check_pixels(path: Path, width: int, height: int) -> None:
-    if width * height > MAX_DEPTH_PIXELS:
-        raise CaptureError(
-            f"{path}: the header says {width}x{height} pixels ({width * height / 1e6:.0f} "
-            f"megapixels); depth images of at most {MAX_DEPTH_PIXELS / 1e6:.0f} megapixels are "
-            f"read (a larger one is damaged, or crafted to fill the memory)"
-        )
-
-
 def _read_depth_png(path: Path) -> np.ndarray:
-    """A 16-bit greyscale PNG -> (H, W) raw depth units. The size is checked on the IHDR chunk
-    (always the first) before Pillow decodes anything."""
+    """A 16-bit greyscale PNG -> (H, W) raw depth units. The size, bit depth and colour type
+    are checked on the IHDR chunk (always the first) before Pillow decodes anything."""
     from PIL import Image
 
-    _sniff(path, (b"\x89PNG\r\n\x1a\n",), "PNG")
-    head = _head(path, 24)
-    if head[12:16] != b"IHDR":
-        raise CaptureError(f"{path}: a damaged PNG (its first chunk is not IHDR)")
-    width, height = struct.unpack(">II", head[16:24])
-    _check_pixels(path, width, height)
+    parse_png_header(_head(path, 26), str(path))
     try:
         with warnings.catch_warnings():  # the size is checked above, against our own limit
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
@@ -343,12 +545,8 @@ def _read_depth_png(path: Path) -> np.ndarray:
                         f"{im.mode} - an 8-bit or colour image has no depth in it"
                     )
                 return np.asarray(im)
-    except (OSError, SyntaxError, Image.DecompressionBombError) as exc:
-        raise CaptureError(f"{path}: cannot decode this PNG: {exc}") from None
-
-
-_NETPBM = {b"P2": (1, False), b"P5": (1, True), b"P3": (3, False), b"P6": (3, True)}
-"""Magic -> (channels, binary)."""
+    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
+        raise CaptureError(f"{path}: cannot decode this PNG: {str(exc)[:200]}") from None
 
 
 def read_netpbm_depth(path: Path) -> np.ndarray:
@@ -356,30 +554,14 @@ def read_netpbm_depth(path: Path) -> np.ndarray:
     (P6, P3), of which only the first channel is read (a colour pixmap has no depth; a depth
     tool that writes PPM repeats the depth in every channel). maxval > 255 means 16 bits per
     sample, big-endian (netpbm's rule); the samples are not rescaled by maxval. The header is
-    checked against the file's real size before anything is allocated. Pillow is not used: it
-    reads 16-bit PGM but not 16-bit PPM, and trusts the header's size."""
-    head = _head(path, 4096)
-    if head[:2] not in _NETPBM:
-        raise CaptureError(
-            f"{path}: not a netpbm image (it starts with {head[:16]!r}; accepted: P5/P2 "
-            f"greymaps and P6/P3 pixmaps)"
-        )
-    channels, binary = _NETPBM[head[:2]]
-    width, height, maxval, pos = _netpbm_header(path, head)
-    samples = width * height * channels
-    available = path.stat().st_size - pos
-    # binary: 2 bytes per sample; ASCII: at least a digit and a separator per sample
-    needed = 2 * samples if binary else 2 * samples - 1
-    if available < needed:
-        raise CaptureError(
-            f"{path}: the netpbm header says {width}x{height}x{channels} 16-bit samples, which "
-            f"need {needed} bytes{'' if binary else ' or more'}, but {max(available, 0)} follow "
-            f"the header: the file is truncated or its header is wrong"
-        )
+    checked against the file's real size before anything is allocated (parse_netpbm_header).
+    Pillow is not used: it reads 16-bit PGM but not 16-bit PPM, and trusts the header's size."""
+    h = parse_netpbm_header(_head(path, 4096), path.stat().st_size, str(path))
+    samples = h.samples
     with open(path, "rb") as f:
-        f.seek(pos)
-        if binary:
-            data = np.frombuffer(f.read(needed), dtype=">u2")
+        f.seek(h.data_offset)
+        if h.binary:
+            data = np.frombuffer(f.read(2 * samples), dtype=">u2")
         else:
             words = f.read().split()
             if len(words) < samples or not all(w.isdigit() for w in words[:samples]):
@@ -387,51 +569,17 @@ def read_netpbm_depth(path: Path) -> np.ndarray:
                     f"{path}: the ASCII netpbm image needs {samples} decimal samples after the "
                     f"header, it has {len(words)} words (or some are not numbers)"
                 )
-            data = np.array(words[:samples], dtype=np.int64)
-    if data.max() > maxval:
-        raise CaptureError(f"{path}: a sample is {data.max()}, above the header's maxval {maxval}")
-    return data.reshape(height, width, channels)[..., 0].astype(np.uint16)
-
-
-def _netpbm_header(path: Path, head: bytes) -> tuple[int, int, int, int]:
-    """A netpbm file's first bytes -> (width, height, maxval, offset of the pixels), checked:
-    a 16-bit image within MAX_DEPTH_PIXELS."""
-    numbers, pos = [], 2
-    while len(numbers) < 3:  # width, height, maxval, between whitespace and # comments
-        while pos < len(head) and (head[pos : pos + 1].isspace() or head[pos] == ord("#")):
-            if head[pos] == ord("#"):
-                end = head.find(b"\n", pos)
-                pos = len(head) if end < 0 else end + 1
-            else:
-                pos += 1
-        start = pos
-        while pos < len(head) and head[pos : pos + 1].isdigit() and pos - start < 10:
-            pos += 1
-        if pos >= len(head):
-            raise CaptureError(
-                f"{path}: bad netpbm header: it ends (or its comments run past "
-                f"{len(head)} bytes) before width, height and maxval are all given"
-            )
-        if pos == start or not head[pos : pos + 1].isspace():
-            raise CaptureError(
-                f"{path}: bad netpbm header: expected width, height and maxval (decimal numbers "
-                f"between whitespace) after {head[:2].decode()}, found {head[start:start + 16]!r}"
-            )
-        numbers.append(int(head[start:pos]))
-    width, height, maxval = numbers
-    pos += 1  # the single whitespace character that ends the header
-    if min(width, height) < 1 or not 1 <= maxval <= 65535:
+            try:
+                data = np.array(words[:samples], dtype=np.int64)
+            except OverflowError:  # more digits than any 16-bit sample has
+                raise CaptureError(
+                    f"{path}: a sample is over {h.maxval}, the header's maxval"
+                ) from None
+    if data.max() > h.maxval:
         raise CaptureError(
-            f"{path}: bad netpbm header: width {width}, height {height}, maxval {maxval} "
-            f"(expected width, height >= 1 and maxval 1-65535)"
+            f"{path}: a sample is {data.max()}, above the header's maxval {h.maxval}"
         )
-    if maxval <= 255:
-        raise CaptureError(
-            f"{path}: an 8-bit netpbm image (maxval {maxval}) has no depth in it; a depth image "
-            f"has maxval > 255 (16 bits per sample)"
-        )
-    _check_pixels(path, width, height)
-    return width, height, maxval, pos
+    return data.reshape(h.height, h.width, h.channels)[..., 0].astype(np.uint16)
 
 
 STANDARD_DEPTH_SCALES: dict[float, str] = {
@@ -494,10 +642,32 @@ _PC2_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: 
 
 
 def pointcloud2_to_points(msg) -> tuple[np.ndarray, tuple[int, int] | None]:
-    """sensor_msgs/PointCloud2 -> ((N, 3) float64 points, (H, W) if organized)."""
+    """sensor_msgs/PointCloud2 -> ((N, 3) float64 points, (H, W) if organized). Its layout
+    (types, offsets, steps) is checked against the bytes it carries before they are read."""
     fields = {f.name: f for f in msg.fields}
     if not all(k in fields for k in "xyz"):
-        raise CaptureError(f"PointCloud2 has fields {list(fields)}; it needs x, y and z")
+        raise CaptureError(f"PointCloud2 has fields {list(fields)[:12]}; it needs x, y and z")
+    h, w, step, row = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
+    for k in "xyz":
+        f = fields[k]
+        if f.datatype not in _PC2_TYPES:
+            raise CaptureError(
+                f"PointCloud2 field {k}: datatype {f.datatype}; accepted: 1-8 (INT8 ... FLOAT64)"
+            )
+        if f.offset + int(_PC2_TYPES[f.datatype][1]) > step:
+            raise CaptureError(
+                f"PointCloud2 field {k}: offset {f.offset} runs past point_step {step}"
+            )
+    if h * w > MAX_CLOUD_POINTS:
+        raise CaptureError(f"PointCloud2 of {h}x{w} points; clouds of at most "
+                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
+    if h * w == 0:
+        raise CaptureError(f"PointCloud2 of {h}x{w} points: no points")
+    if row < w * step or len(msg.data) < h * row:
+        raise CaptureError(
+            f"PointCloud2 of {h}x{w} points of {step} bytes, rows of {row} bytes, carries "
+            f"{len(msg.data)} bytes: its row_step or data is too short"
+        )
     end = ">" if msg.is_bigendian else "<"
     dtype = np.dtype({
         "names": list("xyz"),
@@ -505,45 +675,199 @@ def pointcloud2_to_points(msg) -> tuple[np.ndarray, tuple[int, int] | None]:
         "offsets": [fields[k].offset for k in "xyz"],
         "itemsize": msg.point_step,
     })  # fmt: skip
-    h, w = msg.height, msg.width
-    raw = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(h, msg.row_step)
-    rows = raw[:, : w * msg.point_step].copy().view(dtype).reshape(-1)
+    raw = np.frombuffer(bytes(msg.data), dtype=np.uint8, count=h * row).reshape(h, row)
+    rows = raw[:, : w * step].copy().view(dtype).reshape(-1)
     pts = np.stack([rows[k].astype(np.float64) for k in "xyz"], axis=1)
     return pts, ((h, w) if h > 1 else None)
 
 
+BAG_MAGIC = {".bag": ("a ROS 1 bag", b"#ROSBAG V2.0\n"),
+             ".db3": ("a ROS 2 SQLite bag", b"SQLite format 3\0"),
+             ".mcap": ("an MCAP bag", b"\x89MCAP0\r\n")}  # fmt: skip
+"""Suffix -> what it is and what it starts with (ROS 1: format 2.0, the only one rosbags
+reads)."""
+
+
+MAX_BAG_METADATA_BYTES = 16 * 1024**2
+"""Largest ROS 2 metadata.yaml read [bytes]; a bag of a thousand topics has a few hundred kB."""
+
+
 def _load_bag(path: Path, topic: str | None, depth_scale: float | None) -> Capture:
+    """A bag file, or a ROS 2 bag's folder. The file's kind is checked on its first bytes, a
+    ROS 1 bag's records against the file's size (check_ros1_bag); whatever rosbags raises
+    on a damaged bag, while opening or reading a message, becomes a CaptureError."""
     from rosbags.highlevel import AnyReader
 
+    meta = path / "metadata.yaml"
+    if path.is_dir() and meta.stat().st_size > MAX_BAG_METADATA_BYTES:
+        raise CaptureError(
+            f"{meta}: {meta.stat().st_size} bytes; a ROS 2 bag's metadata.yaml of at most "
+            f"{MAX_BAG_METADATA_BYTES // 1024**2} MiB is read"
+        )
+    if path.is_file():
+        what, magic = BAG_MAGIC[path.suffix.lower()]
+        head = _head(path, 64)
+        if head.startswith(b"#ROSBAG V") and not head.startswith(magic):
+            raise CaptureError(
+                f"{path}: a ROS 1 bag of format {head[9:12].decode('latin-1')!r}; only format "
+                f"2.0 (ROS 1 since 2010) is read: convert it with `rosbag fix`"
+            )
+        if not head.startswith(magic):
+            raise CaptureError(
+                f"{path}: not {what} ({path.suffix.lower()}): it starts with {head[:16]!r}, "
+                f"{what} with {magic!r}"
+            )
+        if path.suffix.lower() == ".bag":
+            check_ros1_bag(path)
+    _bound_ros1_decompression()
     try:
         reader = AnyReader([path])
         reader.open()
+    except CaptureError as exc:  # the bounded decompressors know no file name
+        raise CaptureError(f"{path}: {exc}") from None
     except Exception as exc:  # noqa: BLE001 - rosbags raises its own error types per format
-        raise CaptureError(f"{path}: cannot open this bag: {exc}") from None
+        raise CaptureError(f"{path}: cannot open this bag: {_said(exc)}") from None
     try:
-        conns = reader.connections
-        types = {c.topic: c.msgtype for c in conns}
-        wanted = [c for c in conns if topic is None or c.topic == topic]
-        if topic is not None and not wanted:
-            raise CaptureError(f"{path}: no topic {topic!r}; it has {sorted(types)}")
-        clouds = [c for c in wanted if c.msgtype == "sensor_msgs/msg/PointCloud2"]
-        images = [c for c in wanted if c.msgtype == "sensor_msgs/msg/Image"]
-        if clouds:
-            _, _, raw = next(reader.messages(connections=clouds[:1]))
-            msg = reader.deserialize(raw, clouds[0].msgtype)
-            pts, shape = pointcloud2_to_points(msg)
-            cap = Capture(points=pts, shape=shape, source=f"{path} ({clouds[0].topic})",
-                          frame=_frame_of(msg.header.frame_id))  # fmt: skip
-            return _with_imu_gravity(reader, cap, msg.header.frame_id)
-        if images:
-            cap = _bag_depth_image(reader, path, images[0], depth_scale)
-            return _with_imu_gravity(reader, cap, None)
-        raise CaptureError(
-            f"{path}: no sensor_msgs/PointCloud2 or depth sensor_msgs/Image topic; topics: "
-            f"{', '.join(f'{t} ({m})' for t, m in sorted(types.items())) or 'none'}"
-        )
+        return _read_bag(reader, path, topic, depth_scale)
+    except CaptureError as exc:
+        if str(exc).startswith(str(path)):
+            raise
+        raise CaptureError(f"{path}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - a damaged message: rosbags, struct, numpy errors
+        raise CaptureError(f"{path}: a damaged bag: {_said(exc)}") from None
     finally:
         reader.close()
+
+
+def _said(exc: BaseException) -> str:
+    """An exception from a library, bounded, for a message."""
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:240]}"
+
+
+def check_ros1_bag(path: Path) -> None:
+    """Walk a ROS 1 bag's records (header length, header, data length, data) and refuse one
+    that runs past the end of the file, an unknown chunk compression, or a chunk larger than
+    MAX_BAG_CHUNK_BYTES: before rosbags reads (and allocates) what they claim. Only the small
+    record headers are read."""
+    size = path.stat().st_size
+    pos, n = 13, 0
+    with open(path, "rb") as f:
+        while pos < size:
+            f.seek(pos)
+            lengths = f.read(4)
+            hlen = struct.unpack("<I", lengths)[0] if len(lengths) == 4 else size
+            if pos + 8 + hlen > size or hlen > 16 * 1024**2:
+                raise CaptureError(
+                    f"{path}: record {n} of the bag, at byte {pos}, has a header of "
+                    f"{hlen} bytes, but the file ends at byte {size}: the bag is truncated"
+                )
+            fields = _ros1_fields(path, f.read(hlen), pos)
+            if "op" not in fields:
+                raise CaptureError(
+                    f"{path}: the bag's record at byte {pos} has no op field: damaged"
+                )
+            dlen = struct.unpack("<I", f.read(4))[0]
+            if pos + 8 + hlen + dlen > size:
+                raise CaptureError(
+                    f"{path}: record {n} of the bag, at byte {pos}, holds {dlen} bytes, but "
+                    f"the file ends at byte {size}: the bag is truncated"
+                )
+            if fields.get("op") == b"\x05":  # a chunk: its compression and unpacked size
+                kind = fields.get("compression", b"").decode("latin-1")
+                unpacked = fields.get("size", b"")
+                unpacked = struct.unpack("<I", unpacked)[0] if len(unpacked) == 4 else -1
+                if kind not in ("none", "bz2", "lz4") or not 0 <= unpacked <= MAX_BAG_CHUNK_BYTES:
+                    raise CaptureError(
+                        f"{path}: chunk at byte {pos}: compression {kind[:16]!r}, size "
+                        f"{unpacked}; accepted: none, bz2 or lz4, at most "
+                        f"{MAX_BAG_CHUNK_BYTES // 1024**2} MiB unpacked"
+                    )
+            pos, n = pos + 8 + hlen + dlen, n + 1
+
+
+def _ros1_fields(path: Path, header: bytes, pos: int) -> dict[str, bytes]:
+    """A ROS 1 record header: fields of a 4-byte length then name=value."""
+    fields, i = {}, 0
+    while i < len(header):
+        if i + 4 > len(header):
+            raise CaptureError(f"{path}: the bag's record at byte {pos} has a damaged header")
+        n = struct.unpack("<I", header[i : i + 4])[0]
+        name, eq, value = header[i + 4 : i + 4 + n].partition(b"=")
+        if i + 4 + n > len(header) or not eq:
+            raise CaptureError(f"{path}: the bag's record at byte {pos} has a damaged header")
+        fields[name.decode("latin-1")] = value
+        i += 4 + n
+    return fields
+
+
+def _bound_ros1_decompression() -> None:
+    """Make rosbags' ROS 1 reader decompress a chunk to at most MAX_BAG_CHUNK_BYTES: a bz2 or
+    lz4 block of a few kilobytes can unpack to gigabytes, and rosbags unpacks whole chunks
+    with no limit. Its reader looks its decompressors up in a module dict on every chunk;
+    replacing them there is the only hook it offers."""
+    import bz2
+
+    import lz4.frame
+    from rosbags.rosbag1 import reader
+
+    def bounded(make):
+        def decompress(data: bytes) -> bytes:
+            out = bytearray()
+            while data:  # bz2.decompress, which rosbags calls, reads streams one after another
+                stream = make()
+                out += stream.decompress(data, max_length=MAX_BAG_CHUNK_BYTES + 1 - len(out))
+                if len(out) > MAX_BAG_CHUNK_BYTES:
+                    raise CaptureError(
+                        f"a chunk of the bag unpacks to more than "
+                        f"{MAX_BAG_CHUNK_BYTES // 1024**2} MiB: damaged, or crafted to fill the "
+                        f"memory"
+                    )
+                if not stream.eof:
+                    raise ValueError("a compressed chunk ends before its end-of-stream marker")
+                data = stream.unused_data
+            return bytes(out)
+
+        return decompress
+
+    reader.decompressors["bz2"] = bounded(bz2.BZ2Decompressor)
+    reader.decompressors["lz4"] = bounded(lz4.frame.LZ4FrameDecompressor)
+
+
+def _read_bag(reader, path: Path, topic: str | None, depth_scale: float | None) -> Capture:
+    conns = reader.connections
+    types = {c.topic: c.msgtype for c in conns}
+    wanted = [c for c in conns if topic is None or c.topic == topic]
+    if topic is not None and not wanted:
+        raise CaptureError(
+            f"{path}: no topic {short_repr(topic)}; it has {', '.join(sorted(types))[:400] or 'no topics'}"
+        )
+    clouds = [c for c in wanted if c.msgtype == "sensor_msgs/msg/PointCloud2"]
+    images = [c for c in wanted if c.msgtype == "sensor_msgs/msg/Image"]
+    if clouds:
+        raw = _first_message(reader, path, clouds[0])
+        msg = reader.deserialize(raw, clouds[0].msgtype)
+        try:
+            pts, shape = pointcloud2_to_points(msg)
+        except CaptureError as exc:
+            raise CaptureError(f"{path} ({clouds[0].topic}): {exc}") from None
+        cap = Capture(points=pts, shape=shape, source=f"{path} ({clouds[0].topic})",
+                      frame=_frame_of(msg.header.frame_id))  # fmt: skip
+        return _with_imu_gravity(reader, cap, msg.header.frame_id)
+    if images:
+        cap = _bag_depth_image(reader, path, images[0], depth_scale)
+        return _with_imu_gravity(reader, cap, None)
+    raise CaptureError(
+        f"{path}: no sensor_msgs/PointCloud2 or depth sensor_msgs/Image topic; topics: "
+        f"{', '.join(f'{t} ({m})' for t, m in sorted(types.items())) or 'none'}"
+    )
+
+
+def _first_message(reader, path: Path, conn) -> bytes:
+    """The raw first message of a connection."""
+    first = next(reader.messages(connections=[conn]), None)
+    if first is None:
+        raise CaptureError(f"{path}: the topic {conn.topic} ({conn.msgtype}) has no messages")
+    return first[2]
 
 
 def _frame_of(frame_id: str) -> Literal["camera", "world"]:
@@ -581,8 +905,7 @@ def _with_imu_gravity(reader, cap: Capture, cloud_frame: str | None) -> Capture:
 
 
 def _bag_depth_image(reader, path: Path, conn, depth_scale: float | None) -> Capture:
-    _, _, raw = next(reader.messages(connections=[conn]))
-    img = reader.deserialize(raw, conn.msgtype)
+    img = reader.deserialize(_first_message(reader, path, conn), conn.msgtype)
     enc = img.encoding.lower()
     if enc in ("16uc1", "mono16"):
         dt, scale = np.dtype(">u2" if img.is_bigendian else "<u2"), depth_scale or 1000.0
@@ -592,15 +915,21 @@ def _bag_depth_image(reader, path: Path, conn, depth_scale: float | None) -> Cap
         raise CaptureError(
             f"{path} ({conn.topic}): depth encoding {img.encoding!r}; accepted: 16UC1, 32FC1"
         )
-    rows = np.frombuffer(bytes(img.data), dtype=np.uint8).reshape(img.height, img.step)
+    h, w, step = int(img.height), int(img.width), int(img.step)
+    check_pixels(f"{path} ({conn.topic})", w, h)
+    if step < w * dt.itemsize or len(img.data) < h * step:
+        raise CaptureError(
+            f"{path} ({conn.topic}): a {w}x{h} {img.encoding} image with rows of {step} bytes "
+            f"carries {len(img.data)} bytes: its step or data is too short"
+        )
+    rows = np.frombuffer(bytes(img.data), dtype=np.uint8, count=h * step).reshape(h, step)
     depth = rows[:, : img.width * dt.itemsize].copy().view(dt).astype(np.float64)
     info = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"]
     if not info:
         raise CaptureError(
             f"{path}: a depth Image needs a sensor_msgs/CameraInfo topic for its intrinsics"
         )
-    _, _, raw = next(reader.messages(connections=info[:1]))
-    ci = reader.deserialize(raw, info[0].msgtype)
+    ci = reader.deserialize(_first_message(reader, path, info[0]), info[0].msgtype)
     k = np.asarray(getattr(ci, "k", None) if hasattr(ci, "k") else ci.K, dtype=float).reshape(3, 3)
     intr = intrinsics_from_mapping(
         {"width": img.width, "height": img.height, "fx": k[0, 0], "fy": k[1, 1],
