@@ -8,6 +8,7 @@ from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
 from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
 from ._openscad import render_scad as render_scad
 from ._scene import LIBRARY as LIBRARY
+from ._scene import MAX_SEED as MAX_SEED
 from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
 from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
 from ._scene import terrain_file_scene as terrain_file_scene

@@ -137,14 +137,17 @@ def _quick(cfg):
 def _valid_pose(world, xy: np.ndarray, heading: float) -> tuple[float, float, float] | None:
     """(x, y, yaw) at xy with the yaw nearest heading (in 16 steps) where the robot stands."""
     sc = world.scene
+    # Checked as a scene file will hold it (x, y to 0.1 mm, yaw to 0.001 deg): on a rough
+    # capture 0.1 mm can cross a height-field cell and make a checked pose invalid.
+    x, y = round(float(xy[0]), 4), round(float(xy[1]), 4)
     yaws = heading + np.array([0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6, 7, -7, 8]) * np.pi / 8
-    states = np.column_stack([np.full(len(yaws), xy[0]), np.full(len(yaws), xy[1]), yaws])
+    yaws = np.radians(np.round(np.degrees(np.arctan2(np.sin(yaws), np.cos(yaws))), 3))
+    states = np.column_stack([np.full(len(yaws), x), np.full(len(yaws), y), yaws])
     code = check_states(world.heightfield, world.footprint, sc.planner.validity, states).code
     ok = np.flatnonzero(code == VALID)
     if not len(ok):
         return None
-    yaw = float(np.arctan2(np.sin(yaws[ok[0]]), np.cos(yaws[ok[0]])))
-    return (round(float(xy[0]), 4), round(float(xy[1]), 4), yaw)
+    return (x, y, float(yaws[ok[0]]))
 
 
 def _farthest(mask: np.ndarray, source: tuple[int, int]) -> tuple[tuple[int, int], np.ndarray]:

@@ -3,9 +3,12 @@
 A model may only read files in its own folder. Before OpenSCAD runs, the model and everything it
 includes are scanned: `include <f>`, `use <f>` and every file-reading call (`import`, `surface`,
 `file = ...` arguments) must name a literal relative path that stays inside the folder, so a
-refusal names the file, the line and the offending path. Where the kernel allows unprivileged
-user namespaces, OpenSCAD then also runs with the home, work and temporary folders hidden, so a
-path the scan could not see is still not readable.
+refusal names the file, the line and the offending path. OpenSCAD then runs in a jail of the
+operating system (scenes/_jail.py: user, mount and network namespaces) that holds only the
+model's folder (read-only), OpenSCAD's own program, libraries and fonts, and the one folder it
+writes its mesh to; so a path the scan could not see (an escape that OpenSCAD decodes, a link)
+leads nowhere. Each render also runs under limits of memory, processor time and output size.
+Where the system cannot make the jail, rendering is refused unless $ROACHPLAN_UNSAFE_SCAD=1.
 """
 
 from __future__ import annotations
@@ -13,16 +16,22 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import math
 import os
 import re
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from perception import short_repr
+
+from . import _jail
 from ._errors import SceneError
 
 ScadValue = float | int | bool | str
@@ -39,7 +48,11 @@ long is meant."""
 # (OpenSCAD 2021.01, including the deprecated import_* modules). Any call's `file = ...`
 # argument is checked too (dxf_dim, dxf_cross, linear_extrude(file=...), ...).
 _FILE_CALLS = ("import", "surface", "import_stl", "import_off", "import_dxf")
-_HIDDEN_DIRS = ("/home", "/root", "/tmp", "/var/tmp", "/work", "/srv", "/opt", "/media")
+UNSAFE_ENV = "ROACHPLAN_UNSAFE_SCAD"
+"""Set to 1 to render without the jail where the system cannot make one (the model can then
+read every file the user can)."""
+MEMORY_ENV = "ROACHPLAN_SCAD_MEMORY"
+"""Memory limit of one render, e.g. 16G or 512M (default: default_memory_limit())."""
 
 
 def cache_dir() -> Path:
@@ -140,6 +153,24 @@ def _call_arguments(code: str, open_paren: int) -> list[str]:
 
 
 _STRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
+_ESCAPE = re.compile(r"\\(x[0-7][0-9a-fA-F]|u[0-9a-fA-F]{4}|U[0-9a-fA-F]{6}|.)", re.S)
+
+
+def _unescape(body: str) -> str:
+    """A string literal's text as OpenSCAD 2021.01 decodes it: \\n \\t \\r, \\x00-\\x7F
+    (\\x00 is a space), \\uXXXX and \\UXXXXXX; any other backslash is dropped. So
+    "\\x2fetc" is the absolute path /etc, whatever file name it spells undecoded."""
+
+    def one(m: re.Match) -> str:
+        e = m.group(1)
+        if len(e) > 1:  # a numbered character
+            code = int(e[1:], 16)
+            if code == 0:
+                return " "
+            return chr(code) if code <= 0x10FFFF and not 0xD800 <= code <= 0xDFFF else "\ufffd"
+        return {"n": "\n", "t": "\t", "r": "\r"}.get(e, e)
+
+    return _ESCAPE.sub(one, body)
 
 
 def _file_references(src: ScadSource) -> list[tuple[str, int, str]]:
@@ -182,7 +213,7 @@ def scad_dependencies(scad_file: Path) -> list[Path]:
                         f'{where}: the file must be a literal string such as "terrain.dat" '
                         f"(got `{arg}`), so it can be checked to stay in the model's folder"
                     )
-                name = lit.group(1)
+                name = _unescape(lit.group(1))  # the path OpenSCAD will open
             rel = Path(name)
             if not name or rel.is_absolute() or name.startswith("~") or ".." in rel.parts:
                 raise SceneError(
@@ -292,21 +323,68 @@ def _statement_end(code: str, start: int) -> int:
     return len(code)
 
 
-_NUMBER = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_TOKEN = re.compile(
+    r'\s*(?:(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<string>"(?:[^"\\]|\\.)*")'
+    r"|(?P<name>[A-Za-z_$][\w$]*)|(?P<op>&&|\|\||==|!=|<=|>=|[-+*/%^()<>!?:,\[\]]))"
+)
+# OpenSCAD 2021.01's built-in functions that return a number whatever their arguments.
+_NUMBER_FUNCTIONS = frozenset(
+    "abs sign sin cos tan acos asin atan atan2 floor round ceil ln log pow sqrt exp min max norm "
+    "len".split()
+)
+_COMPARISONS = frozenset(("&&", "||", "==", "!=", "<=", ">=", "<", ">", "!"))
 
 
-def scad_value_kind(expr: str) -> str | None:
-    """"number", "string" or "bool" for a default value whose type can be read off its text
-    (a literal, or arithmetic on number literals); None for any other expression."""
+def scad_value_kind(expr: str, variables: Mapping[str, str] | None = None) -> str | None:
+    """"number", "string", "bool" or "vector" for a default value whose type can be read off
+    its text: a literal, a list `[...]`, a comparison, or arithmetic on numbers, built-in
+    numeric functions and the model's variables (scad_variables) that are numbers themselves
+    (`size = 2 * unit;`); None for any other expression (a condition `c ? a : b`, a call of a
+    function of the model's)."""
+    return _value_kind(expr, variables or {}, frozenset())
+
+
+def _value_kind(expr: str, variables: Mapping[str, str], seen: frozenset[str]) -> str | None:
     expr = expr.strip()
     if expr in ("true", "false"):
         return "bool"
     if _STRING.fullmatch(expr):
         return "string"
-    bare = _NUMBER.sub("0", expr)
-    if "0" in bare and re.fullmatch(r"[0\s+\-*/%()]+", bare):
-        return "number"
-    return None
+    if expr in variables and expr not in seen:  # `b = a;`: a's kind
+        return _value_kind(variables[expr], variables, seen | {expr})
+    tokens, i = [], 0
+    while i < len(expr):
+        m = _TOKEN.match(expr, i)
+        if m is None:
+            return None  # a character that is no part of these expressions
+        tokens.append((m.lastgroup, m.group(m.lastgroup)))
+        i = m.end()
+    if tokens and tokens[0] == ("op", "[") and tokens[-1] == ("op", "]"):
+        return "vector"
+    return _tokens_kind(tokens, variables, seen)
+
+
+def _tokens_kind(tokens: list, variables: Mapping[str, str], seen: frozenset[str]) -> str | None:
+    ops = {text for kind, text in tokens if kind == "op"}
+    if ops & {"?", ":", "[", "]"} or any(kind == "string" for kind, _ in tokens):
+        return None  # a condition, a vector or range inside, text: not read here
+    if ops & _COMPARISONS:
+        return "bool"
+    operands = 0
+    for k, (kind, text) in enumerate(tokens):
+        if kind != "name":
+            operands += kind == "number"
+            continue
+        calls = k + 1 < len(tokens) and tokens[k + 1] == ("op", "(")
+        if calls and text in _NUMBER_FUNCTIONS or not calls and text == "PI":
+            operands += 1
+        elif not calls and text in variables and text not in seen:
+            if _value_kind(variables[text], variables, seen | {text}) != "number":
+                return None
+            operands += 1
+        else:
+            return None  # a function of the model's, undef, a special $variable
+    return "number" if operands else None
 
 
 def _kind_of(value: ScadValue) -> str:
@@ -315,7 +393,10 @@ def _kind_of(value: ScadValue) -> str:
     return "string" if isinstance(value, str) else "number"
 
 
-_KIND_NAMES = {"number": "a number", "string": "a string", "bool": "a boolean (true or false)"}
+_KIND_NAMES = {
+    "number": "a number", "string": "a string", "bool": "a boolean (true or false)",
+    "vector": "a vector (here: a number, as OpenSCAD's cube() and scale() take)",
+}  # fmt: skip
 
 
 def param_problem(name: str, value: ScadValue, variables: Mapping[str, str], model: str) -> str:
@@ -323,19 +404,32 @@ def param_problem(name: str, value: ScadValue, variables: Mapping[str, str], mod
     (scad_variables), or "" if it would: no such top-level variable, or a value of another type
     than the default's (OpenSCAD would take "wide" for a width without a word)."""
     if name not in variables:
+        if not variables:
+            return (
+                f"{short_repr(name)} is not a variable of the model: {model} has no top-level "
+                f"variables, so it takes no params (module and function parameters cannot be "
+                f"set); remove `params`, or give the model a top-level `{_shown_name(name)} = ...;`"
+            )
+        names = sorted(variables)
+        listed = ", ".join(names[:40]) + (f" and {len(names) - 40} more" if len(names) > 40 else "")
         return (
-            f"{name!r} is not a variable of the model; its variables: "
-            f"{', '.join(sorted(variables)) or '(none)'} (the top-level assignments of {model}; "
-            f"module and function parameters cannot be set)"
+            f"{short_repr(name)} is not a variable of the model; its variables: {listed} (the "
+            f"top-level assignments of {model}; module and function parameters cannot be set)"
         )
     default = variables[name]
-    kind = scad_value_kind(default)
-    if kind is not None and kind != _kind_of(value):
+    kind = scad_value_kind(default, variables)
+    given = _kind_of(value)
+    if kind is not None and kind != given and not (kind == "vector" and given == "number"):
+        shown = default if len(default) <= 80 else default[:77] + "..."
         return (
-            f"{name!r} defaults to {default} in {model}, so it takes {_KIND_NAMES[kind]}; "
-            f"got {value!r}, {_KIND_NAMES[_kind_of(value)]}"
+            f"{short_repr(name)} defaults to {shown} in {model}, so it takes "
+            f"{_KIND_NAMES[kind]}; got {short_repr(value)}, {_KIND_NAMES[given]}"
         )
     return ""
+
+
+def _shown_name(name: object) -> str:
+    return name if isinstance(name, str) and len(name) <= 40 else "name"
 
 
 def timeout_problem(timeout: object) -> str:
@@ -347,7 +441,7 @@ def timeout_problem(timeout: object) -> str:
     ):
         return (
             f"expected a number of seconds above 0 and at most {MAX_TIMEOUT:.0f} (24 h), "
-            f"got {timeout!r}"
+            f"got {short_repr(timeout)}"
         )
     return ""
 
@@ -363,59 +457,264 @@ def _scad_literal(value: ScadValue) -> str:
     return json.dumps(value)  # a double-quoted string OpenSCAD accepts
 
 
-# Inside a fresh user + mount namespace: show the model's folder at /mnt/model and the output
-# folder at /mnt/out, hide the folders where people keep files, then become OpenSCAD (exec, so
-# the time limit's kill reaches it).
-_SANDBOX_SCRIPT = """
-set -e
-mount --bind "$1" "$2/model"
-mount --rbind "$2" /mnt
-for d in {hidden}; do [ -d "$d" ] && mount -t tmpfs -o size=16m none "$d" || true; done
-cd /mnt/model
-shift 2
-exec "$@"
-""".format(hidden=" ".join(_HIDDEN_DIRS))
+# -- the jail and the limits ---------------------------------------------------------------------
+
+JAIL_MODEL, JAIL_OUT = "/model", "/out"
+"""Where the model's folder (read-only) and the output folder (writable) appear in the jail."""
+
+# What OpenSCAD 2021.01 reads at run time besides its libraries (found with strace on a text()
+# model): the loader's cache, fontconfig's setup, the fonts and their cache, the C library's
+# locales and character sets, and its own resource folder (beside its program: ../share/openscad,
+# with its fonts/ and libraries/ where installed). The user's own fonts (~/.fonts) stay outside.
+_RUNTIME_DATA = (
+    "/etc/ld.so.cache", "/etc/fonts", "/usr/share/fontconfig", "/usr/share/fonts",
+    "/usr/local/share/fonts", "/var/cache/fontconfig", "/usr/lib/locale", "/dev/null",
+)  # fmt: skip
+_LIBRARY_DIRS = ("/lib", "/lib64", "/usr/lib", "/usr/lib64")
+"""Shown whole when `ldd` cannot list a program's libraries."""
+
+
+def default_memory_limit() -> int:
+    """Memory limit of one render unless $ROACHPLAN_SCAD_MEMORY sets one [bytes]: 8 GiB, or
+    three quarters of the machine's memory if that is less. Large CGAL renders need a few GiB."""
+    try:
+        ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError):
+        ram = 0
+    return min(8 << 30, ram * 3 // 4) if ram > 0 else 8 << 30
+
+
+_SIZE = re.compile(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([kmgt]?)(?:i?b)?\s*", re.I)
+
+
+def memory_limit() -> int:
+    """The memory limit of a render [bytes]: $ROACHPLAN_SCAD_MEMORY (16G, 512M, 1.5G, or
+    bytes) or default_memory_limit()."""
+    text = os.environ.get(MEMORY_ENV, "").strip()
+    if not text:
+        return default_memory_limit()
+    m = _SIZE.fullmatch(text)
+    size = float(m.group(1)) * 1024 ** " kmgt".index(m.group(2).lower() or " ") if m else 0.0
+    if not 64 << 20 <= size <= 1 << 50:
+        raise SceneError(
+            f"{MEMORY_ENV}={text!r}: expected a memory size from 64M up, such as 16G or 512M"
+        )
+    return int(size)
+
+
+def _size_text(size: int) -> str:
+    return f"{size / (1 << 30):.3g} GiB" if size >= 1 << 30 else f"{size / (1 << 20):.3g} MiB"
+
+
+def _program_libraries(program: str) -> list[str]:
+    """The shared libraries `program` loads (its loader first), as `ldd` lists them; [] when
+    ldd cannot tell (not installed, not a dynamic program)."""
+    try:
+        out = subprocess.run(
+            ["ldd", program], capture_output=True, text=True, timeout=30, check=False
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return []
+    if out.returncode != 0:
+        return []
+    # "\tlibz.so.1 => /lib/x86_64-linux-gnu/libz.so.1 (0x...)" or "\t/lib64/ld-linux... (0x...)"
+    return re.findall(r"(?:=>\s*|^\s*)(/\S+)\s+\(0x", out.stdout, re.M)
+
+
+def _show(path: str, ro: dict[str, str], links: dict[str, str], depth: int = 0) -> None:
+    """Make `path` lead in the jail where it leads here: every symlink on the way re-created
+    (its target as written), the file or folder it ends at bound read-only at the same place."""
+    parts = Path(path).parts
+    here = "/"
+    for i, part in enumerate(parts[1:], start=1):
+        step = os.path.join(here, part)
+        if os.path.islink(step) and depth < 40:
+            target = os.readlink(step)
+            links[step] = target
+            _show(os.path.normpath(os.path.join(here, target, *parts[i + 1 :])), ro, links,
+                  depth + 1)  # fmt: skip
+            return
+        here = step
+    if os.path.exists(here):
+        ro[here] = here
+
+
+@functools.cache
+def _jail_layout(program: str) -> tuple[dict[str, str], dict[str, str]]:
+    """(read-only binds, symlinks) that let `program` run in the jail as it runs here."""
+    resources = os.path.join(os.path.dirname(os.path.realpath(program)), "..", "share",
+                             os.path.basename(program))  # fmt: skip
+    libraries = _program_libraries(program)
+    wanted = [program, *(libraries or _LIBRARY_DIRS), *_RUNTIME_DATA, os.path.normpath(resources)]
+    # Character-set modules of the C library, beside it (gconv/).
+    wanted += [os.path.join(os.path.dirname(lib), "gconv") for lib in libraries if "/libc." in lib]
+    ro: dict[str, str] = {}
+    links: dict[str, str] = {}
+    for path in wanted:
+        _show(path, ro, links)
+    folders = [p for p in ro if os.path.isdir(p)]
+
+    def covered(path: str) -> bool:  # inside a folder shown whole: nothing to add
+        return any(path != f and path.startswith(f.rstrip("/") + "/") for f in folders)
+
+    return (
+        {p: src for p, src in ro.items() if not covered(p)},
+        {p: t for p, t in links.items() if not covered(p)},
+    )
+
+
+def confined(
+    argv: list[str], model_dir: Path, work_dir: Path, *, memory: int | None = None,
+    cpu: float = MAX_TIMEOUT, jail: bool = True,
+) -> list[str]:  # fmt: skip
+    """The command that runs argv under the render limits (memory [bytes], default
+    memory_limit(); cpu: processor time [s]) and, with jail, in a jail where model_dir is
+    JAIL_MODEL (read-only; the working directory) and work_dir/out is JAIL_OUT (writable), and
+    nothing else is but argv[0] with its libraries and OpenSCAD's run-time data. Without jail,
+    argv runs here in model_dir. If the jail or the limits cannot be made, the command exits
+    with _jail.SETUP_FAILED and a line starting with _jail.SETUP_TAG on stderr."""
+    program = shutil.which(argv[0]) or argv[0]
+    spec: dict = {
+        "argv": [program, *argv[1:]],
+        "memory": memory_limit() if memory is None else int(memory),
+        "cpu": math.ceil(cpu) + 1,
+        "env": None,  # this process's; never on the command line, where anyone can read it
+        "jail": None,
+    }
+    if jail:
+        ro, links = _jail_layout(program)
+        root = work_dir / "root"
+        root.mkdir(exist_ok=True)
+        (work_dir / "out").mkdir(exist_ok=True)
+        spec["jail"] = {
+            "root": str(root), "ro": {**ro, JAIL_MODEL: str(model_dir)},
+            "rw": {JAIL_OUT: str(work_dir / "out")}, "links": links, "tmpfs": ["/tmp"],
+            "cwd": JAIL_MODEL,
+        }  # fmt: skip
+        spec["env"] = {"PATH": "/usr/bin:/bin", "HOME": "/tmp", "LANG": "C.UTF-8"}
+    return [sys.executable, "-I", "-S", _jail.__file__, json.dumps(spec)]
+
+
+def _jail_wanted() -> bool:
+    return os.environ.get(UNSAFE_ENV, "").strip() not in ("1", "yes", "true")
 
 
 @functools.cache
 def _sandbox_available() -> bool:
-    """True if unprivileged user + mount namespaces work here (`unshare -r -m`)."""
-    if shutil.which("unshare") is None:
-        return False
-    try:
-        probe = subprocess.run(
-            ["unshare", "-r", "-m", "sh", "-c", "mount -t tmpfs none /mnt"],
-            capture_output=True, timeout=10, check=False,
-        )  # fmt: skip
-    except (OSError, subprocess.TimeoutExpired):
-        return False
+    """True if this system can make the jail (unprivileged user, mount and network namespaces)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = confined(["true"], Path(tmp), Path(tmp), memory=1 << 30, cpu=10)
+        try:
+            probe = subprocess.run(cmd, capture_output=True, timeout=30, check=False)
+        except (OSError, subprocess.TimeoutExpired):
+            return False
     return probe.returncode == 0
 
 
-def confined(argv: list[str], model_dir: Path, work_dir: Path) -> list[str]:
-    """argv wrapped to run with model_dir as its working directory (seen as /mnt/model) and
-    work_dir as /mnt (write results to /mnt/out), and the home, work and temporary folders
-    hidden — when user namespaces are available; otherwise argv unchanged, run in model_dir."""
-    if not _sandbox_available():
-        return argv
-    (work_dir / "model").mkdir(exist_ok=True)
-    return ["unshare", "-r", "-m", "sh", "-c", _SANDBOX_SCRIPT, "sh", str(model_dir),
-            str(work_dir), *argv]  # fmt: skip
-
-
 def _run(cmd: list[str], *, cwd: Path, timeout: float) -> subprocess.CompletedProcess:
-    """Run cmd in its own process group; kill the whole group past the time limit."""
+    """Run cmd in its own process group; kill the whole group past the time limit. Only the
+    two ends of its error output are kept (OpenSCAD writes everything there): a model's echo()
+    in a loop prints gigabytes, which must not fill this process's memory."""
     proc = subprocess.Popen(
-        cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        start_new_session=True,
+        cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, start_new_session=True,
     )  # fmt: skip
+    kept: list[str] = []
+    reader = threading.Thread(target=_read_ends, args=(proc.stderr, kept), daemon=True)
+    reader.start()
     try:
-        out, err = proc.communicate(timeout=timeout)
+        proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
+        proc.wait()
         raise
-    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+    finally:
+        reader.join()
+        proc.stderr.close()
+    return subprocess.CompletedProcess(cmd, proc.returncode, "", kept[0] if kept else "")
+
+
+def _read_ends(stream, kept: list[str], keep: int = 1 << 16) -> None:
+    """Read stream to its end; append its first and last `keep` bytes as text to kept."""
+    head, tail, left_out = bytearray(), bytearray(), 0
+    for chunk in iter(lambda: stream.read1(1 << 16), b""):
+        room = max(keep - len(head), 0)
+        head += chunk[:room]
+        tail += chunk[room:]
+        if len(tail) > keep:
+            left_out += len(tail) - keep
+            del tail[: len(tail) - keep]
+    gap = f"\n... ({left_out} bytes left out) ...\n" if left_out else ""
+    kept.append(head.decode(errors="replace") + gap + tail.decode(errors="replace"))
+
+
+def _limit_hit(returncode: int, err: str, *, memory: int, timeout: float) -> str:
+    """Which limit stopped OpenSCAD, with how to raise it; "" if none did."""
+    sig = -returncode if returncode < 0 else 0
+    raise_memory = f"set {MEMORY_ENV}=SIZE (now {_size_text(memory)}; e.g. {MEMORY_ENV}=16G)"
+    if sig == signal.SIGXCPU:  # the wall-clock limit comes first unless this process stalled
+        return (
+            f"OpenSCAD used up its processor-time limit of {timeout:g} s and was stopped; a "
+            f"slow model may take more: give this terrain object `timeout: SECONDS` (or "
+            f"--scad-timeout SECONDS), at most {MAX_TIMEOUT:.0f}"
+        )
+    if sig == signal.SIGXFSZ:
+        return (
+            f"OpenSCAD's mesh grew past the output size limit of {_size_text(memory)} (the "
+            f"memory limit) and was stopped; to allow more, {raise_memory}"
+        )
+    if "bad_alloc" in err or "out of memory" in err.lower():
+        return (
+            f"OpenSCAD ran out of memory at its limit of {_size_text(memory)} and was "
+            f"stopped; a large model may need more: {raise_memory}"
+        )
+    if sig:
+        name = signal.Signals(sig).name if sig in signal.valid_signals() else f"signal {sig}"
+        return (
+            f"OpenSCAD was stopped ({name}); a model that needs more than its memory limit "
+            f"of {_size_text(memory)}, or than the machine has, may end this way: {raise_memory}"
+        )
+    return ""
+
+
+def _failure(
+    scad_file: Path, proc: subprocess.CompletedProcess, *, memory: int, timeout: float,
+    jail: bool,
+) -> str:  # fmt: skip
+    """Why a render that left no mesh failed, for a SceneError: the jail could not be made, a
+    limit was hit, or OpenSCAD's own errors (its jail paths turned back into real ones)."""
+    err = proc.stderr.replace(f"{JAIL_MODEL}/", f"{scad_file.parent}/") if jail else proc.stderr
+    if proc.returncode == _jail.SETUP_FAILED and _jail.SETUP_TAG in err:
+        why = err.split(_jail.SETUP_TAG, 1)[1].strip().splitlines()[0]
+        if not jail:
+            return f"cannot start OpenSCAD under its limits: {why}"
+        return (
+            f"cannot render: OpenSCAD models run in a jail that sees only the model's folder, "
+            f"and this system refused to make one ({why}): unprivileged user namespaces are "
+            f"off or used up here (sysctl kernel.unprivileged_userns_clone, "
+            f"user.max_user_namespaces, AppArmor's kernel.apparmor_restrict_unprivileged_userns, "
+            f"or a container's seccomp profile). To render without the jail, "
+            f"trusting this model with every file you can read, set {UNSAFE_ENV}=1"
+        )
+    limit = _limit_hit(proc.returncode, err, memory=memory, timeout=timeout)
+    if limit:
+        return limit
+    lines = [line for line in err.splitlines() if "ERROR" in line or "WARNING" in line]
+    detail = _bounded(lines)
+    if jail and ("couldn't be opened" in err or "Can't open" in err):
+        detail += f"\n(a model sees only the files in its own folder, {scad_file.parent})"
+    if "Current top level object is empty" in err:
+        detail = (detail + "\nthe model produces no geometry").strip()
+    return f"OpenSCAD failed:\n{detail.strip() or _bounded(err.strip().splitlines()[-20:])}"
+
+
+def _bounded(lines: list[str], count: int = 20, width: int = 300) -> str:
+    """At most `count` lines of at most `width` characters: a model's echo() or a flood of
+    warnings must not become megabytes of error text."""
+    shown = [line if len(line) <= width else line[: width - 3] + "..." for line in lines[:count]]
+    if len(lines) > count:
+        shown.append(f"... and {len(lines) - count} more lines")
+    return "\n".join(shown)
 
 
 def render_scad(
@@ -423,13 +722,16 @@ def render_scad(
     params: Mapping[str, ScadValue] | None = None,
     *,
     timeout: float = DEFAULT_TIMEOUT,
+    memory: int | None = None,
 ) -> Path:
     """Render scad_file with `-D name=value` overrides to an STL and return its cached path.
 
     The cache key covers the model text, the files it reads, the overrides and the OpenSCAD
     version, so a changed parameter or height map renders again and an unchanged model never
-    does. A render past `timeout` seconds is killed. OpenSCAD's own error text is passed
-    through when the model is wrong.
+    does. OpenSCAD runs in the jail (module docstring); a render past `timeout` seconds, or
+    past `memory` bytes of memory (default: memory_limit()), is stopped with a SceneError
+    that says how to allow more. OpenSCAD's own error text is passed through when the model
+    is wrong.
     """
     scad_file = Path(scad_file).resolve()
     if not scad_file.is_file():
@@ -437,6 +739,7 @@ def render_scad(
     problem = timeout_problem(timeout)
     if problem:
         raise SceneError(f"{scad_file}: render time limit: {problem}")
+    memory = memory_limit() if memory is None else memory
     params = dict(params or {})
     known = scad_variables(scad_file)
     for name, value in params.items():
@@ -459,10 +762,13 @@ def render_scad(
     work = Path(tempfile.mkdtemp(dir=out.parent, prefix=".render-"))
     try:
         (work / "out").mkdir()
-        target = "/mnt/out/mesh.stl" if _sandbox_available() else str(work / "out" / "mesh.stl")
+        jail = _jail_wanted()
+        target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
         openscad = [openscad_binary(), "--export-format", "binstl", "-o", target]
         openscad += [a for d in defines for a in ("-D", d)]
-        cmd = confined([*openscad, scad_file.name], root, work)
+        cmd = confined(
+            [*openscad, scad_file.name], root, work, memory=memory, cpu=timeout, jail=jail
+        )
         try:
             proc = _run(cmd, cwd=root, timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -473,11 +779,8 @@ def render_scad(
             ) from None
         mesh = work / "out" / "mesh.stl"
         if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
-            lines = proc.stderr.splitlines()
-            detail = "\n".join(line for line in lines if "ERROR" in line or "WARNING" in line)
-            if "Current top level object is empty" in proc.stderr:
-                detail = (detail + "\nthe model produces no geometry").strip()
-            raise SceneError(f"{scad_file}: OpenSCAD failed:\n{detail or proc.stderr.strip()}")
+            why = _failure(scad_file, proc, memory=memory, timeout=timeout, jail=jail)
+            raise SceneError(f"{scad_file}: {why}")
         mesh.replace(out)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -15,9 +15,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
-
-from perception import CAPTURE_SUFFIXES, CaptureError, CaptureSettings, capture_settings
+from perception import (
+    CAPTURE_SUFFIXES,
+    MAX_YAML_BYTES,
+    CaptureError,
+    CaptureSettings,
+    capture_settings,
+    load_yaml,
+    short_repr,
+)
 from planning import PlannerConfig
 from sim import DriverConfig, SimConfig
 
@@ -28,6 +34,14 @@ LIBRARY = Path(__file__).parent / "library"
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
 TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
 """Files that are a scene of their own wherever a scene is taken."""
+MAX_SEED = 2**31 - 2
+"""Largest seed accepted: OMPL's generator takes seed % (2^31 - 1) + 1 (planning/_ompl.py), so
+seeds 0..MAX_SEED are its seeds 1..2^31 - 1, each a different one."""
+MAX_SETTING_INT = 2**31 - 1
+"""Largest integer setting (iterations, batch sizes): what a C int holds (PyBullet, OMPL)."""
+QUATERNION_TOLERANCE = 1e-3
+"""How far from 1 a quaternion's norm may be [-]: four rounded decimals ([0, 0, 0.7071,
+0.7071]) are within it and are normalised; further off is a typing error, refused."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -99,7 +113,7 @@ def resolve_scene(name_or_path: str | Path) -> Path:
     .scad: a scene of its own) -> the file's path."""
     p = Path(name_or_path)
     if p.suffix.lower() in TERRAIN_SUFFIXES:
-        if not p.is_file():
+        if not _is_file(p):
             raise SceneError(f"{p}: no such file")
         return p.resolve()
     return resolve_in_library(name_or_path, LIBRARY, "scene", SceneError)
@@ -145,26 +159,36 @@ def resolve_in_library(
     of file and the library's names when there is no such file."""
     p = Path(name_or_path)
     if p.suffix in (".yaml", ".yml"):
-        if not p.is_file():
+        if not _is_file(p):
             raise error(f"{p}: no such {kind} file")
         return p.resolve()
     lib = library / f"{name_or_path}.yaml"
-    if lib.is_file():
+    if _is_file(lib):
         return lib
+    article = "an" if kind[0] in "aeiou" else "a"
     raise error(
-        f"unknown {kind} {str(name_or_path)!r}: give {'an' if kind[0] in 'aeiou' else 'a'} "
-        f"{kind} file (.yaml) or one of {', '.join(library_names(library))}"
+        f"unknown {kind} {short_repr(str(name_or_path))}: give {article} {kind} file (.yaml) or "
+        f"one of {', '.join(library_names(library))}"
     )
 
 
-def read_yaml(path: Path, kind: str, error: type[ValueError]) -> Any:
-    """The parsed content of a YAML file; `error` when it cannot be read or parsed."""
+def _is_file(p: Path) -> bool:
+    """p.is_file(), False also for a name the OS refuses (too long: OSError)."""
     try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise error(f"{path}: not valid YAML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"{path}: cannot read the {kind} file: {exc}") from None
+        return p.is_file()
+    except OSError:
+        return False
+
+
+def read_yaml(path: Path, kind: str, error: type[ValueError]) -> Any:
+    """The parsed content of a YAML file (perception.load_yaml: numbers as people write them,
+    size, depth and aliases bounded); `error` when it cannot be read or parsed."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_YAML_BYTES + 1)  # never more than load_yaml would take
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {kind} file: {exc.strerror or exc}") from None
+    return load_yaml(data, str(path), error)
 
 
 # -- validation (also used by experiment specs) ------------------------------------------------------------------------
@@ -178,17 +202,20 @@ class YamlFields:
         self.error = error
 
     def fail(self, key: str, msg: str) -> ValueError:
+        # A key may be a user's own name (a route, a scad parameter): shortened like a value.
+        key = key if len(key) <= 120 else key[:117] + "..."
         return self.error(f"{self.path}: {key}: {msg}")
 
     def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required=()) -> dict:
         if not isinstance(value, dict):
             raise self.fail(
-                key, f"expected a mapping with keys {', '.join(allowed)}, got {value!r}"
+                key, f"expected a mapping with keys {', '.join(allowed)}, got {short_repr(value)}"
             )
         unknown = [k for k in value if k not in allowed]
         if unknown:
+            name = unknown[0] if isinstance(unknown[0], str) else short_repr(unknown[0])
             raise self.fail(
-                f"{key}.{unknown[0]}" if key else str(unknown[0]),
+                f"{key}.{name}" if key else name,
                 f"unknown key; accepted keys: {', '.join(allowed)}",
             )
         for k in required:
@@ -202,17 +229,38 @@ class YamlFields:
             or not isinstance(value, int | float)
             or not math.isfinite(value)
         ):
-            raise self.fail(key, f"expected a finite number, got {value!r}")
+            raise self.fail(key, f"expected a finite number, got {short_repr(value)}")
         return float(value)
+
+    def integer(self, value: Any, key: str, minimum: int, maximum: int = MAX_SETTING_INT) -> int:
+        """An integer from minimum to maximum; a float without a fraction (`1e5`) is taken as
+        the integer it writes."""
+        whole = int(value) if isinstance(value, float) and value.is_integer() else value
+        if isinstance(whole, bool) or not isinstance(whole, int) or not minimum <= whole <= maximum:
+            raise self.fail(
+                key, f"expected an integer from {minimum} to {maximum}, got {short_repr(value)}"
+            )
+        return whole
+
+    def seed(self, value: Any, key: str) -> int:
+        """A seed: an integer from 0 to MAX_SEED."""
+        whole = int(value) if isinstance(value, float) and value.is_integer() else value
+        if isinstance(whole, bool) or not isinstance(whole, int) or not 0 <= whole <= MAX_SEED:
+            raise self.fail(
+                key,
+                f"expected a non-negative integer up to {MAX_SEED} (what OMPL's generator "
+                f"takes), got {short_repr(value)}",
+            )
+        return whole
 
     def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]:
         if not isinstance(value, list | tuple) or len(value) != n:
-            raise self.fail(key, f"expected a list of {n} numbers, got {value!r}")
+            raise self.fail(key, f"expected a list of {n} numbers, got {short_repr(value)}")
         return tuple(self.number(v, f"{key}[{i}]") for i, v in enumerate(value))
 
     def box(self, value: Any, key: str) -> tuple[tuple[float, float], tuple[float, float]]:
         if not isinstance(value, list | tuple) or len(value) != 2:
-            raise self.fail(key, f"expected [[xmin, ymin], [xmax, ymax]], got {value!r}")
+            raise self.fail(key, f"expected [[xmin, ymin], [xmax, ymax]], got {short_repr(value)}")
         lo, hi = self.vector(value[0], f"{key}[0]", 2), self.vector(value[1], f"{key}[1]", 2)
         if not (lo[0] < hi[0] and lo[1] < hi[1]):
             raise self.fail(key, f"min {lo} must be below max {hi} in x and y")
@@ -232,25 +280,41 @@ class YamlFields:
                 options = typing.get_args(hint)
                 if v not in options:
                     raise self.fail(
-                        f"{key}.{k}", f"{v!r} is not one of {', '.join(map(str, options))}"
+                        f"{key}.{k}",
+                        f"{short_repr(v)} is not one of {', '.join(map(str, options))}",
                     )
                 kwargs[k] = v
             elif hint is bool:
                 if not isinstance(v, bool):
-                    raise self.fail(f"{key}.{k}", f"expected true or false, got {v!r}")
+                    raise self.fail(f"{key}.{k}", f"expected true or false, got {short_repr(v)}")
                 kwargs[k] = v
             elif hint is int:
-                if isinstance(v, bool) or not isinstance(v, int):
-                    raise self.fail(f"{key}.{k}", f"expected an integer, got {v!r}")
-                kwargs[k] = v
+                kwargs[k] = self.integer(v, f"{key}.{k}", 1)
             elif hint is float:
                 kwargs[k] = self.number(v, f"{key}.{k}")
+            elif hint == float | None:  # e.g. planner.turning_radius: null is "none"
+                kwargs[k] = None if v is None else self.number(v, f"{key}.{k}")
             else:  # pragma: no cover - a config field type this loader does not know
                 raise self.fail(f"{key}.{k}", f"unsupported setting type {hint}")
             if isinstance(kwargs[k], float | int) and not isinstance(kwargs[k], bool):
                 if kwargs[k] <= 0:
-                    raise self.fail(f"{key}.{k}", f"must be positive, got {v!r}")
+                    raise self.fail(f"{key}.{k}", f"must be positive, got {short_repr(v)}")
         return cls(**kwargs)
+
+
+def _existing_file(ctx: YamlFields, name: str, key: str) -> Path:
+    """The file `name` (relative to the scene's folder) resolves to; refused when it is missing,
+    a folder, or no usable name (a NUL character, too long)."""
+    try:
+        source = (ctx.path.parent / name).resolve()
+        if source.is_file():
+            return source
+        missing = "is a folder, not a file" if source.is_dir() else "does not exist"
+    except (OSError, ValueError) as exc:  # ENAMETOOLONG, ELOOP; a NUL character
+        why = exc.strerror if isinstance(exc, OSError) else str(exc)
+        raise ctx.fail(key, f"{short_repr(name)} is not a usable file name ({why})") from None
+    shown = str(source) if len(str(source)) <= 200 else short_repr(name)
+    raise ctx.fail(key, f"file {shown} {missing}")
 
 
 def _pose(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
@@ -263,12 +327,17 @@ def _pose(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
 
 def _capture_of(ctx: YamlFields, data: dict, key: str) -> CaptureSettings:
     """A capture object's `perception:` settings, checked (file names relative to the scene)."""
+
+    def resolve(name: str) -> Path:
+        if "\0" in name:
+            raise CaptureError(f"intrinsics: {short_repr(name)} is not a file name (a NUL byte)")
+        return (ctx.path.parent / name).resolve()
+
     try:
-        return capture_settings(
-            data.get("perception") or {}, resolve=lambda p: (ctx.path.parent / p).resolve()
-        )
+        return capture_settings(data.get("perception") or {}, resolve=resolve)
     except CaptureError as exc:  # "field: what" -> "<file>: terrain[i].perception.field: what"
         field, _, what = str(exc).partition(": ")
+        what = what if len(what) <= 300 else what[:297] + "..."  # it may echo a whole value
         raise ctx.fail(f"{key}.perception.{field}", what) from None
 
 
@@ -282,7 +351,7 @@ def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
         raise ctx.fail(
             key,
             f"expected a positive number (0.001 for a model in millimetres) or a list of 3 "
-            f"positive numbers [x, y, z], got {value!r}",
+            f"positive numbers [x, y, z], got {short_repr(value)}",
         )
     return tuple(float(f) for f in factors)  # type: ignore[return-value]
 
@@ -302,10 +371,8 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         )
     kind = kinds[0]
     if not isinstance(data[kind], str):
-        raise ctx.fail(f"{key}.{kind}", f"expected a file name, got {data[kind]!r}")
-    source = (ctx.path.parent / data[kind]).resolve()
-    if not source.is_file():
-        raise ctx.fail(f"{key}.{kind}", f"file {source} does not exist")
+        raise ctx.fail(f"{key}.{kind}", f"expected a file name, got {short_repr(data[kind])}")
+    source = _existing_file(ctx, data[kind], f"{key}.{kind}")
     allowed = {"scad": (".scad",), "mesh": MESH_SUFFIXES, "capture": CAPTURE_SUFFIXES}[kind]
     if source.suffix.lower() not in allowed:
         raise ctx.fail(f"{key}.{kind}", f"{source.name}: expected a {' or '.join(allowed)} file")
@@ -319,13 +386,14 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         )
     if not isinstance(params, dict):
         raise ctx.fail(
-            f"{key}.params", f"expected a mapping of OpenSCAD variable overrides, got {params!r}"
+            f"{key}.params",
+            f"expected a mapping of OpenSCAD variable overrides, got {short_repr(params)}",
         )
     variables = scad_variables(source) if kind == "scad" else {}
     for name, v in params.items():
         if not isinstance(v, int | float | bool | str):
             raise ctx.fail(
-                f"{key}.params.{name}", f"expected a number, boolean or string, got {v!r}"
+                f"{key}.params.{name}", f"expected a number, boolean or string, got {short_repr(v)}"
             )
         problem = param_problem(name, v, variables, source.name)
         if problem:
@@ -337,10 +405,12 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
     norm = math.sqrt(sum(c * c for c in q))
-    if abs(norm - 1.0) > 1e-3:
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
         raise ctx.fail(
             f"{key}.orientation",
-            f"quaternion {list(q)} has norm {norm:.4f}; expected a unit quaternion [x, y, z, w]",
+            f"quaternion {list(q)} has norm {norm:.6g}; expected a unit quaternion [x, y, z, w] "
+            f"(norm within {QUATERNION_TOLERANCE:g} of 1), e.g. [0, 0, 0.7071, 0.7071] for 90 "
+            f"degrees about z",
         )
     return TerrainObject(
         source=source,
@@ -372,13 +442,17 @@ def load_scene(name_or_path: str | Path) -> Scene:
             "terrain", "expected a list of terrain objects (it may be empty only with a ground)"
         )
     robot = ctx.mapping(data.get("robot") or {}, "robot", ("start",))
-    routes = ctx.mapping(data.get("routes") or {}, "routes", tuple(data.get("routes") or {}))
-    seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ctx.fail("seed", f"expected a non-negative integer, got {seed!r}")
+    routes = data.get("routes") or {}
+    if not isinstance(routes, dict):
+        raise ctx.fail(
+            "routes",
+            f"expected a mapping of route names to [[xmin, ymin], [xmax, ymax]], "
+            f"got {short_repr(routes)}",
+        )
+    seed = ctx.seed(data.get("seed", 0), "seed")
     description = data.get("description", "")
     if not isinstance(description, str):
-        raise ctx.fail("description", f"expected a string, got {description!r}")
+        raise ctx.fail("description", f"expected a string, got {short_repr(description)}")
     scene = Scene(
         name=path.stem,
         path=path,

@@ -33,6 +33,10 @@ from ._scene import Scene, TerrainObject
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
+MAX_DEPTH_BELOW_GROUND = 1.0
+"""How deep the terrain may reach under the ground plane [m] before build_world warns: a model
+sunk a little into the floor is common; metres down is most often a wrong position z, units or
+orientation."""
 MAX_PLANNING_AREA = 400.0
 """Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
 and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
@@ -126,9 +130,48 @@ def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
     """All terrain objects of a scene merged into one mesh, world frame [m] (maybe empty)."""
     if not scene.terrain:
         return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-    mesh = trimesh.util.concatenate([load_terrain_object(o, scene.path) for o in scene.terrain])
+    meshes = [load_terrain_object(o, scene.path) for o in scene.terrain]
+    for obj, placed in zip(scene.terrain, meshes):
+        problem = below_ground_problem(placed, scene.ground)
+        if problem:
+            raise SceneError(f"{scene.path}: {obj.key}: {problem}")
+    mesh = trimesh.util.concatenate(meshes)
     mesh.merge_vertices()
     return mesh
+
+
+_RAISE_IT = "raise it with `position: [x, y, z]`, or give `ground: null` if it has its own floor"
+
+
+def below_ground_problem(mesh: trimesh.Trimesh, ground: float | None) -> str:
+    """Why a placed terrain object (world frame [m]) cannot be part of a world with a ground
+    plane at z = ground [m] (None: no plane): it lies entirely under the plane; else ""."""
+    if ground is None or len(mesh.faces) == 0:
+        return ""
+    top = float(mesh.bounds[1][2])
+    if top > ground:
+        return ""
+    return (
+        f"lies entirely under the ground plane: its top is at z = {top:.3g} m, "
+        f"{ground - top:.3g} m under the ground at z = {ground:g} m, so nothing of it can be "
+        f"stood on; {_RAISE_IT} in a scene file"
+    )
+
+
+def below_ground_note(mesh: trimesh.Trimesh, ground: float | None) -> str:
+    """A warning when the terrain (world frame [m]) reaches more than MAX_DEPTH_BELOW_GROUND
+    under the ground plane at z = ground [m], or "". Not refused: a height map or a model in
+    other units may do so on purpose (its part under the plane is hidden, and walked over)."""
+    if ground is None or len(mesh.faces) == 0:
+        return ""
+    low = float(mesh.bounds[0][2])
+    if ground - low <= MAX_DEPTH_BELOW_GROUND:
+        return ""
+    return (
+        f"warning: the terrain reaches {ground - low:.3g} m under the ground plane at "
+        f"z = {ground:g} m (its lowest point is at z = {low:.3g} m): the plane hides that part; "
+        f"if it is placed wrong, {_RAISE_IT} (or scale a model in other units)"
+    )
 
 
 def build_world(
@@ -144,7 +187,7 @@ def build_world(
     mesh: the scene's terrain if already built (build_terrain_mesh), not to build it twice."""
     robot = robot or RobotConfig()
     mesh = build_terrain_mesh(scene) if mesh is None else mesh
-    notes = []
+    notes = [note] if (note := below_ground_note(mesh, scene.ground)) else []
     if scene.bounds is None:
         if len(mesh.faces) == 0:
             raise SceneError(f"{scene.path}: give bounds: the scene has no terrain to take them from")
@@ -202,10 +245,23 @@ def pose_problem(world: World, pose: tuple[float, float, float]) -> str:
     """Why the robot cannot stand at pose (x [m], y [m], yaw [rad]), or "" if it can."""
     xy = np.asarray(pose[:2], dtype=np.float64)
     if not np.isfinite(world.heightfield.sample(xy)):
-        (x0, y0), (x1, y1) = world.heightfield.covered_bounds()
+        hf = world.heightfield
+        (x0, y0), (x1, y1) = hf.covered_bounds()
+        if not np.isfinite(x0):
+            return f"({xy[0]:g}, {xy[1]:g}) is off the terrain: there is no terrain in the bounds"
+        if not (x0 <= xy[0] <= x1 and y0 <= xy[1] <= y1):
+            return (
+                f"({xy[0]:g}, {xy[1]:g}) is off the terrain: nothing to stand on there; the "
+                f"terrain covers x in [{x0:.2f}, {x1:.2f}], y in [{y0:.2f}, {y1:.2f}]"
+            )
+        # Inside the terrain's extent: a hole or a gap between pieces; say where ground is.
+        j, i = np.nonzero(np.isfinite(hf.heights))
+        cells = np.column_stack([hf.x0 + i * hf.resolution, hf.y0 + j * hf.resolution])
+        near = cells[np.argmin(np.sum((cells - xy) ** 2, axis=1))]
         return (
-            f"({xy[0]:g}, {xy[1]:g}) is off the terrain: nothing to stand on there; the terrain "
-            f"covers x in [{x0:.2f}, {x1:.2f}], y in [{y0:.2f}, {y1:.2f}]"
+            f"({xy[0]:g}, {xy[1]:g}) is over a hole or gap in the terrain: nothing to stand on "
+            f"there; the nearest surface is {np.linalg.norm(near - xy):.2f} m away, at "
+            f"({near[0]:.2f}, {near[1]:.2f})"
         )
     hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
     state = np.asarray(pose, dtype=np.float64)

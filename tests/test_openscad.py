@@ -197,7 +197,10 @@ def test_the_sandbox_shows_the_model_folder_and_hides_the_rest():
         (model / "m.scad").write_text("cube(1);")
         (Path(home_dir) / "secret.txt").write_text("secret")
         (work / "secret.txt").write_text("secret")
-        argv = ["sh", "-c", f"cat m.scad; cat {home_dir}/secret.txt {tmp_dir}/secret.txt"]
+        # Shell built-ins only: the jail holds the program and its libraries, not `cat`.
+        read = 'while IFS= read -r line || [ -n "$line" ]; do printf %s "$line"; done < '
+        script = f"{read} m.scad; {read} {home_dir}/secret.txt; {read} {tmp_dir}/secret.txt"
+        argv = ["sh", "-c", script]
         out = subprocess.run(
             confined(argv, model, work), capture_output=True, text=True, cwd=model, check=False
         )
