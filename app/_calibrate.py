@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments import atomic_path, atomic_write
 from sim import (
     DriverConfig,
     RobotConfig,
@@ -37,7 +38,7 @@ def calibrate_turning(
     samples = turning_sweep(robot, sim, driver.omega0, ratios, duration)
     model = fit_turning(samples)
     out_dir.mkdir(parents=True, exist_ok=True)
-    with (out_dir / "turning.csv").open("w", newline="") as f:
+    with atomic_path(out_dir / "turning.csv") as tmp, tmp.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["motor_speed_ratio", "log_ratio", "distance_m", "revolutions",
                     "curvature_per_m", "duration_s"])  # fmt: skip
@@ -45,7 +46,8 @@ def calibrate_turning(
             w.writerow([f"{s.ratio:g}", f"{np.log(s.ratio):.6f}", f"{s.distance:.6f}",
                         f"{s.revolutions:.6f}", f"{s.curvature:.6f}", f"{s.duration:g}"])  # fmt: skip
     gain = model.gain_for(driver.r_path)
-    (out_dir / "turning_model.json").write_text(
+    atomic_write(
+        out_dir / "turning_model.json",
         json.dumps(
             {
                 "model": "curvature_per_m = slope * ln(motor_speed_ratio) + intercept",
@@ -61,9 +63,10 @@ def calibrate_turning(
             },
             indent=2,
         )
-        + "\n"
+        + "\n",
     )
-    _plot(out_dir / "turning.png", samples, model)
+    with atomic_path(out_dir / "turning.png") as tmp:
+        _plot(tmp, samples, model)
     return samples, model
 
 

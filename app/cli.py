@@ -3,19 +3,35 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
+import os
 import sys
 
 import numpy as np
 
-from experiments import ExperimentError
+from experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
 from perception import CaptureError
 from planning import PLANNER_NAMES, PlanningError
-from scenes import SceneError, list_scenes
+from scenes import MAX_SEED, SceneError, list_scenes
 from sim import SimError
 
-USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError, CaptureError)
+
+class UsageError(ValueError):
+    """A command-line value out of its range; the message names the flag, the value and the
+    range."""
+
+
+from app._choose_cli import add_choose_parser
+
+USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError, CaptureError, OutputError,
+               UsageError)  # fmt: skip
+MESH_WRITTEN = "a mesh roachplan wrote (it says so in its header)"
+"""What `mesh -o` and `scene build -o` replace without --force: their own earlier output."""
+FORCE_HELP = (
+    "replace an existing output file roachplan did not write (never an input of the command)"
+)
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -83,13 +99,27 @@ def _rerun_trial(args: argparse.Namespace) -> int:
 
 def _cmd_experiment(args: argparse.Namespace) -> int:
     import dataclasses
-    import os
     from concurrent.futures.process import BrokenProcessPool
     from pathlib import Path
 
-    from experiments import describe_best, load_experiment, read_manifest, run_experiment
+    from experiments import (
+        check_results_folder,
+        describe_best,
+        load_experiment,
+        read_manifest,
+        run_experiment,
+    )
 
+    cores = os.cpu_count() or 1
+    cluster = args.backend == "ray" and args.address is not None
+    if args.workers is not None and not cluster and args.workers > 4 * cores:
+        raise UsageError(f"--workers {args.workers}: this machine has {cores} cores; give at "
+                         f"most {4 * cores} local workers (or a Ray cluster's --address)")  # fmt: skip
+    if args.out is not None:  # refused before the spec's work, not after it
+        check_results_folder(Path(args.out), create=False)
     spec = load_experiment(args.spec)
+    if args.reference:
+        spec = _as_reference(spec)
     out = Path(args.out) if args.out else Path("results") / spec.name
     trials, repeats = args.trials, args.repeats
     if args.resume and (out / "manifest.json").is_file():  # continue as it was started
@@ -102,8 +132,7 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, best_path_repeats=repeats)
     trials = spec.default_trials if trials is None else trials
     # Ray with a cluster address: one worker per CPU of the cluster unless told.
-    cluster = args.backend == "ray" and args.address is not None
-    workers = args.workers or (None if cluster else os.cpu_count() or 1)
+    workers = args.workers if args.workers is not None else (None if cluster else cores)
     try:
         report = run_experiment(
             spec, trials=trials, out=out, workers=workers, resume=args.resume,
@@ -130,7 +159,11 @@ def _pose(text: str | None, flag: str) -> tuple[float, float, float] | None:
     try:
         x, y, yaw = (float(v) for v in text.split(","))
     except ValueError:
-        raise PlanningError(f"{flag} {text!r}: expected x,y,yaw_deg, e.g. 0,-1.6,90") from None
+        raise PlanningError(
+            f"{flag} {_clip(repr(text), 80)}: expected x,y,yaw_deg, e.g. 0,-1.6,90"
+        ) from None
+    if not all(map(math.isfinite, (x, y, yaw))):
+        raise PlanningError(f"{flag} {_clip(repr(text), 80)}: expected finite numbers x,y,yaw_deg")
     return (x, y, math.radians(yaw))
 
 
@@ -150,19 +183,27 @@ def _planner_config(scene, args: argparse.Namespace):
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from experiments import plan_many
     from scenes import build_world, load_scene
 
     if args.count < 1:
         raise PlanningError(f"--count {args.count}: must be 1 or more")
+    start, goal = _pose(args.start, "--start"), _pose(args.goal, "--goal")
     scene = _scene_options(load_scene(args.scene), args)
-    world = build_world(scene)
+    # --start/--goal replace the scene's own poses before the world is built, so a scene pose
+    # they replace is not checked; plan_path checks the poses it plans between, by their flags.
+    start_goal = (start or scene.start, goal or scene.goal)
+    replaced = (start or goal) is not None and None not in start_goal
+    if replaced:
+        scene = dataclasses.replace(scene, start=start or scene.start, goal=goal or scene.goal)
+    world = build_world(scene, check_poses=not replaced)
     for note in world.notes:
         print(f"roachplan: {note}", file=sys.stderr)
     scene = world.scene  # with the start and goal picked, if the scene file had none
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
-    start, goal = _pose(args.start, "--start"), _pose(args.goal, "--goal")
     plans = plan_many(world, args.count, seed=seed, start=start, goal=goal, planner=planner)
     rows = [
         {
@@ -215,12 +256,25 @@ def _scene_options(scene, args: argparse.Namespace):
         scene = scaled_scene(scene, args.scale)
     if getattr(args, "scad_timeout", None) is not None:
         scene = with_scad_timeout(scene, args.scad_timeout)
+    if getattr(args, "reference", False):
+        scene = _as_reference(scene)
     return scene
+
+
+def _as_reference(scene_or_spec):
+    """--reference: the report's raw paths and algorithms 1-2 (tables 7.1-7.3)."""
+    import dataclasses
+
+    from experiments._spec import reference_settings
+
+    planner, driver = reference_settings(scene_or_spec.planner, scene_or_spec.driver)
+    return dataclasses.replace(scene_or_spec, planner=planner, driver=driver)
 
 
 def _cmd_scene_check(args: argparse.Namespace) -> int:
     from scenes import build_world, load_scene
 
+    _scene_options(load_scene("flat"), args)  # a bad flag is refused once (exit 2), not per file
     failed = 0
     for name in args.files:
         try:
@@ -242,25 +296,45 @@ def _cmd_scene_check(args: argparse.Namespace) -> int:
 
 
 def _export_mesh(mesh, out) -> None:
-    """Write the mesh in the format out's suffix names, beside out and renamed: a failure
-    leaves no half-written file."""
-    import os
+    """Write the mesh in the format out's suffix names, atomically (a failure leaves no
+    half-written file), marked WRITTEN_BY where the format has room, so that a later -o may
+    replace it without --force."""
+    from experiments import atomic_write
 
-    tmp = out.with_name(f".{out.name}.part")
-    mesh.export(tmp, file_type=out.suffix.lower().lstrip("."))
-    os.replace(tmp, out)
+    fmt = out.suffix.lower().lstrip(".")
+    if fmt == "obj":
+        data = mesh.export(file_type="obj", header=WRITTEN_BY).encode()
+    elif fmt == "glb":
+        data = mesh.export(file_type="glb", tree_postprocessor=lambda tree: tree["asset"].update(
+            generator=f"{WRITTEN_BY} (trimesh)"))  # fmt: skip
+    else:
+        data = mesh.export(file_type=fmt)
+        if fmt == "stl":  # binary STL: 80 free bytes of header
+            data = WRITTEN_BY.encode().ljust(80, b" ") + data[80:]
+        elif fmt == "ply":  # a comment line after "ply" and "format ..."
+            first, second, rest = data.split(b"\n", 2)
+            data = b"\n".join((first, second, b"comment " + WRITTEN_BY.encode(), rest))
+    atomic_write(out, data)
+
+
+def _scene_inputs(scene) -> list:
+    """The files a scene is read from: never an output's target."""
+    files = [scene.path]
+    for o in scene.terrain:
+        files.append(o.source)
+        intrinsics = getattr(o.capture, "intrinsics", None)
+        if isinstance(intrinsics, str | os.PathLike):
+            files.append(intrinsics)
+    return files
 
 
 def _cmd_scene_build(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from scenes import build_terrain_mesh, load_scene
 
-    out = Path(args.output)
-    formats = (".stl", ".obj", ".ply", ".glb")
-    if out.suffix.lower() not in formats:
-        raise SceneError(f"{out}: the output must end in one of {', '.join(formats)}")
-    mesh = build_terrain_mesh(_scene_options(load_scene(args.scene), args))
+    scene = load_scene(args.scene)
+    out = check_output_file(args.output, suffixes=(".stl", ".obj", ".ply", ".glb"),
+                            inputs=_scene_inputs(scene), kind=MESH_WRITTEN, force=args.force)  # fmt: skip
+    mesh = build_terrain_mesh(_scene_options(scene, args))
     if len(mesh.faces) == 0:
         raise SceneError(f"scene {args.scene!r} has no terrain objects, only a ground plane")
     _export_mesh(mesh, out)
@@ -268,18 +342,29 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _numbers(text: str | None, flag: str, n: tuple[int, ...]) -> list[float] | None:
-    """'a,b,c' -> [a, b, c] with a count in n, or CaptureError naming the flag."""
+def _numbers(
+    text: str | None, flag: str, n: tuple[int, ...], error: type[Exception] = CaptureError
+) -> list[float] | None:
+    """'a,b,c' -> [a, b, c], finite, with a count in n, or `error` naming the flag, the value
+    and what is wrong with it."""
     if text is None:
         return None
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) not in n:
-        contiguous = len(n) > 2 and n == tuple(range(n[0], n[-1] + 1))
-        counts = f"{n[0]} to {n[-1]}" if contiguous else " or ".join(map(str, n))
-        raise CaptureError(f"{flag} {text!r}: expected {counts} comma-separated numbers")
+    contiguous = len(n) > 2 and n == tuple(range(n[0], n[-1] + 1))
+    counts = f"{n[0]} to {n[-1]}" if contiguous else " or ".join(map(str, n))
+    expected = f"expected {counts} comma-separated numbers"
+    parts = text.split(",")
+    if len(parts) not in n:
+        raise error(f"{flag} {_clip(repr(text), 80)}: {expected}, got {len(parts)}")
+    values = []
+    for part in parts:
+        try:
+            values.append(float(part))
+        except ValueError:
+            raise error(f"{flag} {_clip(repr(text), 80)}: {expected}; {_clip(repr(part), 40)} "
+                        f"is not a number") from None  # fmt: skip
+        if not math.isfinite(values[-1]):
+            raise error(f"{flag} {_clip(repr(text), 80)}: {expected}; {part.strip()} is not "
+                        f"a finite number")  # fmt: skip
     return values
 
 
@@ -324,7 +409,17 @@ def _capture_settings(args: argparse.Namespace):
     }
     crop = _numbers(getattr(args, "crop", None), "--crop", (6,))
     if crop:
+        swapped = [a for a, lo, hi in zip("xyz", crop[:3], crop[3:]) if not lo < hi]
+        if swapped:
+            raise CaptureError(
+                f"--crop {_clip(args.crop, 80)}: expected xmin,ymin,zmin,xmax,ymax,zmax [m] with "
+                f"each min below its max; not so for {', '.join(swapped)}"
+            )
         given["crop"] = [crop[:3], crop[3:]]
+    near_far = given["depth_range"]
+    if near_far is not None and not 0 <= near_far[0] < near_far[1]:
+        raise CaptureError(f"--depth-range {_clip(args.depth_range, 80)}: expected NEAR,FAR [m] "
+                           f"with 0 <= NEAR < FAR")  # fmt: skip
     settings = {k: v for k, v in given.items() if v is not None}
     try:
         return capture_settings(settings)
@@ -333,17 +428,13 @@ def _capture_settings(args: argparse.Namespace):
 
 
 def _cmd_mesh(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from perception import mesh_capture
 
-    out = Path(args.output)
-    formats = (".stl", ".ply", ".obj")
-    if out.suffix.lower() not in formats:
-        raise CaptureError(f"{out}: the output must end in one of {', '.join(formats)}")
-    if out.resolve() == Path(args.input).resolve():
-        raise CaptureError(f"{out}: the output would overwrite the input capture; name another file")
-    rec = mesh_capture(args.input, _capture_settings(args))
+    settings = _capture_settings(args)
+    out = check_output_file(args.output, suffixes=(".stl", ".ply", ".obj"),
+                            inputs=(args.input, args.intrinsics), kind=MESH_WRITTEN,
+                            force=args.force)  # fmt: skip
+    rec = mesh_capture(args.input, settings)
     _export_mesh(rec.mesh, out)
     report = {"input": args.input, "output": str(out), **rec.report()}
     if args.json:
@@ -371,8 +462,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
 
 
 def _cmd_voxel_study(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
+    from experiments import atomic_write
     from perception import load_capture
     from perception._voxel_study import (
         format_study,
@@ -399,6 +489,11 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
         if args.square is not None:
             raise CaptureError("pass either --square or --region, not both")
     settings = _capture_settings(args)
+    if args.csv is not None:  # before the study's work, not after it
+        header = study_csv([]).encode()  # a CSV that starts with the study's header: ours
+        check_output_file(args.csv, flag="--csv", suffixes=(".csv",),
+                          inputs=(args.capture, args.intrinsics), kind="a voxel-study table",
+                          replaceable=lambda head: head.startswith(header), force=args.force)  # fmt: skip
     cap = load_capture(args.capture, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
                        topic=settings.topic, units=settings.units)  # fmt: skip
     pts = cap.finite_points() - cap.sensor_origin
@@ -423,7 +518,7 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
     if warning is not None:
         print(f"roachplan: warning: {warning}", file=sys.stderr)
     if args.csv:
-        Path(args.csv).write_text(study_csv(rows))
+        atomic_write(args.csv, study_csv(rows))
         print(f"wrote {args.csv}", file=sys.stderr if args.json else sys.stdout)
     return 0
 
@@ -436,18 +531,27 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
     from scenes import build_terrain_mesh, load_scene
 
     scene = load_scene(args.scene)
+    eye = _numbers(args.eye, "--eye", (3,))
+    target = _numbers(args.target, "--target", (3,))
+    # A capture may be a real one, not ours to replace: an existing file needs --force.
+    inputs = (*_scene_inputs(scene), args.intrinsics)
+    out = check_output_file(args.output, suffixes=(".png", ".pcd", ".ply", ".npy"), inputs=inputs,
+                            replaceable=None, kind="a capture, perhaps a real one, is "
+                            "replaced only with --force", force=args.force)  # fmt: skip
+    if out.suffix.lower() == ".png":  # and its calibration beside it
+        check_output_file(out.with_suffix(".json"), flag="-o (the .png's sidecar)", inputs=inputs,
+                          replaceable=None, kind="a capture's calibration is replaced only "
+                          "with --force", force=args.force)  # fmt: skip
     mesh = build_terrain_mesh(scene)
     if scene.ground is not None:  # the endless floor, as a big square
         g = trimesh.creation.box((100.0, 100.0, 0.01))
         g.apply_translation((0, 0, scene.ground - 0.005))
         mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
     intr = load_intrinsics(args.intrinsics)
-    eye = _numbers(args.eye, "--eye", (3,))
-    target = _numbers(args.target, "--target", (3,))
     pose = look_at(eye, target)
     noise = NO_NOISE if args.no_noise else NoiseModel()
     depth = render_depth(mesh, intr, pose, noise, np.random.default_rng(args.seed))
-    written = save_depth(args.output, depth, intr, world_from_camera=pose)
+    written = save_depth(out, depth, intr, world_from_camera=pose)
     print(f"wrote {', '.join(map(str, written))}: {intr.width}x{intr.height}, "
           f"{np.mean(depth > 0) * 100:.1f} % of pixels measured, seed {args.seed}")  # fmt: skip
     return 0
@@ -474,7 +578,10 @@ def _add_perception_parsers(sub) -> None:
     p = sub.add_parser("mesh", help="capture (point cloud, depth image, bag) -> terrain mesh")
     p.add_argument("input", metavar="INPUT",
                    help=".pcd .ply .xyz .pts .npy .png .pgm .ppm .bag .db3 .mcap")  # fmt: skip
-    p.add_argument("-o", "--output", required=True, help="mesh file: .stl, .ply or .obj")
+    p.add_argument("-o", "--output", required=True,
+                   help="mesh file: .stl, .ply or .obj, in an existing folder; an existing file "
+                        "is replaced only if roachplan wrote it (else --force), never the input")  # fmt: skip
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--voxel", default=None, help="voxel size [m]: d or dx,dy,dz (default 0.01)")
     p.add_argument("--method", choices=METHODS, default=None, help="default: grid")
     p.add_argument("--camera-pose", default=None,
@@ -509,12 +616,15 @@ def _add_perception_parsers(sub) -> None:
                    help="use the points within this square around the optical axis [m]")  # fmt: skip
     p.add_argument("--region", default=None, metavar="X0,Y0,X1,Y1",
                    help="use the points with x0<=x<=x1, y0<=y<=y1 in the camera frame "
-                        "(x right, y down) [m]; write --region=-1,0,1,1 when x0 < 0")  # fmt: skip
+                        "(x right, y down) [m]")  # fmt: skip
     p.add_argument("--plane", action="store_true",
                    help="use only the dominant plane's points (RANSAC), e.g. a room's wall")
     p.add_argument("--seed", type=int, default=None, help="RANSAC seed of --plane (default 0)")
     p.add_argument("--json", action="store_true", help="print the study as JSON")
-    p.add_argument("--csv", default=None, help="also write the table as CSV")
+    p.add_argument("--csv", default=None,
+                   help="also write the table to this .csv file (an existing file is replaced "
+                        "only if it is a voxel-study table, else with --force)")  # fmt: skip
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--voxel", default=None, help=argparse.SUPPRESS)
     capture_flags(p)
     p.set_defaults(func=_cmd_voxel_study)
@@ -522,8 +632,11 @@ def _add_perception_parsers(sub) -> None:
     p = sub.add_parser("synth-capture", help="render a scene as a noisy Kinect v2 depth capture")
     p.add_argument("scene", metavar="SCENE", help="library scene name or scene .yaml")
     p.add_argument(
-        "-o", "--output", required=True, help=".png (+ .json sidecar), .pcd, .ply or .npy"
+        "-o", "--output", required=True,
+        help=".png (+ .json sidecar), .pcd, .ply or .npy in an existing folder; an existing "
+        "file is replaced only with --force",
     )
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--eye", required=True, help="camera position x,y,z [m]")
     p.add_argument("--target", required=True, help="point the camera looks at x,y,z [m]")
     p.add_argument("--intrinsics", default="kinect2-qhd", help=f"{', '.join(PRESETS)} or a file")
@@ -532,15 +645,29 @@ def _add_perception_parsers(sub) -> None:
     p.set_defaults(func=_cmd_synth_capture)
 
 
+CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json")
+"""What `calibrate-turning` writes in its --out folder."""
+
+
 def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from experiments import is_partial, prepare_output_folder
 
     from ._calibrate import calibrate_turning
 
-    ratios = [float(r) for r in args.ratios.split(",")]
-    if any(r < 1.0 for r in ratios) or len(ratios) < 2:
-        raise SimError(f"--ratios {args.ratios!r}: give two or more right/left ratios >= 1")
-    samples, model = calibrate_turning(Path(args.out), ratios=ratios, duration=args.duration)
+    ratios = _numbers(args.ratios, "--ratios", tuple(range(2, 33)), SimError)
+    if any(r < 1.0 for r in ratios):
+        raise SimError(f"--ratios {_clip(repr(args.ratios), 80)}: give two or more right/left "
+                       f"ratios >= 1")  # fmt: skip
+    # Its own earlier calibration may be replaced; a folder of anything else is refused.
+    def earlier_calibration(folder) -> bool:
+        return {n for n in os.listdir(folder) if not is_partial(n)} <= {*CALIBRATION_FILES}
+
+    out = prepare_output_folder(
+        args.out, flag="--out", owned=earlier_calibration,
+        accepts=f"--out takes a new or empty folder, or one holding only an earlier "
+        f"calibration ({', '.join(CALIBRATION_FILES)})",
+    )  # fmt: skip
+    samples, model = calibrate_turning(out, ratios=ratios, duration=args.duration)
     print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
     for s in samples:
         print(f"{s.ratio:6.2f} {s.distance:10.3f} {s.revolutions:7.3f} {s.curvature:13.3f}")
@@ -562,10 +689,15 @@ def _add_experiment_parser(sub) -> None:
     )
     p.add_argument("--trials", type=int, default=None,
                    help="total trials, split evenly over the spec's routes (default: the spec's)")  # fmt: skip
+    p.add_argument("--reference", action="store_true",
+                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
     p.add_argument(
         "--workers", type=int, default=None, help="parallel workers (default: all cores)"
     )
-    p.add_argument("--out", default=None, help="results folder (default: results/SPEC)")
+    p.add_argument("--out", default=None,
+                   help="results folder, created if new (default: results/SPEC); an existing one "
+                        "must be empty or hold a roachplan experiment (to --resume)")  # fmt: skip
     p.add_argument("--resume", action="store_true",
                    help="continue the experiment in --out (its --trials and --repeats by default)")  # fmt: skip
     p.add_argument("--repeats", type=int, default=None, help="re-drives of the best path")
@@ -578,14 +710,20 @@ def _add_experiment_parser(sub) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="roachplan",
         description="Plan a small hexapod's path across terrain with OMPL and test it in PyBullet.",
+        epilog="Outputs are written atomically and never over an input; -o replaces an existing "
+        "file only if roachplan wrote it (or with --force). Exit status: 0 done, 1 a run that "
+        "failed, 2 bad input.",
     )
+    parser.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an error (for a bug report)")  # fmt: skip
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("serve", help="start the browser app")
-    p.add_argument("--scene", default="double_bridge", help="library scene name or scene .yaml")
+    p.add_argument("--scene", default="double_bridge",
+                   help="library scene name, scene .yaml, or a terrain file (capture, mesh, .scad)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default: loopback only)")
     p.add_argument("--port", type=int, default=8080)
     p.set_defaults(func=_cmd_serve)
@@ -601,10 +739,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="from_dir", default=None, metavar="DIR",
                    help="re-run a trial of the experiment in DIR exactly (with --trial K)")  # fmt: skip
     p.add_argument("--trial", type=int, default=None, metavar="K", help="trial number in DIR")
+    p.add_argument("--reference", action="store_true",
+                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_trial)
 
     _add_experiment_parser(sub)
+    add_choose_parser(sub, terrain_help)
     _add_perception_parsers(sub)
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
@@ -623,13 +765,18 @@ def build_parser() -> argparse.ArgumentParser:
         ("optimize", "let optimizing planners refine to their budget"),
     ):
         p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None, help=what)
+    p.add_argument("--reference", action="store_true",
+                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser(
         "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"
     )
-    p.add_argument("--out", required=True, help="folder for turning.csv/.png/_model.json")
+    p.add_argument("--out", required=True,
+                   help="folder for turning.csv/.png/_model.json, created if new; an existing "
+                        "one must be empty or hold only an earlier calibration")  # fmt: skip
     p.add_argument("--ratios", default="1,1.25,1.5,1.75,2,2.5,3", help="right/left speed ratios")
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per ratio")
     p.set_defaults(func=_cmd_calibrate_turning)
@@ -647,22 +794,140 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=_cmd_scene_check)
     q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
     q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
-    q.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj, .ply or .glb")
+    q.add_argument("-o", "--output", required=True,
+                   help="mesh file: .stl, .obj, .ply or .glb, in an existing folder; an existing "
+                        "file is replaced only if roachplan wrote it (else --force), never an "
+                        "input")  # fmt: skip
     q.add_argument("--scale", type=float, default=None, metavar="S",
                    help="scale every terrain model by S before placing it (0.001: millimetres)")
     q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
                    help="time limit of each OpenSCAD render (default: the scene's, else 600)")
+    q.add_argument("--force", action="store_true", help=FORCE_HELP)
     q.set_defaults(func=_cmd_scene_build)
+    # --debug after the command too (`roachplan plan --debug`); SUPPRESS keeps the top level's
+    # value when it is not repeated there.
+    for command in _all_parsers(parser)[1:]:
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help=argparse.SUPPRESS)  # fmt: skip
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except USER_ERRORS as exc:
-        print(f"roachplan: error: {exc}", file=sys.stderr)
+def _all_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """parser and every (sub)command's parser under it."""
+    out = [parser]
+    for action in parser._actions:  # argparse has no public walk of its subcommands
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                out += _all_parsers(child)
+    return out
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its error messages bounded (it echoes a refused value whole), and a value
+    that starts with a negative number taken as a value: `--crop -1,-1,0,1,1,1`, not "expected
+    one argument" (no roachplan option looks like a number)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        import re
+
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d|\.\d)[\d.,eE+\-]*$")
+
+    def error(self, message: str):
+        super().error(_clip(message, 300))
+
+
+def _clip(text: str, limit: int = 2000) -> str:
+    """text, cut to at most about `limit` characters, saying how much was cut."""
+    text = str(text)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text) - limit} more characters)"
+
+
+MAX_PLAN_COUNT = 100
+"""`plan --count` at most: each path costs up to 3 plans (plan_many), each up to --time-limit."""
+MAX_RUN_SECONDS = 3600.0
+"""`plan --time-limit` and `calibrate-turning --duration` at most [s]."""
+INT_FLAGS = {  # argparse dest: (flag, lowest, highest or None)
+    "seed": ("--seed", 0, MAX_SEED),  # the scene files' range: what OMPL's generator takes
+    "count": ("--count", 1, MAX_PLAN_COUNT),
+    "trials": ("--trials", 1, None),
+    "workers": ("--workers", 1, None),
+    "repeats": ("--repeats", 0, None),
+    "trial": ("--trial", 0, None),
+    "port": ("--port", 1, 65535),
+}
+FLOAT_FLAGS = {  # argparse dest: (flag, above, at most or None, unit); --scale and
+    # --scad-timeout are the scenes package's to check (_scene_options)
+    "time_limit": ("--time-limit", 0.0, MAX_RUN_SECONDS, "s"),
+    "duration": ("--duration", 0.0, MAX_RUN_SECONDS, "s"),
+    "square": ("--square", 0.0, None, "m"),
+    "depth_scale": ("--depth-scale", 0.0, None, "units per metre"),
+}
+
+
+def check_flags(args: argparse.Namespace) -> None:
+    """Before any work: every numeric flag given is in its range, else UsageError naming the
+    flag, the value and the range."""
+    for dest, (flag, lo, hi) in INT_FLAGS.items():
+        v = getattr(args, dest, None)
+        if v is not None and not (lo <= v and (hi is None or v <= hi)):
+            accepted = f"from {lo} to {hi}" if hi is not None else f"{lo} or more"
+            raise UsageError(f"{flag} {_clip(str(v), 40)}: expected a whole number {accepted}")
+    for dest, (flag, lo, hi, unit) in FLOAT_FLAGS.items():
+        v = getattr(args, dest, None)
+        if v is not None and not (math.isfinite(v) and lo < v and (hi is None or v <= hi)):
+            accepted = f"above {lo:g}" + ("" if hi is None else f" and at most {hi:g}")
+            raise UsageError(f"{flag} {v:g}: expected a number {accepted} {unit}".rstrip())
+
+
+PATH_ERRNOS = {errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.EPERM, errno.EROFS,
+               errno.EEXIST, errno.ENAMETOOLONG, errno.ELOOP, errno.EINVAL, errno.EXDEV}  # fmt: skip
+"""OSErrors about a path the user gave (exit 2); others (a full disk, an I/O error) are a run
+that failed (exit 1)."""
+
+
+def report_error(exc: BaseException, debug: bool) -> int:
+    """Print exc as one bounded line (and its traceback with --debug); the exit status."""
+    if debug:
+        import traceback
+
+        traceback.print_exception(exc)
+    if isinstance(exc, USER_ERRORS):
+        print(f"roachplan: error: {_clip(exc)}", file=sys.stderr)
         return 2
+    if isinstance(exc, OSError):
+        where = f"{_clip(os.fsdecode(exc.filename), 300)}: " if exc.filename is not None else ""
+        print(f"roachplan: error: {where}{exc.strerror or _clip(exc, 300)}", file=sys.stderr)
+        return 2 if exc.errno in PATH_ERRNOS else 1
+    from planning._isolated import IsolationError
+
+    if isinstance(exc, IsolationError):  # a planning child hit its memory limit or crashed
+        print(f"roachplan: error: {_clip(exc, 600)}", file=sys.stderr)
+        return 1
+    if isinstance(exc, MemoryError):
+        print("roachplan: error: out of memory; try a smaller input or setting", file=sys.stderr)
+        return 1
+    # A bug of ours, not the user's input: say so in one line rather than hide it.
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    hint = "" if debug else "; re-run with --debug for the traceback"
+    print(f"roachplan: internal error: {type(exc).__name__}: {_clip(first, 300)}{hint} (please "
+          f"report it)", file=sys.stderr)  # fmt: skip
+    return 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Exit status: 0 done, 1 a run that failed, 2 bad input (the message says which and what
+    is accepted), 130 interrupted. No traceback unless --debug."""
+    args = build_parser().parse_args(argv)
+    debug = getattr(args, "debug", False)
+    try:
+        check_flags(args)
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("roachplan: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # every error ends in one line and an exit status: see main's doc
+        return report_error(exc, debug)
 
 
 if __name__ == "__main__":

@@ -2,8 +2,17 @@
 PyBullet, one at a time or as a parallel, resumable experiment with tables and figures."""
 
 from ._errors import ExperimentError as ExperimentError
+from ._errors import OutputError as OutputError
 from ._manifest import read_manifest as read_manifest
+from ._outputs import WRITTEN_BY as WRITTEN_BY
+from ._outputs import atomic_path as atomic_path
+from ._outputs import atomic_write as atomic_write
+from ._outputs import check_output_file as check_output_file
+from ._outputs import is_partial as is_partial
+from ._outputs import marked as marked
+from ._outputs import prepare_output_folder as prepare_output_folder
 from ._runner import ExperimentReport as ExperimentReport
+from ._runner import check_results_folder as check_results_folder
 from ._runner import describe_best as describe_best
 from ._runner import rerun_trial as rerun_trial
 from ._runner import run_experiment as run_experiment

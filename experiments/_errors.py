@@ -4,3 +4,9 @@
 class ExperimentError(ValueError):
     """An experiment spec, results folder or trial number is wrong; the message says where
     and what is accepted."""
+
+
+class OutputError(ValueError):
+    """An output file or results folder a command was given cannot be written without losing
+    something (an input, a file roachplan did not write) or cannot be written at all; the
+    message names the flag, the path and what would be accepted."""

@@ -6,18 +6,19 @@ import datetime
 import hashlib
 import importlib.metadata
 import json
-import os
 import platform
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from perception import short_repr
 from planning import PlannerConfig
 from scenes import World
 from sim import DriverConfig, SimConfig
 
 from ._errors import ExperimentError
+from ._outputs import atomic_write
 from ._spec import ExperimentSpec, config_from_json
 
 MANIFEST = "manifest.json"
@@ -83,22 +84,48 @@ def new_manifest(
 
 def write_manifest(out: Path, manifest: dict) -> None:
     """Write beside the target and rename: a kill never leaves half a manifest."""
-    tmp = out / f".{MANIFEST}.part"
-    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
-    os.replace(tmp, out / MANIFEST)
+    atomic_write(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+
+
+MAX_MANIFEST_BYTES = 256 * 2**20
+"""A manifest holds a line per trial: a million trials stay well within it."""
+MANIFEST_KEYS = ("format", "spec", "trials_total", "trials", "scene")
+"""Keys every roachplan experiment's manifest has: what tells it from another manifest.json."""
+
+
+def is_experiment(out: Path) -> bool:
+    """Whether the folder `out` holds a roachplan experiment (a manifest this roachplan reads)."""
+    try:
+        read_manifest(out)
+    except ExperimentError:
+        return False
+    return True
 
 
 def read_manifest(out: Path) -> dict:
     path = Path(out) / MANIFEST
     if not path.is_file():
         raise ExperimentError(f"{out}: no {MANIFEST}; not an experiment's results folder")
+    if path.stat().st_size > MAX_MANIFEST_BYTES:  # not ours: refuse before reading it all
+        raise ExperimentError(f"{path}: {path.stat().st_size} bytes, more than any roachplan "
+                              f"manifest ({MAX_MANIFEST_BYTES}); not an experiment's manifest")  # fmt: skip
     try:
         manifest = json.loads(path.read_text())
     except ValueError as exc:
-        raise ExperimentError(f"{path}: not valid JSON ({exc})") from None
+        raise ExperimentError(f"{path}: not valid JSON ({str(exc)[:200]})") from None
+    except OSError as exc:
+        raise ExperimentError(f"{path}: cannot be read ({exc.strerror})") from None
+    missing = [k for k in MANIFEST_KEYS if k not in manifest] if isinstance(manifest, dict) else (
+        list(MANIFEST_KEYS))  # fmt: skip
+    if missing:
+        raise ExperimentError(
+            f"{path}: not the manifest of a roachplan experiment (no {', '.join(missing)}); "
+            f"a results folder holds the manifest.json that `roachplan experiment` wrote"
+        )
     if manifest.get("format") != FORMAT:
         raise ExperimentError(
-            f"{path}: format {manifest.get('format')!r}; this roachplan reads format {FORMAT}"
+            f"{path}: format {short_repr(manifest.get('format'))}; this roachplan reads format "
+            f"{FORMAT}"
         )
     return manifest
 

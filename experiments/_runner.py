@@ -24,16 +24,17 @@ import numpy as np
 
 from scenes import build_world
 
-from ._errors import ExperimentError
-from ._figures import energy_figure, paths_figure
+from ._errors import ExperimentError, OutputError
 from ._manifest import (
     MANIFEST,
     check_same_spec,
     check_same_world,
+    is_experiment,
     new_manifest,
     read_manifest,
     write_manifest,
 )
+from ._outputs import atomic_path, atomic_write, prepare_output_folder
 from ._spec import ExperimentSpec, jitter_pose
 from ._store import REDRIVE, TRIAL, ResultStore
 from ._summary import (
@@ -46,6 +47,9 @@ from ._summary import (
 )
 
 STORE = "trials.jsonl"
+RESULTS_FOLDER = (
+    "--out takes a new or empty folder, or one holding a roachplan experiment (to --resume it)"
+)
 UNREACHABLE_AFTER = 100
 """The census gives up on the routes when one of them has no path after this many plans."""
 Backend = Literal["local", "ray"]
@@ -82,15 +86,13 @@ def run_experiment(
         raise ExperimentError(f"--workers {workers}: must be 1 or more")
     if workers is None and backend != "ray":
         raise ExperimentError("give the number of workers (only Ray can ask its cluster)")
+    check_results_folder(out)
     has_manifest = (out / MANIFEST).is_file()
     if has_manifest and not resume:
         raise ExperimentError(
             f"{out} already holds an experiment: pass --resume to continue it, or choose another "
             f"--out folder"
         )
-    if not has_manifest and (out / STORE).exists():
-        raise ExperimentError(f"{out}: has {STORE} but no {MANIFEST}; use another --out folder")
-    out.mkdir(parents=True, exist_ok=True)
     world = build_world(spec.scene_with_settings())
     if has_manifest:
         manifest = read_manifest(out)
@@ -128,6 +130,20 @@ def run_experiment(
         out=out, summaries=summaries, table=table, best=best,
         trials_stored=len(trial_recs), trials_run=ran,
     )  # fmt: skip
+
+
+def check_results_folder(out: Path, *, create: bool = True) -> Path:
+    """`out` as an experiment's results folder (created if new, unless create=False), or
+    OutputError: never into a folder of files we did not write (issue 15: a user's summary.csv
+    was lost), only a new or empty one or one holding a roachplan experiment."""
+    if (Path(out) / MANIFEST).is_file():  # say what is wrong with a manifest.json found there
+        try:
+            read_manifest(out)
+        except ExperimentError as exc:
+            raise OutputError(f"--out {exc}; {RESULTS_FOLDER}") from None
+    return prepare_output_folder(
+        out, flag="--out", owned=is_experiment, accepts=RESULTS_FOLDER, create=create
+    )
 
 
 def _make_pool(spec: ExperimentSpec, workers: int | None, backend: Backend, address: str | None):
@@ -270,19 +286,24 @@ def describe_best(best: dict | None) -> str:
 
 
 def _write_outputs(out: Path, *, spec, world, trials, summaries, best) -> None:
+    from ._figures import energy_figure, paths_figure  # matplotlib: 1.5 s of every CLI start
+
     title = f"{spec.name}: {spec.description}" if spec.description else spec.name
-    (out / "summary.csv").write_text(format_csv(summaries))
+    atomic_write(out / "summary.csv", format_csv(summaries))
     comparison = (
         compare_routes(summaries[0], summaries[1], trials) + "\n\n" if len(summaries) == 2 else ""
     )
-    (out / "summary.md").write_text(
+    atomic_write(
+        out / "summary.md",
         f"# {title}\n\n{format_markdown(summaries)}\n\n{comparison}"
         f"Energies in relative units (successful trials only; 1.0 = a straight walk on a flat "
-        f"floor from start to goal).\n\n{describe_best(best)}\n"
+        f"floor from start to goal).\n\n{describe_best(best)}\n",
     )
-    (out / "best_path.json").write_text(json.dumps(best, indent=1) + "\n")
-    paths_figure(out / "paths.png", world.heightfield, trials, best, title)
-    energy_figure(out / "energy.png", trials, [s.route for s in summaries], spec.name)
+    atomic_write(out / "best_path.json", json.dumps(best, indent=1) + "\n")
+    with atomic_path(out / "paths.png") as tmp:
+        paths_figure(tmp, world.heightfield, trials, best, title)
+    with atomic_path(out / "energy.png") as tmp:
+        energy_figure(tmp, trials, [s.route for s in summaries], spec.name)
 
 
 WALL_CLOCK_FIELDS = ("plan_time", "drive_wall_time")
