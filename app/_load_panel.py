@@ -1,8 +1,10 @@
 """The page's load panel: how the next capture is read (meshing, camera intrinsics, depth scale
-and range, a calibration file uploaded before its depth image), re-levelling the loaded capture
-(click its ground, or type the camera's height, pitch and roll), and reloading a model in
-millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the app's loop
-calls `handle` (and `upload`, `relevel_at_click`), which run on the loop thread.
+and range, a calibration file uploaded before its depth image), re-meshing the loaded capture
+with other settings (voxel, cell, method, depth range, a crop box) or re-levelling it (click its
+ground, or type the camera's height, pitch and roll) without uploading it again, the OpenSCAD
+time limit, and reloading a model in millimetres scaled by 0.001. Callbacks only put a PanelCmd
+on the app's queue; the app's loop calls `handle` (and `upload`, `relevel_at_click`), which
+start a load in the background (`app._load`).
 """
 
 from __future__ import annotations
@@ -14,15 +16,28 @@ from pathlib import Path
 
 import yaml
 
-from perception import PRESETS, CaptureError, load_calibration, mesh_capture
+from perception import METHODS, PRESETS, CaptureError, MeshingConfig, load_calibration, load_yaml
+from scenes import DEFAULT_TIMEOUT, MAX_TIMEOUT
 
-from ._relevel import CaptureView, relevel_at, repose, rewrite_capture_settings
+from ._relevel import (
+    CaptureView,
+    adopt_capture_scene,
+    relevel_at,
+    repose,
+    rewrite_capture_settings,
+)
 from ._uploads import DEPTH_IMAGE_SUFFIXES, MAX_UPLOAD_BYTES, safe_name, scene_from_upload
 
 NUMBERS = "numbers below"
 """The camera dropdown's entry that uses the fx, fy, cx, cy boxes."""
 DEFAULT_RANGE = (0.3, 8.0)
 """The pipeline's own depth range of a camera-frame capture [m] (not passed on unless changed)."""
+DEFAULTS = MeshingConfig()
+"""The pipeline's defaults, which `roachplan trial --scene CAPTURE` uses: the page's boxes start
+at them and pass on only what differs, so a capture loaded with them is the same scene (same
+terrain, same start and goal) as on the command line."""
+CAMERA_SUFFIXES = (*DEPTH_IMAGE_SUFFIXES, ".bag")
+"""Captures that a camera's intrinsics and depth scale apply to."""
 CALIBRATION_KEYS = ("camera_matrix", "K", "k", "fx", "intrinsic_matrix", "Camera.fx")
 """Keys by which an uploaded YAML is a camera calibration rather than a scene."""
 
@@ -30,7 +45,8 @@ CALIBRATION_KEYS = ("camera_matrix", "K", "k", "fx", "intrinsic_matrix", "Camera
 @dataclass(frozen=True)
 class PanelCmd:
     """A load-panel action: "scale" (reload in millimetres), "repose" (re-mesh with the typed
-    camera pose), "forget" (drop the pending calibration)."""
+    camera pose), "remesh" (re-mesh with the meshing boxes), "forget" (drop the pending
+    calibration)."""
 
     client_id: int | None
     action: str
@@ -48,21 +64,10 @@ def is_calibration_upload(name: str, data: bytes) -> bool:
     if text.lstrip().startswith("%YAML"):  # OpenCV's FileStorage header
         return True
     try:
-        raw = yaml.safe_load(data)
-    except yaml.YAMLError:
+        raw = load_yaml(data, name)
+    except ValueError:
         return False
     return isinstance(raw, dict) and "terrain" not in raw and any(k in raw for k in CALIBRATION_KEYS)
-
-
-def view_of_upload(scene) -> CaptureView | None:
-    """The reconstruction of an uploaded scene's one capture object (its camera pose, to
-    re-level it), or None for other scenes. Runs in the load child."""
-    captures = [o for o in scene.terrain if o.kind == "capture"]
-    if len(captures) != 1 or len(scene.terrain) != 1:
-        return None
-    rec = mesh_capture(captures[0].source, captures[0].capture)
-    return CaptureView(scene_path=Path(scene.path), world_from_camera=rec.world_from_camera,
-                       report=rec.report())  # fmt: skip
 
 
 def needs_millimetre_scale(message: str) -> bool:
@@ -80,10 +85,31 @@ class LoadPanel:
         self.view: CaptureView | None = None
         self.mm_offer: tuple[Path, str] | None = None
         """The scene file and label of an upload refused as millimetres."""
-        self.mesh_method = gui.add_dropdown("Capture meshing", ("grid", "poisson", "ball-pivot"))
-        self.voxel = gui.add_number("Voxel [m]", 0.02, min=0.005, max=0.2, step=0.005)
         self.scale_button = gui.add_button("Scale x0.001", visible=False,
                                            hint="Reload the model with `scale: 0.001` (millimetres to metres)")  # fmt: skip
+        self.scad_timeout = gui.add_number(
+            "OpenSCAD limit [s]", DEFAULT_TIMEOUT, min=1.0, max=MAX_TIMEOUT, step=10.0,
+            hint="An uploaded .scad (or .zip) render is stopped after this long",
+        )  # fmt: skip
+        with gui.add_folder("Meshing (captures)"):
+            self.mesh_method = gui.add_dropdown("Capture meshing", METHODS,
+                                                initial_value=DEFAULTS.method)  # fmt: skip
+            self.voxel = gui.add_number("Voxel [m]", DEFAULTS.voxel[0], min=0.002, max=2.0,
+                                        step=0.001)  # fmt: skip
+            self.cell = gui.add_number("Grid cell [m]", 0.0, min=0.0, max=5.0, step=0.001,
+                                       hint="Height field cell of the grid method; 0: the voxel")  # fmt: skip
+            self.near = gui.add_number("Depth near [m]", DEFAULT_RANGE[0], min=0.0, step=0.05)
+            self.far = gui.add_number("Depth far [m]", DEFAULT_RANGE[1], min=0.1, step=0.1)
+            self.crop = gui.add_checkbox(
+                "Crop", False, hint="Keep only the points inside the box (world frame: z up, the "
+                "ground at z = 0, as drawn; the loaded capture's bounds are filled in)",
+            )  # fmt: skip
+            self.crop_min = gui.add_vector3("Crop min [m]", (-1.0, -1.0, -1.0), step=0.01)
+            self.crop_max = gui.add_vector3("Crop max [m]", (1.0, 1.0, 1.0), step=0.01)
+            self.remesh_button = gui.add_button(
+                "Re-mesh loaded capture", disabled=True,
+                hint="Mesh the loaded capture again with these settings (no new upload)",
+            )  # fmt: skip
         with gui.add_folder("Camera (next capture)"):
             self.preset = gui.add_dropdown(
                 "Camera", (*PRESETS, NUMBERS), initial_value="kinect2-qhd",
@@ -98,8 +124,6 @@ class LoadPanel:
                 "Depth scale [units/m]", 0.0, min=0.0, step=1.0,
                 hint="0: the file's or calibration's, else 1000 (millimetres)",
             )  # fmt: skip
-            self.near = gui.add_number("Depth near [m]", DEFAULT_RANGE[0], min=0.0, step=0.05)
-            self.far = gui.add_number("Depth far [m]", DEFAULT_RANGE[1], min=0.1, step=0.1)
             self.calibration = gui.add_markdown(
                 "To use a calibration file, load it first (it is kept as the *pending "
                 "calibration*), then load its depth image."
@@ -123,6 +147,7 @@ class LoadPanel:
         self.preset.on_update(lambda ev: self._show_preset())
         self.scale_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "scale")))
         self.repose_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "repose")))
+        self.remesh_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "remesh")))
         self.forget_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "forget")))
 
     def _show_preset(self) -> None:
@@ -135,20 +160,41 @@ class LoadPanel:
 
     # settings of the next capture ---------------------------------------------------------------
 
-    def capture_settings(self) -> dict:
-        """The `perception:` block of the next uploaded capture (plain data)."""
-        out: dict = {"method": self.mesh_method.value, "voxel": float(self.voxel.value)}
-        if self.preset.value == NUMBERS:
-            out["intrinsics"] = {k: float(getattr(self, k).value) for k in ("fx", "fy", "cx", "cy")}
-        else:
-            out["intrinsics"] = self.preset.value
-        if float(self.depth_scale.value) > 0:
-            out["depth_scale"] = float(self.depth_scale.value)
+    def meshing_changes(self) -> dict:
+        """The meshing boxes as changes to a capture's `perception:` block: each setting at
+        the pipeline's default is None (left out), the others plain data."""
+        voxel, cell = round(float(self.voxel.value), 6), round(float(self.cell.value), 6)
         near, far = float(self.near.value), float(self.far.value)
-        if (near, far) != DEFAULT_RANGE:
-            if not 0 <= near < far:
-                raise CaptureError(f"depth range: near ({near:g} m) must be below far ({far:g} m)")
-            out["depth_range"] = [near, far]
+        if (near, far) != DEFAULT_RANGE and not 0 <= near < far:
+            raise CaptureError(f"depth range: near ({near:g} m) must be below far ({far:g} m)")
+        crop = None
+        if self.crop.value:
+            lo, hi = (tuple(round(float(v), 4) for v in b.value)
+                      for b in (self.crop_min, self.crop_max))  # fmt: skip
+            if not all(a < b for a, b in zip(lo, hi, strict=True)):
+                raise CaptureError(f"crop box: min {list(lo)} must be below max {list(hi)} in "
+                                   f"x, y and z (metres, as drawn)")  # fmt: skip
+            crop = [list(lo), list(hi)]
+        return {
+            "method": None if self.mesh_method.value == DEFAULTS.method else self.mesh_method.value,
+            "voxel": None if voxel == DEFAULTS.voxel[0] else voxel,
+            "cell": cell if cell > 0 else None,
+            "depth_range": None if (near, far) == DEFAULT_RANGE else [near, far],
+            "crop": crop,
+        }
+
+    def capture_settings(self, name: str) -> dict:
+        """The `perception:` block of an uploaded capture named `name` (plain data): only what
+        differs from the pipeline's defaults, and the camera only for depth images and bags."""
+        out = {k: v for k, v in self.meshing_changes().items() if v is not None}
+        if Path(name).suffix.lower() in CAMERA_SUFFIXES:
+            if self.preset.value == NUMBERS:
+                out["intrinsics"] = {k: float(getattr(self, k).value)
+                                     for k in ("fx", "fy", "cx", "cy")}  # fmt: skip
+            else:
+                out["intrinsics"] = self.preset.value
+            if float(self.depth_scale.value) > 0:
+                out["depth_scale"] = float(self.depth_scale.value)
         return out
 
     def keep_calibration(self, app, client_id, name: str, data: bytes) -> None:
@@ -180,12 +226,17 @@ class LoadPanel:
 
     # after a load ----------------------------------------------------------------------------
 
-    def show_capture(self, view: CaptureView | None) -> None:
-        """Show the loaded capture's camera (or that none is loaded); enable re-levelling."""
+    def show_capture(self, view: CaptureView | None, bounds=None) -> None:
+        """Show the loaded capture's camera (or that none is loaded); enable re-levelling and
+        re-meshing. bounds: (2, 3) of its terrain [m], the crop box's start when not cropping."""
         self.view = view
         has_camera = view is not None and view.has_camera
         for w in (self.height, self.pitch, self.roll, self.repose_button):
             w.disabled = not has_camera
+        self.remesh_button.disabled = view is None
+        if view is not None and bounds is not None and not self.crop.value:
+            self.crop_min.value = tuple(round(float(v) - 0.005, 2) for v in bounds[0])
+            self.crop_max.value = tuple(round(float(v) + 0.005, 2) for v in bounds[1])
         if view is None:
             self.capture_info.content = "No capture loaded."
             self.pick_ground.value = False
@@ -220,9 +271,25 @@ class LoadPanel:
         if is_calibration_upload(cmd.name, cmd.data):
             self.keep_calibration(app, cmd.client_id, cmd.name, cmd.data)
             return
-        path = scene_from_upload(cmd.name, cmd.data, app.upload_dir, self.capture_settings(),
-                                 calibration=self.calibration_for(cmd.name))  # fmt: skip
-        app._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
+        path = scene_from_upload(cmd.name, cmd.data, app.upload_dir, self.capture_settings(cmd.name),
+                                 calibration=self.calibration_for(cmd.name),
+                                 scad_timeout=float(self.scad_timeout.value))  # fmt: skip
+        label, what = f"upload: {cmd.name}", None
+        if Path(cmd.name).suffix.lower() in (".scad", ".zip"):
+            what = (f"Rendering {cmd.name} with OpenSCAD (limit "
+                    f"{float(self.scad_timeout.value):g} s)")  # fmt: skip
+        app._load(cmd, str(path), from_upload=True, label=label, what=what)
+
+    def _reload_with(self, app, cmd, changes: dict) -> None:
+        """Change the loaded capture's settings and load it again, in the background. Its scene
+        file is rewritten when the app wrote it; a library or command-line scene is never
+        rewritten: a copy is (adopt_capture_scene), and joins the scene picker."""
+        path, label = self.view.scene_path, app._picker_label()
+        if not path.resolve().is_relative_to(Path(app.upload_dir).resolve()):
+            folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
+            path, label = adopt_capture_scene(path, folder), f"edited: {path.stem}"
+        rewrite_capture_settings(path, changes)
+        app._load(cmd, str(path), from_upload=True, label=label)
 
     def relevel_at_click(self, app, cmd, p_world) -> None:
         """Re-mesh the loaded capture with its ground through the clicked world point."""
@@ -231,8 +298,7 @@ class LoadPanel:
             app._notify(cmd.client_id, "No capture loaded",
                         "Pick ground re-levels a capture loaded from a file.", error=True)  # fmt: skip
             return
-        rewrite_capture_settings(self.view.scene_path, relevel_at(self.view, p_world))
-        app._load(cmd, str(self.view.scene_path), from_upload=True, label=app._picker_label())
+        self._reload_with(app, cmd, relevel_at(self.view, p_world))
 
     def handle(self, app, cmd: PanelCmd) -> None:
         if cmd.action == "forget":
@@ -242,7 +308,7 @@ class LoadPanel:
         elif cmd.action == "scale" and self.mm_offer is not None:
             (path, label), self.mm_offer = self.mm_offer, None
             self.scale_button.visible = False
-            raw = yaml.safe_load(path.read_text())
+            raw = load_yaml(path.read_bytes(), path.name)
             for obj in raw["terrain"]:
                 obj["scale"] = 0.001
             for k in ("robot", "goal", "bounds"):
@@ -252,5 +318,10 @@ class LoadPanel:
         elif cmd.action == "repose" and self.view is not None and self.view.has_camera:
             changes = repose(self.view, float(self.height.value), float(self.pitch.value),
                              float(self.roll.value))  # fmt: skip
-            rewrite_capture_settings(self.view.scene_path, changes)
-            app._load(cmd, str(self.view.scene_path), from_upload=True, label=app._picker_label())
+            self._reload_with(app, cmd, changes)
+        elif cmd.action == "remesh":
+            if self.view is None:
+                app._notify(cmd.client_id, "No capture loaded",
+                            "Re-mesh works on a capture loaded from a file.", error=True)  # fmt: skip
+                return
+            self._reload_with(app, cmd, self.meshing_changes())

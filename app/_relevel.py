@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from perception import load_yaml
+
 _LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 """Columns: the level camera's x, y, z axes in the world (looking along world +y)."""
 
@@ -92,7 +94,7 @@ def rewrite_capture_settings(scene_path: Path, changes: dict) -> None:
     """Set (or, for None, remove) keys of the capture object's `perception:` block in an
     upload's scene file, and drop its start, goal and bounds (the terrain moves: they are
     picked again on the next load)."""
-    raw = yaml.safe_load(Path(scene_path).read_text())
+    raw = load_yaml(Path(scene_path).read_bytes(), Path(scene_path).name)
     obj = next(o for o in raw["terrain"] if "capture" in o)
     settings = dict(obj.get("perception") or {})
     for k, v in changes.items():
@@ -104,6 +106,33 @@ def rewrite_capture_settings(scene_path: Path, changes: dict) -> None:
     for k in ("robot", "goal", "bounds"):
         raw.pop(k, None)
     Path(scene_path).write_text(yaml.safe_dump(raw, sort_keys=False))
+
+
+def adopt_capture_scene(scene_path: Path, folder: Path) -> Path:
+    """A scene file in folder, which the app may rewrite, for a capture scene that came from
+    elsewhere (the library, `serve --scene`): the capture and a calibration file beside it by
+    absolute path, its perception settings and the scene's other keys kept; start, goal and
+    bounds left out (they are picked again)."""
+    from scenes import TERRAIN_SUFFIXES
+
+    scene_path = Path(scene_path).resolve()
+    if scene_path.suffix.lower() in TERRAIN_SUFFIXES:  # a capture file as a scene of its own
+        raw = {"description": f"{scene_path.name}, re-meshed in the page",
+               "terrain": [{"capture": str(scene_path)}], "ground": None}  # fmt: skip
+    else:
+        raw = load_yaml(scene_path.read_bytes(), scene_path.name)
+        obj = next(o for o in raw["terrain"] if "capture" in o)
+        obj["capture"] = str((scene_path.parent / obj["capture"]).resolve())
+        settings = obj.get("perception") or {}
+        intrinsics = settings.get("intrinsics")
+        if isinstance(intrinsics, str) and (scene_path.parent / intrinsics).is_file():
+            settings["intrinsics"] = str((scene_path.parent / intrinsics).resolve())
+        for k in ("robot", "goal", "bounds"):
+            raw.pop(k, None)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{scene_path.stem}.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
 
 
 def relevel_at(view: CaptureView, p_world) -> dict:

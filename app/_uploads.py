@@ -19,13 +19,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from perception import CAPTURE_SUFFIXES
-from scenes import LIBRARY, MESH_SUFFIXES, SceneError
+from perception import CAPTURE_SUFFIXES, load_yaml
+from scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
-SCAD_TIMEOUT = 60.0
-"""Time limit of an uploaded model's OpenSCAD render [s]."""
+SCAD_TIMEOUT = DEFAULT_TIMEOUT
+"""Default time limit of an uploaded model's OpenSCAD render [s] (the command line's; the
+page's load panel sets another)."""
 UPLOAD_SUFFIXES = tuple(
     sorted({".scad", ".yaml", ".yml", ".zip", *MESH_SUFFIXES, *CAPTURE_SUFFIXES})
 )
@@ -42,12 +43,13 @@ def safe_name(name: str) -> str:
 
 
 def scene_from_upload(
-    name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None
-) -> Path:
+    name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None,
+    scad_timeout: float = SCAD_TIMEOUT,
+) -> Path:  # fmt: skip
     """Write an uploaded file into a fresh folder under root and return the scene .yaml that
     uses it. capture: perception settings for captures (method, voxel, intrinsics, ...).
     calibration: a calibration file uploaded before a depth image (copied beside it and used as
-    its intrinsics).
+    its intrinsics). scad_timeout: the OpenSCAD time limit of a .scad or .zip [s].
 
     A .yaml is the scene itself; a .scad or mesh becomes a terrain object on a ground plane; a
     .zip holds a .scad (at its top level) with its includes and data files; a capture becomes a
@@ -77,7 +79,7 @@ def scene_from_upload(
     if suffix == ".zip":
         from ._archive import extract_scad_zip
 
-        obj = {"scad": extract_scad_zip(name, data, folder), "timeout": SCAD_TIMEOUT}
+        obj = {"scad": extract_scad_zip(name, data, folder), "timeout": scad_timeout}
     elif suffix == ".ply" and _ply_has_faces(data):
         obj = {"mesh": fname}
     elif suffix in CAPTURE_SUFFIXES:
@@ -88,9 +90,9 @@ def scene_from_upload(
                 calib = f"calibration-{calib}"
             shutil.copy(calibration, folder / calib)
             capture["intrinsics"] = calib
-        obj = {"capture": fname, "perception": capture}
+        obj = {"capture": fname, **({"perception": capture} if capture else {})}
     elif suffix == ".scad":
-        obj = {"scad": fname, "timeout": SCAD_TIMEOUT}
+        obj = {"scad": fname, "timeout": scad_timeout}
     else:
         obj = {"mesh": fname}
     is_capture = "capture" in obj
@@ -105,6 +107,36 @@ def scene_from_upload(
     return path
 
 
+def limit_uploads(server, max_bytes: int, refuse) -> None:
+    """Make a viser server refuse an upload larger than max_bytes when it starts (before its
+    parts are buffered), and drop one whose parts outgrow what it announced.
+    refuse(client_id, name, size) says so."""
+    from viser import _messages
+
+    gui = server.gui
+    ws = gui._websock_interface  # viser has no upload limit of its own (1.1)
+    start, part = gui._handle_file_transfer_start, gui._handle_file_transfer_part
+
+    def on_start(client_id, message) -> None:
+        if message.size_bytes > max_bytes:
+            refuse(client_id, message.filename, message.size_bytes)
+            return
+        start(client_id, message)
+
+    def on_part(client_id, message) -> None:
+        state = gui._current_file_upload_states.get(message.transfer_uuid)
+        if state is not None and state["transferred_bytes"] + len(message.content) > max_bytes:
+            gui._current_file_upload_states.pop(message.transfer_uuid, None)
+            refuse(client_id, state["filename"], state["transferred_bytes"] + len(message.content))
+            return
+        part(client_id, message)
+
+    ws.unregister_handler(_messages.FileTransferStartUpload, start)
+    ws.unregister_handler(_messages.FileTransferPart, part)
+    ws.register_handler(_messages.FileTransferStartUpload, on_start)
+    ws.register_handler(_messages.FileTransferPart, on_part)
+
+
 def _ply_has_faces(data: bytes) -> bool:
     head = data[:4096].split(b"end_header", 1)[0]
     m = re.search(rb"element face (\d+)", head)
@@ -113,10 +145,7 @@ def _ply_has_faces(data: bytes) -> bool:
 
 def _check_sources_inside(path: Path, folder: Path) -> None:
     """An uploaded scene may not reach outside its folder (absolute paths, '..')."""
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{path.name}: not valid YAML: {exc}") from None
+    raw = load_yaml(path.read_bytes(), path.name, SceneError)
     terrain = raw.get("terrain") if isinstance(raw, dict) else None
     for i, obj in enumerate(terrain if isinstance(terrain, list) else []):
         for kind in ("scad", "mesh", "capture"):
@@ -139,7 +168,7 @@ def prepare_upload_scene(scene_path: Path):
     from scenes import build_terrain_mesh, build_world, load_scene
     from scenes._autopose import auto_bounds
 
-    raw = yaml.safe_load(scene_path.read_text())
+    raw = load_yaml(scene_path.read_bytes(), scene_path.name, SceneError)
     scene = load_scene(scene_path)
     mesh = build_terrain_mesh(scene)
     notes = []

@@ -59,6 +59,7 @@ def test_upload_a_capture_and_the_terrain_changes(server_url, artifacts):
     capture = ROOT / "scenes" / "library" / "kinect_bridge_depth.png"
     with browser_pages(server_url) as (page,):
         assert "double_bridge" in title(page)
+        set_value(page, "Voxel [m]", "0.02")  # (a lighter mesh for software WebGL)
         upload(page, capture)  # a depth PNG: meshed with the page's camera preset (QHD)
         page.get_by_text(re.compile(r"Loaded kinect_bridge_depth")).wait_for(timeout=120_000)
         assert "kinect_bridge_depth" in title(page)
@@ -183,7 +184,7 @@ def test_cancel_a_batch_show_a_trial_and_the_roadmap(artifacts):
             set_value(page, "Workers", "2")
             page.get_by_role("button", name="Run trials").click()
             page.get_by_text(re.compile(r"1/40 trials")).wait_for(timeout=120_000)
-            page.get_by_role("button", name="Cancel").click()
+            page.get_by_role("button", name="Cancel batch").click()
             done = page.get_by_text(re.compile(r"Batch cancelled: \d+/40 trials"))
             done.wait_for(timeout=60_000)
             n = int(re.search(r"cancelled: (\d+)/40", done.inner_text()).group(1))

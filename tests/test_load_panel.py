@@ -46,6 +46,10 @@ def test_depth_png_with_its_calibration_uploaded_first(app, artifacts):
         shown = page.get_by_text(re.compile(r"Camera \d+\.\d\d m above the ground")).inner_text()
         height = float(re.search(r"Camera (\d+\.\d\d) m", shown).group(1))
         assert 0.35 < height < 0.5, shown
+        # Start and goal as `roachplan trial --scene depth_154.png` picks them: over a metre apart.
+        start, goal = app.world.scene.start, app.world.scene.goal
+        assert np.hypot(goal[0] - start[0], goal[1] - start[1]) >= 1.0, app.world.notes
+        page.get_by_text("Start and goal are valid.").wait_for(timeout=10_000)
         # Notifications and panels name the files, never the app's upload folders.
         assert str(app.upload_dir) not in page.content()
 
@@ -53,6 +57,7 @@ def test_depth_png_with_its_calibration_uploaded_first(app, artifacts):
 def test_click_the_floor_to_relevel_then_plan_and_drive(app, artifacts):
     pcd = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        set_value(page, "Voxel [m]", "0.02")  # (a lighter mesh for software WebGL)
         upload(page, pcd)
         page.get_by_text(re.compile(r"Loaded `?tutorials_region_growing")).wait_for(timeout=120_000)
         before = app.world.mesh.bounds.copy()

@@ -1,0 +1,135 @@
+"""A batch of trials from the page: N trials on W worker processes (the experiment's workers),
+fed by a thread of its own so that the page stays usable; each finished trial is handed to the
+app's loop through a queue. Cancel kills the workers at once (the trials in flight are lost).
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+
+from experiments import ExperimentSpec
+from experiments._workers import LocalPool
+
+
+@dataclass(eq=False)
+class Batch:
+    """A running batch of trials."""
+
+    total: int
+    done: int = 0
+    successes: int = 0
+    started: float = field(default_factory=time.monotonic)
+    """When it started (time.monotonic) [s]."""
+    results: queue.Queue = field(default_factory=queue.Queue)
+    """("trial", record) per finished trial, then ("done", how it ended)."""
+    cancelled: threading.Event = field(default_factory=threading.Event)
+    pool: LocalPool | None = None
+
+    @property
+    def elapsed(self) -> float:
+        return time.monotonic() - self.started
+
+    def progress(self) -> str:
+        """What the panel says while it runs."""
+        eta = self.elapsed / max(self.done, 1) * (self.total - self.done)
+        return (f"{self.done}/{self.total} trials, {self.successes} successes, ETA {eta:.0f} s "
+                f"({self.elapsed:.0f} s so far)")  # fmt: skip
+
+    def cancel(self) -> None:
+        """Stop now: no more trials are recorded; the workers are killed."""
+        self.cancelled.set()
+        if self.pool is not None:
+            self.pool.terminate()
+
+
+def start_batch(spec: ExperimentSpec, calls: list, workers: int) -> Batch:
+    """Run the calls on a pool of workers in a thread; returns the batch to follow."""
+    batch = Batch(total=len(calls))
+    threading.Thread(target=_feed, args=(batch, spec, calls, workers), name="roachplan-batch",
+                     daemon=True).start()  # fmt: skip
+    return batch
+
+
+def _feed(batch: Batch, spec: ExperimentSpec, calls: list, workers: int) -> None:
+    """Feeds the worker pool and passes each finished trial on."""
+    try:
+        batch.pool = LocalPool(spec, workers)
+        if batch.cancelled.is_set():  # cancelled while the pool was starting
+            batch.pool.terminate()
+        try:
+            for rec in batch.pool.run(calls):
+                if batch.cancelled.is_set():
+                    break
+                batch.results.put(("trial", rec))
+        finally:
+            batch.pool.close()
+        batch.results.put(("done", "cancelled" if batch.cancelled.is_set() else "finished"))
+    except Exception as exc:  # noqa: BLE001 - reported in the panel
+        batch.results.put(("done", "cancelled" if batch.cancelled.is_set() else f"failed: {exc}"))
+
+
+class BatchPanel:
+    """The Batch of trials folder: N, workers, Run trials, Cancel batch, a progress bar and
+    line."""
+
+    def __init__(self, gui, put) -> None:
+        from ._jobs import CancelCmd, RunTrialsCmd
+
+        self.batch: Batch | None = None
+        with gui.add_folder("Batch of trials"):
+            self.n = gui.add_number("Trials (N)", 20, min=1, max=1000, step=1)
+            self.workers = gui.add_number("Workers", os.cpu_count() or 1, min=1, max=64, step=1)
+            self.run_button = gui.add_button("Run trials")
+            self.cancel_button = gui.add_button("Cancel batch", disabled=True)
+            self.progress = gui.add_progress_bar(0.0)
+            self.status = gui.add_markdown("")
+        self.run_button.on_click(lambda ev: put(RunTrialsCmd(ev.client_id)))
+        self.cancel_button.on_click(lambda ev: put(CancelCmd(ev.client_id, "batch")))
+
+    def start(self, spec: ExperimentSpec, start, goal) -> None:
+        """spec.trials_per_route trials from spec.seed on, between these poses."""
+        n, workers = spec.trials_per_route, int(self.workers.value)
+        calls = [("trial", (k, spec.seed + k, "", None), {"start": start, "goal": goal})
+                 for k in range(n)]  # fmt: skip
+        self.batch = start_batch(spec, calls, workers)
+        self.run_button.disabled, self.cancel_button.disabled = True, False
+        self.progress.value = 0.0
+        self.status.content = f"Starting {n} trials on {workers} workers ..."
+
+    def drain(self, record) -> None:
+        """Pass each finished trial's record to record(trial); show the progress."""
+        b = self.batch
+        if b is None:
+            return
+        while True:
+            try:
+                kind, payload = b.results.get_nowait()
+            except queue.Empty:
+                break
+            if kind != "trial":
+                self.end(payload)
+                return
+            b.done += 1
+            b.successes += payload["outcome"] == "success"
+            record({k: v for k, v in payload.items() if k not in ("kind", "index", "target_route")})
+            self.progress.value = 100.0 * b.done / b.total
+        text = b.progress()
+        if b.done and self.status.content != text:  # (before the first: "Starting ...")
+            self.status.content = text
+
+    def cancel(self) -> None:
+        """Stop the batch now (its workers are killed)."""
+        if self.batch is not None:
+            self.batch.cancel()
+            self.end("cancelled")
+
+    def end(self, how: str) -> None:
+        b, self.batch = self.batch, None
+        self.status.content = (
+            f"Batch {how}: {b.done}/{b.total} trials, {b.successes} successes, {b.elapsed:.1f} s."
+        )
+        self.run_button.disabled, self.cancel_button.disabled = False, True

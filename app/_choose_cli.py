@@ -1,0 +1,190 @@
+"""`roachplan choose`: which path should the robot take (experiments/_choose.py), from the
+command line: a ranking table (or --json), progress on stderr, and with --out a results folder
+(choice.json, ranking.csv, rollouts.jsonl)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import sys
+
+
+def add_choose_parser(sub, terrain_help: str) -> None:
+    p = sub.add_parser(
+        "choose",
+        help="choose the path to take by simulation: K candidates raced under uncertainty",
+        description="Plan K distinct candidate paths, drive each many times in worlds drawn "
+        "from the uncertainty model (start pose, friction, motors, mass), and rank them by "
+        "P(success) with confidence intervals, then energy. Rollouts are spent where they "
+        "decide something: a candidate leaves the race once it is clearly beaten.",
+    )
+    p.add_argument("--scene", default="double_bridge_rough", help=terrain_help)
+    p.add_argument("--candidates", type=int, default=8, metavar="K", help="candidate paths (default 8)")
+    p.add_argument("--budget-s", type=float, default=None, metavar="T",
+                   help="wall-time budget [s] (default 60 unless --rollouts is given)")  # fmt: skip
+    p.add_argument("--rollouts", type=int, default=None, metavar="N",
+                   help="cap on rollouts over all candidates; with a cap and no time budget the "
+                        "same seed gives the same choice")  # fmt: skip
+    p.add_argument("--confidence", type=float, default=0.95, help="joint confidence (default 0.95)")
+    p.add_argument("--min-success", type=float, default=None, metavar="P",
+                   help="choose the lowest-energy path whose P(success) lower bound is >= P")
+    p.add_argument("--seed", type=int, default=None, help="seed of every draw (default: the scene's)")
+    p.add_argument("--reference", action="store_true",
+                   help="the report's raw paths and algorithms 1-2 instead of drivable plans "
+                        "and the tracking driver")  # fmt: skip
+    p.add_argument("--backend", choices=("local", "ray"), default="local")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores)")
+    p.add_argument("--validate", type=int, default=0, metavar="R",
+                   help="then drive every candidate R more times with fresh seeds and compare "
+                        "predicted with observed success (Brier score, reliability table)")  # fmt: skip
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="results folder: new, empty, or one an earlier choose wrote")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_choose)
+
+
+def _check(args: argparse.Namespace) -> None:
+    from experiments._choose import ChooseError
+
+    def bad(flag: str, value, accepted: str) -> ChooseError:
+        return ChooseError(f"{flag} {value}: {accepted}")
+
+    if not 1 <= args.candidates <= 64:
+        raise bad("--candidates", args.candidates, "give 1 to 64 candidate paths")
+    if args.rollouts is not None and args.rollouts < args.candidates:
+        raise bad("--rollouts", args.rollouts, f"give at least one per candidate ({args.candidates})")
+    if args.budget_s is not None and not (math.isfinite(args.budget_s) and args.budget_s > 0):
+        raise bad("--budget-s", args.budget_s, "give a positive number of seconds")
+    if not 0.5 <= args.confidence < 1:
+        raise bad("--confidence", args.confidence, "give a confidence in [0.5, 1), e.g. 0.95")
+    if args.min_success is not None and not 0 < args.min_success < 1:
+        raise bad("--min-success", args.min_success, "give a probability in (0, 1), e.g. 0.9")
+    if args.seed is not None and not 0 <= args.seed < 2**32:
+        raise bad("--seed", args.seed, f"give a seed in [0, {2**32 - 1}]")
+    if args.workers is not None and args.workers < 1:
+        raise bad("--workers", args.workers, "give 1 or more workers")
+    if args.validate < 0:
+        raise bad("--validate", args.validate, "give 0 or more repeats")
+
+
+def _fmt(v: float, digits: int = 2) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def ranking_table(choice) -> str:
+    rows = ["  #  route            n   P(success) [interval]   rel. energy [interval]   J/m    "
+            "CoT   time s  failures"]  # fmt: skip
+    for r in choice.ranking:
+        mark = "*" if r["candidate"] == choice.chosen else " "
+        fails = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "-"
+        rows.append(
+            f"{mark}{r['candidate']:>2}  {r['route'][:15]:<15} {r['rollouts']:>3}   "
+            f"{_fmt(r['p_success'])} [{_fmt(r['p_low'])}, {_fmt(r['p_high'])}]       "
+            f"{_fmt(r['relative_energy'])} [{_fmt(r['relative_energy_low'])}, "
+            f"{_fmt(r['relative_energy_high'])}]   {_fmt(r['energy_j_per_m'])}  "
+            f"{_fmt(r['cost_of_transport'], 1)}  {_fmt(r['drive_time_s'], 1):>6}  {fails}"
+            + (f"  (out: {r['out']})" if r["out"] else "")
+        )
+    return "\n".join(rows)
+
+
+def _csv(ranking: list[dict]) -> str:
+    buf = io.StringIO()
+    keys = [k for k in ranking[0] if k not in ("failures", "failed_at")] + ["failures"]
+    w = csv.writer(buf)
+    w.writerow(keys)
+    for r in ranking:
+        w.writerow([json.dumps(r[k]) if k == "failures" else
+                    (round(r[k], 6) if isinstance(r[k], float) else r[k]) for k in keys])  # fmt: skip
+    return buf.getvalue()
+
+
+def _jsonable(obj):
+    """numpy scalars and infinities as JSON has them (null for a bound that does not exist)."""
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if hasattr(obj, "item"):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def cmd_choose(args: argparse.Namespace) -> int:
+    import dataclasses
+    import os
+    from pathlib import Path
+
+    from experiments import atomic_write, prepare_output_folder
+    from experiments._choose import ChooseConfig, choose
+    from experiments._spec import reference_settings
+    from scenes import load_scene
+
+    _check(args)
+    out = None
+    if args.out is not None:  # refused before the work, not after it
+        out = prepare_output_folder(
+            args.out, flag="--out", owned=lambda p: (p / "choice.json").is_file(),
+            accepts="a new or empty folder, or one an earlier `roachplan choose` wrote",
+        )  # fmt: skip
+    scene = load_scene(args.scene)
+    if args.reference:
+        planner, driver = reference_settings(scene.planner, scene.driver)
+        scene = dataclasses.replace(scene, planner=planner, driver=driver)
+    budget = args.budget_s if args.budget_s is not None else (None if args.rollouts else 60.0)
+    cfg = ChooseConfig(
+        candidates=args.candidates, rollouts=args.rollouts, budget_s=budget,
+        confidence=args.confidence, min_success=args.min_success,
+        seed=scene.seed if args.seed is None else args.seed,
+    )  # fmt: skip
+
+    def progress(message: str, fraction: float) -> None:
+        bar = "#" * round(20 * fraction)
+        print(f"\rchoose [{bar:<20}] {message}   ", end="", file=sys.stderr, flush=True)
+
+    choice, checked = choose(
+        scene, cfg, workers=args.workers or os.cpu_count() or 1, backend=args.backend,
+        validate_repeats=args.validate, progress=progress,
+    )  # fmt: skip
+    print(file=sys.stderr)
+    result = _jsonable({
+        "scene": scene.name, "chosen": choice.chosen, "stopped": choice.stopped,
+        "rollouts": choice.rollouts, "wall_time_s": round(choice.wall_time, 2),
+        "seed": cfg.seed, "confidence": cfg.confidence, "min_success": cfg.min_success,
+        "turning_radius": scene.planner.turning_radius, "driver": scene.driver.kind,
+        "uncertainty": dataclasses.asdict(cfg.uncertainty),
+        "ranking": choice.ranking, "validation": checked,
+        "chosen_path": (choice.candidates[choice.chosen].path_xyz.tolist()
+                        if choice.chosen is not None else None),
+    })  # fmt: skip
+    if out is not None:
+        atomic_write(out / "choice.json", json.dumps(result, indent=1))
+        atomic_write(out / "ranking.csv", _csv(choice.ranking))
+        lines = [json.dumps(_jsonable(r)) for c in choice.candidates for r in c.rollouts]
+        atomic_write(out / "rollouts.jsonl", "\n".join(lines) + "\n")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{scene.name}: {choice.rollouts} rollouts in {choice.wall_time:.1f} s; "
+              f"{choice.stopped}\n")  # fmt: skip
+        print(ranking_table(choice))
+        if choice.chosen is None:
+            print("\nno candidate succeeded in any rollout: nothing to choose")
+        else:
+            print(f"\nchosen: candidate {choice.chosen} (*)")
+        if checked is not None:
+            inside = sum(r["inside"] for r in checked["candidates"])
+            print(f"\nvalidation, {checked['repeats']} fresh rollouts each: Brier score "
+                  f"{checked['brier']:.3f}; observed success inside the predicted interval for "
+                  f"{inside} of {len(checked['candidates'])} candidates")  # fmt: skip
+            for row in checked["reliability"]:
+                print(f"  predicted {row['bin']}: mean {row['mean_predicted']:.2f}, observed "
+                      f"{row['observed']:.2f} over {row['rollouts']} rollouts")  # fmt: skip
+        if out is not None:
+            print(f"\nwrote {out}/choice.json, ranking.csv, rollouts.jsonl")
+    return 0 if choice.chosen is not None else 1

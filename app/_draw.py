@@ -1,0 +1,121 @@
+"""What the page draws in the 3D scene: the terrain, the roach (a body box and six legs), the
+start and goal markers, paths and trajectories. Fixed roots: /terrain, /robot, /markers, /plans,
+/trajectories. Nodes are added once per world and then only moved.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scenes import World
+
+BLACK, BLUE = (0, 0, 0), (30, 90, 255)
+MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}
+INVALID = (220, 30, 30)
+TERRAIN_COLOUR = (196, 164, 120)
+
+
+def wxyz_from_xyzw(q) -> tuple[float, float, float, float]:
+    """PyBullet's xyzw quaternion as viser's wxyz."""
+    x, y, z, w = q
+    return (w, x, y, z)
+
+
+def yaw_wxyz(yaw: float) -> tuple[float, float, float, float]:
+    """A turn of yaw [rad] about +z as a wxyz quaternion."""
+    return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+
+
+def segments(points: np.ndarray) -> np.ndarray:
+    """(N, 3) polyline points -> (N - 1, 2, 3) float32 line segments."""
+    pts = np.asarray(points, dtype=np.float32)
+    return np.stack([pts[:-1], pts[1:]], axis=1)
+
+
+def on_surface(world: World, pose) -> tuple[float, float, float]:
+    """(x, y, z) of a pose's x, y on the terrain's surface [m] (z = 0 off the terrain)."""
+    z = float(world.heightfield.sample(np.array(pose[:2]))[()])
+    return (float(pose[0]), float(pose[1]), z if np.isfinite(z) else 0.0)
+
+
+def path_fraction(path_xy: np.ndarray, p_xy) -> float:
+    """How far along a path ((N, 2) [m]) the point nearest p_xy lies, 0-1 (by waypoint)."""
+    path_xy = np.asarray(path_xy)
+    if len(path_xy) < 2:
+        return 0.0
+    k = int(np.argmin(np.sum((path_xy - np.asarray(p_xy)[:2]) ** 2, axis=1)))
+    return k / (len(path_xy) - 1)
+
+
+class SceneView:
+    """The nodes of one world in the viser scene; marker moves call on_marker(event)."""
+
+    def __init__(self, scene) -> None:
+        self.scene = scene
+        self.robot_node = None
+        self.hip_nodes: list = []
+        self.controls: dict = {}
+        """Marker name ("start", "goal") -> the marker's transform control (drag it)."""
+        self.balls: dict = {}
+        """Marker name ("start", "goal") -> the marker's sphere (its colour says valid or not)."""
+
+    def show(self, world: World, on_marker) -> None:
+        """Replace everything drawn by this world, with the markers at its start and goal."""
+        s, scene, r = self.scene, world.scene, world.robot
+        for name in ("/terrain", "/plans", "/trajectories", "/robot", "/markers"):
+            s.remove_by_name(name)
+        s.set_up_direction("+z")
+        if len(world.mesh.faces):
+            s.add_mesh_simple("/terrain/mesh", world.mesh.vertices, world.mesh.faces,
+                              color=TERRAIN_COLOUR, flat_shading=True)  # fmt: skip
+        if scene.ground is not None:
+            (lo, hi) = np.asarray(scene.bounds)
+            size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
+            s.add_grid("/terrain/ground", width=float(size[0]), height=float(size[1]),
+                       cell_size=0.25, position=(*((lo + hi) / 2), scene.ground))  # fmt: skip
+        self.robot_node = s.add_box("/robot", color=(60, 60, 70),
+                                    dimensions=(r.body_length, r.body_width, r.body_height))  # fmt: skip
+        self.hip_nodes = []
+        for k, hip in enumerate(r.hip_positions):
+            hip_node = s.add_frame(f"/robot/hip{k}", show_axes=False, position=tuple(hip))
+            s.add_box(f"/robot/hip{k}/leg", color=(200, 80, 40),
+                      dimensions=(2 * r.leg_radius, 2 * r.leg_radius, r.leg_length),
+                      position=(0.0, 0.0, -r.leg_length / 2))  # fmt: skip
+            self.hip_nodes.append(hip_node)
+        self.controls, self.balls = {}, {}
+        for which, pose in (("start", scene.start), ("goal", scene.goal)):
+            ctl = s.add_transform_controls(
+                f"/markers/{which}", scale=0.25, disable_rotations=True,
+                active_axes=(True, True, False), position=on_surface(world, pose),
+                depth_test=False,
+            )  # fmt: skip
+            self.balls[which] = s.add_icosphere(f"/markers/{which}/ball", radius=0.03,
+                                                color=MARKER_COLOURS[which])  # fmt: skip
+            s.add_line_segments(f"/markers/{which}/heading", np.array([[[0, 0, 0.01], [0.12, 0, 0.01]]]),
+                                colors=MARKER_COLOURS[which], thickness=4.0, thickness_units="screen")  # fmt: skip
+            ctl.on_update(on_marker)
+            self.controls[which] = ctl
+
+    def show_robot(self, server, position, wxyz, leg_angles) -> None:
+        """Body pose (world frame, wxyz) and leg angles [rad] (rotations about body +y)."""
+        with server.atomic():
+            self.robot_node.position = position
+            self.robot_node.wxyz = wxyz
+            for node, q in zip(self.hip_nodes, leg_angles, strict=True):
+                node.wxyz = (math.cos(q / 2), 0.0, math.sin(q / 2), 0.0)
+
+    def draw(self, name: str, points, colour) -> None:
+        """A polyline ((N, 3) [m]) as one node of line segments."""
+        if len(points) >= 2:
+            self.scene.add_line_segments(name, segments(np.asarray(points)), colors=colour,
+                                         thickness=3.0, thickness_units="screen")  # fmt: skip
+
+    def draw_roadmap(self, world: World, graph: np.ndarray) -> None:
+        """The planner's roadmap or tree ((E, 2, 2) xy segments [m]), grey, on the surface."""
+        if len(graph):
+            z = world.heightfield.sample(graph.reshape(-1, 2)).reshape(-1, 2, 1)
+            segs = np.concatenate([graph, np.nan_to_num(z) + 0.003], axis=2).astype(np.float32)
+            self.scene.add_line_segments("/plans/roadmap", segs, colors=(150, 150, 150),
+                                         thickness=1.0, thickness_units="screen")  # fmt: skip

@@ -1,0 +1,291 @@
+"""What the page's callbacks enqueue (one frozen dataclass per command), and the work that runs
+outside the server's process: each plan, drive and scene load in a fresh child of a fork server
+(OMPL holds the GIL while it solves, and a fresh process is where its seed takes effect), which
+the loop follows without blocking and can kill at once (Cancel).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+from pathlib import Path
+
+from experiments import finish_trial, plan_many
+from perception import mesh_capture
+from scenes import World, build_world, load_scene
+
+from ._relevel import CaptureView
+
+# -- commands (what callbacks enqueue) ----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cmd:
+    client_id: int | None
+
+
+@dataclass(frozen=True)
+class PlanCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class DriveCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class ResetCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class BestPathCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class LoadSceneCmd(Cmd):
+    name: str
+
+
+@dataclass(frozen=True)
+class UploadCmd(Cmd):
+    name: str
+    data: bytes
+
+
+@dataclass(frozen=True)
+class PlaceCmd(Cmd):
+    ray_origin: tuple[float, float, float]
+    ray_direction: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class MarkersCmd(Cmd):
+    """A marker was dragged or a yaw slider moved: re-check start and goal."""
+
+
+@dataclass(frozen=True)
+class RunTrialsCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class ShowTrialCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class ExportCmd(Cmd):
+    pass
+
+
+@dataclass(frozen=True)
+class CancelCmd(Cmd):
+    """Cancel: "job" (the running plan, drive or best path, and what is queued behind it),
+    "load" (the scene being loaded) or "batch"."""
+
+    what: str
+
+
+NAMES = {PlanCmd: "Plan", DriveCmd: "Drive", ResetCmd: "Reset", BestPathCmd: "Best path",
+         PlaceCmd: "Click", MarkersCmd: "Marker check", RunTrialsCmd: "Run trials",
+         ShowTrialCmd: "Show trial"}  # fmt: skip
+"""How the page names a queued command."""
+
+
+# -- work in child processes --------------------------------------------------------------------
+
+_CTX = mp.get_context("forkserver")
+_CTX.set_forkserver_preload(["experiments._trial"])
+
+
+def _plan_job(conn, world: World, count: int, request: dict, deadline: float) -> None:
+    """request: plan_many's keyword arguments (seed, start, goal, planner); deadline: the end of
+    the whole plan's budget on time.monotonic() (CLOCK_MONOTONIC is one clock for every process
+    on Linux, so the budget counts from the click, not from this child's start)."""
+    try:
+        plan_many(world, count, **request, budget=max(0.0, deadline - time.monotonic()),
+                  on_attempt=lambda seed, lp: conn.send(("attempt", (seed, lp))))  # fmt: skip
+        conn.send(("done", None))
+    except Exception as exc:  # reported to the user as a notification
+        conn.send(("error", f"{exc}"))
+    conn.close()
+
+
+def _drive_job(conn, world: World, planned, start, goal) -> None:
+    try:
+        result = finish_trial(
+            world, planned, start=start, goal=goal, on_frame=lambda f: conn.send(("frame", f))
+        )
+        conn.send(("result", result))
+    except Exception as exc:
+        conn.send(("error", f"{exc}"))
+    conn.close()
+
+
+def _load_job(conn, ref: str, from_upload: bool) -> None:
+    try:
+        conn.send(("world", load_world(ref, from_upload=from_upload)))
+    except Exception as exc:
+        conn.send(("error", f"{exc}"))
+    conn.close()
+
+
+def _warm_job(conn) -> None:
+    conn.close()
+
+
+class Job:
+    """target(conn, *args) in a fresh child process: what it has sent so far, without blocking;
+    `cancel` kills it (and whatever it started) at once."""
+
+    def __init__(self, target, *args) -> None:
+        self.started = time.monotonic()
+        self._conn, child = _CTX.Pipe(duplex=False)
+        self._proc = _CTX.Process(target=target, args=(child, *args), daemon=True)
+        self._proc.start()
+        child.close()
+        self.done = False
+        """The child has closed its end (finished, failed or killed)."""
+
+    @property
+    def elapsed(self) -> float:
+        """Wall time since the job started [s]."""
+        return time.monotonic() - self.started
+
+    def poll(self, timeout: float = 0.0) -> list[tuple[str, object]]:
+        """The messages sent since the last poll, waiting up to timeout [s] for the first."""
+        out: list[tuple[str, object]] = []
+        if self.done:
+            time.sleep(timeout)  # (the caller's pace, as when waiting for a message)
+            return out
+        if not wait([self._conn], timeout):
+            return out
+        while not self.done and self._conn.poll():
+            try:
+                out.append(self._conn.recv())
+            except (EOFError, OSError):
+                self.done = True
+                self._proc.join(timeout=5)
+        return out
+
+    def cancel(self) -> None:
+        """Kill the child and every process under it, now."""
+        if self.done:
+            return
+        if self._proc.exitcode is None:  # (an exited child's pid may belong to another soon)
+            kill_tree(self._proc.pid)
+        self.done = True
+        self._conn.close()
+        self._proc.join(timeout=5)
+
+
+def run_to_end(target, *args) -> list[tuple[str, object]]:
+    """Every message of a job, once it has finished (for quick jobs)."""
+    job, out = Job(target, *args), []
+    while not job.done:
+        out += job.poll(timeout=1.0)
+    return out
+
+
+def _children() -> dict[int, list[int]]:
+    """Parent pid -> child pids of every process visible in /proc."""
+    out: dict[int, list[int]] = {}
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            try:
+                stat = Path(entry.path, "stat").read_text()
+            except OSError:
+                continue
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])  # (the name may hold spaces)
+            out.setdefault(ppid, []).append(int(entry.name))
+    return out
+
+
+def kill_tree(pid: int) -> None:
+    """SIGKILL a process and all its descendants. Not a process group: OpenSCAD runs in a
+    session of its own (so its time limit can kill it whole), which a group kill would miss.
+    The root is stopped first so that it starts nothing new while the tree is read."""
+    try:
+        os.kill(pid, signal.SIGSTOP)
+    except ProcessLookupError:
+        return
+    children, tree, todo = _children(), [], [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        tree += kids
+        todo += kids
+    for p in (pid, *tree):
+        try:
+            os.kill(p, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+# -- loading a scene ------------------------------------------------------------------------------
+
+
+@contextmanager
+def _recording_reconstructions():
+    """The capture reconstructions made while a world is built, as (source, settings, rec).
+    scenes meshes a capture through perception.mesh_capture and keeps only the mesh; the page
+    also shows the camera and ground that meshing found, and meshing again for them doubled
+    every capture load. scenes has no hook to hand the reconstruction out, so its module's
+    reference is wrapped for the duration (in a load's own process)."""
+    import scenes._world as world_module
+
+    made: list = []
+    original = getattr(world_module, "mesh_capture", None)
+    if original is None:  # scenes changed how it meshes: capture_view meshes once more
+        yield made
+        return
+
+    def recording(source, settings):
+        rec = original(source, settings)
+        made.append((Path(source), settings, rec))
+        return rec
+
+    world_module.mesh_capture = recording
+    try:
+        yield made
+    finally:
+        world_module.mesh_capture = original
+
+
+def capture_view(scene, made=()) -> CaptureView | None:
+    """The reconstruction of a scene's one capture object (its camera pose and report, to show
+    and re-level it), or None for other scenes; taken from `made` when it was recorded."""
+    captures = [o for o in scene.terrain if o.kind == "capture"]
+    if len(captures) != 1 or len(scene.terrain) != 1:
+        return None
+    obj = captures[0]
+    rec = next((r for src, cfg, r in made if src == Path(obj.source) and cfg == obj.capture),
+               None) or mesh_capture(obj.source, obj.capture)  # fmt: skip
+    return CaptureView(scene_path=Path(scene.path), world_from_camera=rec.world_from_camera,
+                       report=rec.report())  # fmt: skip
+
+
+def load_world(
+    ref: str, *, from_upload: bool, check_poses: bool = False
+) -> tuple[World, CaptureView | None]:
+    """The world of a scene (a library name, a scene file, a terrain file), with its standable
+    regions computed, and the view of its capture when it is one. from_upload: a scene file
+    the app wrote (prepare_upload_scene picks what it leaves out and writes it back).
+    check_poses: SceneError when its start or goal is not a place to stand (else the page
+    shows the markers red, with why)."""
+    from ._uploads import prepare_upload_scene
+
+    with _recording_reconstructions() as made:
+        if from_upload:
+            world = prepare_upload_scene(Path(ref))
+        else:
+            world = build_world(load_scene(ref), check_poses=check_poses)
+    world.regions  # noqa: B018 - computed here, once, and sent along
+    return world, capture_view(world.scene, made)

@@ -1,0 +1,132 @@
+"""Scene loading in the background: a load (meshing a capture, rendering OpenSCAD, picking start
+and goal) runs in a child while the current scene stays in use; its world replaces the current
+one when it is ready and nothing else is running. One load at a time: a new one replaces it.
+The Scene folder shows what is loading and for how long, with Cancel load.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from scenes import list_scenes
+
+from ._jobs import Cmd, Job, _load_job
+from ._load_panel import needs_millimetre_scale
+from ._uploads import public_message
+
+
+@dataclass(eq=False)
+class Loading:
+    """A scene load running in the background."""
+
+    job: Job
+    client_id: int | None
+    """Who asked for it (its notifications)."""
+    ref: str
+    """Library name or scene file."""
+    label: str
+    """The scene picker's name of it."""
+    from_upload: bool
+    """ref is a scene file the app wrote (and may write back into)."""
+    what: str
+    """What the panel says while it runs ("Loading ...", "Rendering ... with OpenSCAD")."""
+    result: tuple | None = None
+    """(World, CaptureView | None) once it arrived."""
+    error: str | None = None
+
+
+class BackgroundLoad:
+    """The load lane: its status line and Cancel load button in the Scene folder."""
+
+    def __init__(self, gui, put) -> None:
+        from ._jobs import CancelCmd
+
+        self.current: Loading | None = None
+        self.status = gui.add_markdown("")
+        self.cancel_button = gui.add_button("Cancel load", visible=False, color="red")
+        self.cancel_button.on_click(lambda ev: put(CancelCmd(ev.client_id, "load")))
+
+    def start(
+        self, cmd: Cmd, ref: str, *, from_upload: bool, label: str, what: str
+    ) -> Loading | None:
+        """Start loading; returns the load it replaced (stopped), if any."""
+        replaced = self.stop()
+        self.current = Loading(job=Job(_load_job, ref, from_upload), client_id=cmd.client_id,
+                               ref=ref, label=label, from_upload=from_upload, what=what)  # fmt: skip
+        self.cancel_button.visible = True
+        self.show()
+        return replaced
+
+    def stop(self) -> Loading | None:
+        """Kill the running load, if any (returns it)."""
+        ld, self.current = self.current, None
+        if ld is not None:
+            ld.job.cancel()
+        self.cancel_button.visible = False
+        return ld
+
+    def poll(self) -> Loading | None:
+        """The load, once it has a result or an error (it stays current until taken)."""
+        ld = self.current
+        if ld is None or ld.result is not None or ld.error is not None:
+            return ld
+        for kind, payload in ld.job.poll():
+            if kind == "error":
+                ld.error = str(payload)
+            else:
+                ld.result = payload
+        if ld.result is None and ld.error is None and ld.job.done:
+            ld.error = "the loading process ended without a result (out of memory?)"
+        if ld.result is None and ld.error is None:
+            self.show()
+        return ld if (ld.result is not None or ld.error is not None) else None
+
+    def take(self) -> Loading:
+        """The finished load, which is no longer current."""
+        ld, self.current = self.current, None
+        self.cancel_button.visible = False
+        return ld
+
+    def show(self, text: str | None = None) -> None:
+        ld = self.current
+        if text is None:
+            text = f"{ld.what} ... {ld.job.elapsed:.0f} s" if ld is not None else ""
+        if self.status.content != text:
+            self.status.content = text
+
+
+def report_failure(app, ld: Loading) -> None:
+    """A load failed: the current scene stays; say why (a model in millimetres is offered
+    Scale x0.001)."""
+    message = public_message(ld.error, app.upload_dir)
+    app.loading.show("")
+    app.status.content = f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays."
+    app.scene_picker.value = app._picker_label()
+    mm = ld.from_upload and needs_millimetre_scale(message)
+    app.load_panel.offer_scale((Path(ld.ref), ld.label) if mm else None)
+    if mm:
+        message += " Press Scale x0.001 (Scene folder) to load it in metres."
+    app._notify(ld.client_id, f"Could not load {ld.label}", message, error=True)
+
+
+def swap_in(app, ld: Loading) -> None:
+    """The loaded world replaces the current one."""
+    world, view = ld.result
+    app.load_panel.offer_scale(None)
+    app.world = world
+    if ld.from_upload or ld.label in app.files:
+        app.files[ld.label] = (ld.ref, ld.from_upload)
+        app.scene_picker.options = (*list_scenes(), *app.files)
+    app.scene_picker.value = app._picker_label()
+    app._next_seed = world.scene.seed
+    app._show_world()
+    app.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
+    took = ld.job.elapsed
+    app.loading.show("")
+    app.status.content = (
+        f"Loaded `{world.scene.name}` ({len(world.mesh.faces)} triangles) in {took:.1f} s."
+    )
+    if world.notes:
+        notes = public_message(" ".join(world.notes), app.upload_dir)
+        app._notify(ld.client_id, f"Loaded {ld.label}", notes)

@@ -1,0 +1,70 @@
+"""The Start and goal folder: what a click on the terrain places, the two markers' yaws, and why
+a marker is invalid (which validity condition, which leg), shown in red on the marker itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from planning import PlanningError
+from scenes import World, pose_problem
+
+from ._draw import INVALID, MARKER_COLOURS, SceneView, yaw_wxyz
+from ._jobs import MarkersCmd
+
+
+class StartGoal:
+    """The folder's widgets, over the markers drawn by a SceneView."""
+
+    def __init__(self, gui, put, view: SceneView) -> None:
+        self.view = view
+        with gui.add_folder("Start and goal"):
+            self.click_mode = gui.add_dropdown("Click places", ("nothing", "start", "goal"))
+            self.start_yaw = gui.add_slider("Start yaw [deg]", -180, 180, 1, 90)
+            self.goal_yaw = gui.add_slider("Goal yaw [deg]", -180, 180, 1, 90)
+            self.validity = gui.add_markdown("")
+        for slider in (self.start_yaw, self.goal_yaw):
+            slider.on_update(lambda ev: put(MarkersCmd(ev.client_id)))
+
+    def reset(self, world: World) -> None:
+        """The yaws of a newly shown world's start and goal (the markers are at them)."""
+        self.start_yaw.value = round(math.degrees(world.scene.start[2]))
+        self.goal_yaw.value = round(math.degrees(world.scene.goal[2]))
+
+    def pose(self, which: str) -> tuple[float, float, float]:
+        """The marker "start" or "goal" as (x [m], y [m], yaw [rad])."""
+        x, y = (float(v) for v in self.view.controls[which].position[:2])
+        yaw = self.start_yaw.value if which == "start" else self.goal_yaw.value
+        return (x, y, math.radians(float(yaw)))
+
+    def check(self, world: World) -> bool:
+        """Colour each marker (red when invalid), turn it to its yaw, say why it is invalid;
+        whether both are valid."""
+        lines = []
+        for which in ("start", "goal"):
+            pose = self.pose(which)
+            problem = pose_problem(world, pose)
+            (lo, hi) = world.scene.bounds
+            if not problem and not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
+                problem = (f"outside the planning area x in [{lo[0]:g}, {hi[0]:g}], "
+                           f"y in [{lo[1]:g}, {hi[1]:g}]")  # fmt: skip
+            colour = INVALID if problem else MARKER_COLOURS[which]
+            if tuple(self.view.balls[which].color) != colour:
+                self.view.balls[which].color = colour
+            wxyz = yaw_wxyz(pose[2])
+            if not np.allclose(self.view.controls[which].wxyz, wxyz):  # (a change calls back)
+                self.view.controls[which].wxyz = wxyz
+            if problem:
+                lines.append(f"**{which} invalid**: {problem}")
+        text = "  \n".join(lines) or "Start and goal are valid."
+        if self.validity.content != text:
+            self.validity.content = text
+        return not lines
+
+    def valid_poses(self, world: World) -> tuple[tuple, tuple]:
+        """(start, goal); PlanningError saying why when either is invalid."""
+        if not self.check(world):
+            raise PlanningError(self.validity.content.replace("**", ""))
+        return self.pose("start"), self.pose("goal")
