@@ -39,6 +39,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_experiment.py
 	$(BIN)/python benchmarks/bench_perception.py
 	$(BIN)/python benchmarks/bench_app.py
+	$(BIN)/python benchmarks/bench_drivable.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

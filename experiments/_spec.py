@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from perception import short_repr
 from planning import PlannerConfig
 from scenes import (
     TERRAIN_SUFFIXES,
@@ -94,8 +95,8 @@ def resolve_experiment(name_or_path: str | Path) -> Path:
     return resolve_in_library(name_or_path, LIBRARY, "experiment", ExperimentError)
 
 
-_KEYS = ("description", "scene", "planner", "sim", "driver", "routes", "trials_per_route",
-         "seed", "max_plans", "best_path")  # fmt: skip
+_KEYS = ("description", "scene", "reference", "planner", "sim", "driver", "routes",
+         "trials_per_route", "seed", "max_plans", "best_path")  # fmt: skip
 
 
 def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
@@ -107,9 +108,11 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     if not isinstance(data["scene"], str):
         raise f.fail(
             "scene", f"expected a library scene name, a scene .yaml or a terrain file (a capture, "
-            f"mesh or .scad), got {data['scene']!r}"
+            f"mesh or .scad), got {short_repr(data['scene'])}"
         )
     scene_ref = data["scene"]
+    if "\0" in scene_ref:
+        raise f.fail("scene", f"{short_repr(scene_ref)} is not a file name (a NUL character)")
     if Path(scene_ref).suffix.lower() in (".yaml", ".yml", *TERRAIN_SUFFIXES):
         scene_ref = str((path.parent / scene_ref).resolve())  # a scene file or a terrain file
     try:
@@ -119,43 +122,55 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     routes = data.get("routes") or []
     known = [name for name, _ in scene.routes]
     if not isinstance(routes, list) or not all(isinstance(r, str) for r in routes):
-        raise f.fail("routes", f"expected a list of route names, got {routes!r}")
+        raise f.fail("routes", f"expected a list of route names, got {short_repr(routes)}")
     for r in routes:
         if r not in known:
             raise f.fail(
-                "routes", f"{r!r} is not a route of scene {scene.name} (it has: "
+                "routes", f"{short_repr(r)} is not a route of scene {scene.name} (it has: "
                 f"{', '.join(known) or 'none'})"
             )  # fmt: skip
     if len(set(routes)) != len(routes):
-        raise f.fail("routes", f"a route is listed twice: {routes}")
+        raise f.fail("routes", f"a route is listed twice: {short_repr(routes)}")
     best = f.mapping(data.get("best_path") or {}, "best_path", ("repeats", "jitter"))
     jitter = f.vector(best.get("jitter", [0.01, 3.0]), "best_path.jitter", 2)
     if min(jitter) < 0:
         raise f.fail("best_path.jitter", f"expected [metres, degrees] >= 0, got {list(jitter)}")
     description = data.get("description", "")
     if not isinstance(description, str):
-        raise f.fail("description", f"expected a string, got {description!r}")
+        raise f.fail("description", f"expected a string, got {short_repr(description)}")
+    planner = _override(f, scene.planner, data.get("planner"), "planner")
+    driver = _override(f, scene.driver, data.get("driver"), "driver")
+    reference = data.get("reference", False)
+    if not isinstance(reference, bool):
+        raise f.fail("reference", f"expected true or false, got {short_repr(reference)}")
+    if reference:
+        planner, driver = reference_settings(planner, driver)
     return ExperimentSpec(
         name=path.stem,
         path=path,
         description=description,
         scene=scene.path,
-        planner=_override(f, scene.planner, data.get("planner"), "planner"),
+        planner=planner,
         sim=_override(f, scene.sim, data.get("sim"), "sim"),
-        driver=_override(f, scene.driver, data.get("driver"), "driver"),
+        driver=driver,
         routes=tuple(routes),
         trials_per_route=_count(f, data.get("trials_per_route", 20), "trials_per_route", 1),
-        seed=_count(f, data.get("seed", scene.seed), "seed", 0),
+        seed=f.seed(data.get("seed", scene.seed), "seed"),
         max_plans=_count(f, data.get("max_plans", 1000), "max_plans", 1),
         best_path_repeats=_count(f, best.get("repeats", 10), "best_path.repeats", 0),
         best_path_jitter=jitter,  # type: ignore[arg-type]
     )
 
 
+def reference_settings(planner: PlannerConfig, driver: DriverConfig):
+    """(planner, driver) as the report ran them: the planner's raw path (no drivable smoothing)
+    and algorithms 1-2 (`reference: true`, `--reference`), for tables 7.1-7.3."""
+    return (dataclasses.replace(planner, turning_radius=None),
+            dataclasses.replace(driver, kind="reference"))  # fmt: skip
+
+
 def _count(f: YamlFields, value: Any, key: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise f.fail(key, f"expected an integer >= {minimum}, got {value!r}")
-    return value
+    return f.integer(value, key, minimum)
 
 
 def _override(f: YamlFields, base: Any, changes: Any, key: str) -> Any:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-FAILURES = ("fell", "flipped", "stuck", "timeout", "no_path")
+FAILURES = ("fell", "flipped", "stuck", "timeout", "missed", "no_path")
 NO_PATH_ROUTE = "(no path)"
 
 

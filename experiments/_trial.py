@@ -15,7 +15,10 @@ from planning import PlannerConfig, PlanResult, plan_path
 from scenes import World
 from sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
 
-TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "no_path"]
+TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "missed", "no_path"]
+MIN_ATTEMPT_TIME = 0.05
+"""plan_many starts no attempt with less of its budget left than this [s]: a plan's own set-up
+takes about that long."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,6 +54,12 @@ class TrialResult:
     """Planned waypoints x, y, z [m] (z on the terrain surface)."""
     trajectory: tuple[tuple[float, float, float, float], ...]
     """Driven body positions t [s], x, y, z [m]."""
+    turning_radius: float | None = None
+    """The path was made drivable with arcs of this radius [m]; None: the planner's raw path
+    (the report's)."""
+    driver: str = "reference"
+    """Path follower: "tracking" (pure pursuit) or "reference" (Tong 2018, algorithms 1-2).
+    Records from before drivers could be chosen were all driven by the reference one."""
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
@@ -100,27 +109,43 @@ def plan_many(
     planner: PlannerConfig | None = None,
     max_attempts: int | None = None,
     min_separation: float = 0.02,
+    budget: float | None = None,
+    on_attempt: Callable[[int, LabelledPlan | None], None] | None = None,
 ) -> list[LabelledPlan]:
     """Up to `count` distinct paths, planned with seeds seed, seed + 1, ... (each path's own
     seed re-plans it alone), each labelled with its route (World.route).
 
     Distinct: the mean distance between two paths, resampled at 50 points by arc length, is at
-    least min_separation [m]. Stops after max_attempts plans (default 3 count + 10).
+    least min_separation [m]. Stops after max_attempts plans (default 3 count + 10), or when
+    `budget` [s wall] is spent: the budget covers every attempt (each gets what is left of it,
+    at most the planner's time_limit), not each one. on_attempt(seed, new_plan_or_None) is
+    called after each attempt (progress).
     """
     out: list[LabelledPlan] = []
     shapes: list[np.ndarray] = []
     attempts = max_attempts if max_attempts is not None else 3 * count + 10
+    cfg = planner or world.scene.planner
+    deadline = None if budget is None else time.monotonic() + budget
     for k in range(attempts):
         if len(out) == count:
             break
-        planned = plan(world, seed=seed + k, start=start, goal=goal, planner=planner)
-        if not planned.found:
-            continue
-        shape = _resample(planned.path_xyz[:, :2], 50)
-        if any(np.mean(np.linalg.norm(shape - s, axis=1)) < min_separation for s in shapes):
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left < MIN_ATTEMPT_TIME:
+                break
+            cfg = dataclasses.replace(cfg, time_limit=min(cfg.time_limit, left))
+        planned = plan(world, seed=seed + k, start=start, goal=goal, planner=cfg)
+        shape = _resample(planned.path_xyz[:, :2], 50) if planned.found else None
+        if shape is None or any(
+            np.mean(np.linalg.norm(shape - s, axis=1)) < min_separation for s in shapes
+        ):
+            if on_attempt is not None:
+                on_attempt(seed + k, None)
             continue
         shapes.append(shape)
         out.append(LabelledPlan(route=world.route(planned.path_xyz[:, :2]), plan=planned))
+        if on_attempt is not None:
+            on_attempt(seed + k, out[-1])
     return out
 
 
@@ -197,6 +222,8 @@ def finish_trial(
         plan_time=planned.plan_time,
         start=tuple(start),
         goal=tuple(goal),
+        turning_radius=planned.turning_radius,
+        driver=world.scene.driver.kind,
     )
     if not planned.found:
         return TrialResult(

@@ -19,11 +19,13 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 import numpy as np
 
 from planning import PlanResult
+from planning._isolated import limit_child_memory
 from scenes import build_world
 
 from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL
 from ._trial import drive, finish_trial, plan, reference_energy
+from ._uncertainty import draw
 
 Call = tuple[str, tuple] | tuple[str, tuple, dict]
 """(TrialWorker method name, its arguments[, its keyword arguments])."""
@@ -70,6 +72,26 @@ class TrialWorker:
             "trajectory": [list(p) for p in driven.trajectory],
         }  # fmt: skip
 
+    def rollout(self, candidate: int, path: list, seed: int, uncertainty) -> dict:
+        """One of `choose`'s rollouts: drive candidate `candidate`'s path in the world drawn
+        from `uncertainty` with `seed` (experiments/_uncertainty.py); a rollout record."""
+        scene = self.world.scene
+        w = draw(uncertainty, seed)
+        start = tuple(float(a + b) for a, b in zip(scene.start, w.start_offset, strict=True))
+        self.sim.perturb(friction=scene.sim.friction * w.friction_scale,
+                         mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
+        try:
+            driven = drive(self.world, np.asarray(path), start=start, sim=self.sim)
+        finally:
+            self.sim.perturb(friction=scene.sim.friction, mass_scale=1.0, motor_gain=(1.0, 1.0))
+        return {
+            "candidate": candidate, "seed": seed, "world": w.to_json(),
+            "outcome": driven.outcome, "reason": driven.reason,
+            "drive_time": driven.drive_time, "energy": driven.energy,
+            "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
+            "end": list(driven.trajectory[-1][1:3]),
+        }  # fmt: skip
+
     def close(self) -> None:
         self.sim.close()
 
@@ -92,6 +114,9 @@ def _init_local(spec: ExperimentSpec) -> None:
     global _worker  # noqa: PLW0603 - a pool initializer's result lives in its process
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
+    # A runaway trial stops with MemoryError in its worker (a clear failed run), not by
+    # taking the machine (ROACHPLAN_CHILD_MEMORY sets the limit, 0 none).
+    limit_child_memory()
     _worker = TrialWorker(spec)
 
 
@@ -141,6 +166,16 @@ class LocalPool:
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def terminate(self) -> None:
+        """Stop at once: the queued calls are dropped and the workers killed (the calls in
+        flight are lost). Safe from another thread than the one iterating `run`, which then
+        ends with BrokenProcessPool."""
+        # The executor can only wait for its workers; its private process table is the one
+        # handle on them.
+        for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+            proc.kill()
+        self._pool.shutdown(wait=False, cancel_futures=True)
 
 
 # -- Ray --------------------------------------------------------------------------------------

@@ -139,6 +139,9 @@ class PlanResult:
     """Samples drawn from the terrain sampler [-]."""
     roadmap: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     """(E, 2, 2) the planner's graph as xy segments [m] (with keep_roadmap; else empty)."""
+    turning_radius: float | None = None
+    """The path is drivable: arcs of this radius [m] and straight lines (None: the planner's
+    raw path, straight motions in (x, y, yaw))."""
 
 
 class _TerrainSampler(ob.StateSampler):
@@ -491,6 +494,7 @@ def _plan_here(
             f", drivable with turns of radius {cfg.turning_radius:g} m"
             if cfg.turning_radius is not None else ""),
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
+        turning_radius=cfg.turning_radius,
         **stats,
     )
 

@@ -106,6 +106,8 @@ class Simulation:
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
         self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
+        self._motor_gain = (1.0, 1.0)  # each side's speed / its command (perturb) [-]
+        self._base_inertia: tuple[float, float, float] | None = None  # nominal, for perturb
         self.time = 0.0
         self.energy_per_leg = np.zeros(6)
 
@@ -201,10 +203,35 @@ class Simulation:
         self.energy_per_leg[:] = 0.0
 
     def set_leg_speeds(self, left: float, right: float) -> None:
-        """Command the left and right motors [rad/s], clipped to the motor's speed limit."""
+        """Command the left and right motors [rad/s], clipped to the motor's speed limit. With
+        perturb()'s motor gains, each side then runs at gain x the command (a real motor's
+        speed differs from what it is told)."""
         lim = self.robot.max_motor_speed
-        self._omega[0] = min(max(left, -lim), lim)
-        self._omega[1] = min(max(right, -lim), lim)
+        self._omega[0] = min(max(left * self._motor_gain[0], -lim), lim)
+        self._omega[1] = min(max(right * self._motor_gain[1], -lim), lim)
+
+    def perturb(
+        self, *, friction: float, mass_scale: float, motor_gain: tuple[float, float]
+    ) -> None:
+        """Set this world's physical uncertainty for the next drives (choose's rollouts):
+        the Coulomb friction of terrain, ground and robot [-], the body's mass as a multiple
+        of its nominal one [-], and the (left, right) motors' speed gains [-].
+        perturb(friction=cfg.friction, mass_scale=1, motor_gain=(1, 1)) is the nominal world."""
+        bc, r = self._bc, self.robot
+        for body in (self.terrain_id, self.ground_id):
+            if body is not None:
+                bc.changeDynamics(body, -1, lateralFriction=friction)
+        for link in range(-1, 6):
+            bc.changeDynamics(self.robot_id, link, lateralFriction=friction)
+        if self._base_inertia is None:
+            self._base_inertia = tuple(bc.getDynamicsInfo(self.robot_id, -1)[2])
+        # The body (a payload on it) only: the legs' inertia is their motors' reflected one.
+        # PyBullet recomputes a link's inertia from its shape when its mass is set, so the
+        # nominal inertia, scaled, is set back after.
+        bc.changeDynamics(self.robot_id, -1, mass=r.body_mass * mass_scale)
+        bc.changeDynamics(self.robot_id, -1, localInertiaDiagonal=tuple(
+            v * mass_scale for v in self._base_inertia))  # fmt: skip
+        self._motor_gain = (float(motor_gain[0]), float(motor_gain[1]))
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""

@@ -1,0 +1,436 @@
+"""Choose by simulation (issue 17): which of K candidate paths the robot should take, with how
+much confidence, by racing rollouts under an uncertainty model.
+
+The candidates are K distinct plans (plan_many), routes taken round-robin so that where the
+terrain has several routes each gets a candidate. Each round gives every candidate still in
+the race `batch` more rollouts (experiments/_uncertainty.py: each its own seed) on the worker
+pool; after each round a candidate leaves the race when it is clearly beaten:
+
+- on success: its upper confidence bound on P(success) is below another's lower bound;
+- on energy, among the equally safe: another candidate at least as likely to succeed (point
+  estimate) has an upper bound on mean relative energy below this one's lower bound.
+
+Bounds are Wilson intervals for P(success) and t intervals for the mean energy over successes,
+each at confidence 1 - (1 - c) / K (Bonferroni over the candidates). The race stops when one
+candidate is left (separated at the requested confidence), when the rollout cap or the time
+budget is spent, or, with min_success, when the cheapest candidate whose lower bound clears it
+is separated from the other such ones. Which of these stopped it is reported.
+
+Everything drawn flows from `seed`: the candidates are planned with seeds seed, seed + 1, ...,
+and rollout k of candidate c has seed rollout_seed(seed, c, k). Rounds end only when all their
+rollouts are in, so with a rollout cap (not a time budget) the same seed gives the same choice.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from dataclasses import replace as dataclass_replace
+
+import numpy as np
+from scipy import stats
+
+from planning import PlanResult
+
+from ._errors import ExperimentError
+from ._trial import _resample, plan, plan_many
+from ._uncertainty import UncertaintyConfig, rollout_seed
+
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChooseConfig:
+    """How to choose."""
+
+    candidates: int = 8
+    """K, the number of candidate paths [-]."""
+    rollouts: int | None = None
+    """Cap on rollouts over all candidates [-] (None: only the time budget)."""
+    budget_s: float | None = 60.0
+    """Wall-time budget of the race [s] (None: only the rollout cap)."""
+    confidence: float = 0.95
+    """Joint confidence of the decision [-]."""
+    min_success: float | None = None
+    """Choose the lowest-energy candidate whose P(success) lower bound is at least this [-];
+    None: the most likely to succeed, then the lowest energy."""
+    batch: int = 4
+    """Rollouts per candidate per round [-]."""
+    max_per_candidate: int = 200
+    """A candidate gets at most this many rollouts [-]."""
+    seed: int = 0
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+
+
+def wilson(successes: int, n: int, confidence: float) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion [-]; (0, 1) without trials."""
+    if n == 0:
+        return 0.0, 1.0
+    z = stats.norm.ppf(1 - (1 - confidence) / 2)
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+
+
+def mean_interval(values: list[float], confidence: float) -> tuple[float, float, float]:
+    """(mean, low, high): Student t interval of the mean; infinite bounds with < 2 values."""
+    if not values:
+        return math.nan, -math.inf, math.inf
+    m = float(np.mean(values))
+    if len(values) < 2:
+        return m, -math.inf, math.inf
+    half = stats.t.ppf(1 - (1 - confidence) / 2, len(values) - 1) * (
+        float(np.std(values, ddof=1)) / math.sqrt(len(values))
+    )
+    return m, m - half, m + half
+
+
+@dataclass
+class Candidate:
+    """One candidate path and what its rollouts showed."""
+
+    index: int
+    route: str
+    seed: int
+    """The planning seed of its path."""
+    path_xyz: np.ndarray
+    length: float
+    """Path length [m]."""
+    rollouts: list[dict] = field(default_factory=list)
+    out: str = ""
+    """Why it left the race ("" while in it)."""
+
+    @property
+    def n(self) -> int:
+        return len(self.rollouts)
+
+    @property
+    def successes(self) -> list[dict]:
+        return [r for r in self.rollouts if r["outcome"] == "success"]
+
+    def p_interval(self, confidence: float) -> tuple[float, float, float]:
+        k = len(self.successes)
+        lo, hi = wilson(k, self.n, confidence)
+        return (k / self.n if self.n else math.nan), lo, hi
+
+    def energy_interval(self, confidence: float) -> tuple[float, float, float]:
+        return mean_interval([r["relative_energy"] for r in self.successes], confidence)
+
+    def summary(self, confidence: float, mass: float) -> dict:
+        """The ranking row of this candidate."""
+        p, p_lo, p_hi = self.p_interval(confidence)
+        e, e_lo, e_hi = self.energy_interval(confidence)
+        ok = self.successes
+        joules = [r["energy"] for r in ok]
+        fails = [r for r in self.rollouts if r["outcome"] != "success"]
+        mean_j = float(np.mean(joules)) if joules else math.nan
+        return {
+            "candidate": self.index, "route": self.route, "plan_seed": self.seed,
+            "length_m": round(self.length, 3), "rollouts": self.n, "successes": len(ok),
+            "p_success": p, "p_low": p_lo, "p_high": p_hi,
+            "relative_energy": e, "relative_energy_low": e_lo, "relative_energy_high": e_hi,
+            "energy_j": mean_j, "energy_j_per_m": mean_j / self.length,
+            "cost_of_transport": mean_j / (mass * GRAVITY * self.length),
+            "drive_time_s": float(np.mean([r["drive_time"] for r in ok])) if ok else math.nan,
+            "failures": dict(Counter(r["outcome"] for r in fails)),
+            "failed_at": [[round(v, 3) for v in r["end"]] for r in fails[:10]],
+            "out": self.out,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The outcome of a race."""
+
+    chosen: int | None
+    """Index of the chosen candidate (None: no candidate ever succeeded)."""
+    ranking: list[dict]
+    """Every candidate's summary, best first."""
+    stopped: str
+    """Why the race stopped."""
+    rollouts: int
+    wall_time: float
+    """[s]"""
+    candidates: list[Candidate]
+
+
+def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) -> list[Candidate]:
+    """K distinct candidate paths. Where the scene names routes, each route gets candidates in
+    turn, planned through a via pose inside it (a planner left alone takes the easiest route
+    every time: a wide bridge, never the narrow one beside it); the rest, or all of them on a
+    scene without routes, are plan_many's distinct plans."""
+    deadline = None if budget is None else time.monotonic() + budget
+    picked: list[tuple[str, PlanResult]] = []
+    shapes: list[np.ndarray] = []
+
+    def add(route: str, planned: PlanResult) -> None:
+        shape = _resample(planned.path_xyz[:, :2], 50)
+        if all(np.mean(np.linalg.norm(shape - s, axis=1)) >= 0.02 for s in shapes):
+            shapes.append(shape)
+            picked.append((route, planned))
+
+    vias = {name: v for name, region in world.scene.routes
+            if (v := _via_pose(world, region)) is not None}  # fmt: skip
+    tries = 0
+    while vias and len(picked) < cfg.candidates and tries < 3 * cfg.candidates:
+        for name, via in list(vias.items()):
+            if len(picked) >= cfg.candidates or (deadline and time.monotonic() > deadline):
+                break
+            planned = _plan_via(world, via, seed=cfg.seed + tries)
+            if planned is not None and world.route(planned.path_xyz[:, :2]) == name:
+                add(name, planned)
+        tries += 1
+    if len(picked) < cfg.candidates:
+        left = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+        for lp in plan_many(world, 3 * cfg.candidates, seed=cfg.seed, budget=left):
+            if len(picked) < cfg.candidates:
+                add(lp.route, lp.plan)
+    out = []
+    for i, (route, planned) in enumerate(picked):
+        xyz = planned.path_xyz
+        length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
+        out.append(Candidate(index=i, route=route, seed=planned.seed, path_xyz=xyz,
+                             length=max(length, 1e-6)))  # fmt: skip
+    return out
+
+
+def _via_pose(world, region) -> tuple[float, float, float] | None:
+    """A pose inside the route's region ((xmin, ymin), (xmax, ymax)) where the robot can
+    stand, heading from start to goal: the standable cell nearest the region's centre."""
+    from scenes._world import pose_problem
+
+    sc = world.scene
+    heading = math.atan2(sc.goal[1] - sc.start[1], sc.goal[0] - sc.start[0])
+    (x0, y0), (x1, y1) = region
+    cells = world.regions.cell_centres(world.regions.standable)
+    inside = cells[(cells[:, 0] >= x0) & (cells[:, 0] <= x1) & (cells[:, 1] >= y0) & (cells[:, 1] <= y1)]
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    for xy in inside[np.argsort(np.linalg.norm(inside - centre, axis=1))][:20]:
+        for yaw in (heading, heading + math.pi):
+            pose = (float(xy[0]), float(xy[1]), yaw)
+            if not pose_problem(world, pose):
+                return pose
+    return None
+
+
+def _plan_via(world, via, *, seed: int) -> PlanResult | None:
+    """start -> via -> goal as one path (each leg planned with this seed), or None."""
+    sc = world.scene
+    first = plan(world, seed=seed, start=sc.start, goal=via)
+    if not first.found:
+        return None
+    second = plan(world, seed=seed, start=via, goal=sc.goal)
+    if not second.found:
+        return None
+    return dataclass_replace(
+        first,
+        states=np.vstack([first.states, second.states[1:]]),
+        path_xyz=np.vstack([first.path_xyz, second.path_xyz[1:]]),
+        plan_time=first.plan_time + second.plan_time,
+        message=f"through ({via[0]:.2f}, {via[1]:.2f}): {first.message}; {second.message}",
+    )
+
+
+def _eliminate(alive: list[Candidate], conf: float, min_success: float | None) -> None:
+    """Mark the candidates that are clearly beaten (see the module docstring)."""
+    p = {c.index: c.p_interval(conf) for c in alive}
+    e = {c.index: c.energy_interval(conf) for c in alive}
+    if min_success is None:
+        best_low = max(p[c.index][1] for c in alive)
+        for c in alive:
+            if p[c.index][2] < best_low:
+                c.out = "less likely to succeed than another (intervals apart)"
+    else:
+        for c in alive:
+            if p[c.index][2] < min_success:
+                c.out = f"P(success) upper bound below {min_success:g}"
+    still = [c for c in alive if not c.out]
+    for c in still:
+        for d in still:
+            if d is c or d.out:
+                continue
+            safe_enough = (p[d.index][1] >= min_success if min_success is not None
+                           else p[d.index][0] >= p[c.index][0])  # fmt: skip
+            if safe_enough and e[d.index][2] < e[c.index][1]:
+                c.out = f"costs more energy than candidate {d.index} (intervals apart)"
+                break
+
+
+def rank(candidates: list[Candidate], conf: float, min_success: float | None) -> list[Candidate]:
+    """Best first: with min_success, the qualifying ones by energy; else by P(success), then
+    energy. A candidate whose P(success) interval lies wholly below another's never ranks
+    above it."""
+
+    def key(c: Candidate):
+        p, lo, _ = c.p_interval(conf)
+        energy = c.energy_interval(conf)[0]
+        energy = energy if math.isfinite(energy) else math.inf
+        if min_success is not None:
+            return (lo < min_success, energy, -p)
+        return (-(p if math.isfinite(p) else -1), energy)
+
+    ordered = sorted(candidates, key=key)
+    # No candidate above one whose P interval lies wholly above its own.
+    for _ in range(len(ordered)):
+        moved = False
+        for i in range(len(ordered) - 1):
+            a, b = ordered[i], ordered[i + 1]
+            if a.p_interval(conf)[2] < b.p_interval(conf)[1]:
+                ordered[i], ordered[i + 1] = b, a
+                moved = True
+        if not moved:
+            break
+    return ordered
+
+
+def race(
+    candidates: list[Candidate],
+    cfg: ChooseConfig,
+    run_rollouts: Callable[[list[tuple]], list[dict]],
+    *,
+    mass: float,
+    progress: Callable[[str, float], None] | None = None,
+    cancelled: Callable[[], bool] = lambda: False,
+) -> Choice:
+    """Race the candidates. run_rollouts(calls) runs [(candidate index, path, seed)] and returns
+    their rollout records (any order). progress(message, fraction) after each round."""
+    t0 = time.monotonic()
+    k = max(len(candidates), 1)
+    conf = 1 - (1 - cfg.confidence) / k
+    used = 0
+    stopped = ""
+    while True:
+        alive = [c for c in candidates if not c.out]
+        if len(alive) <= 1:
+            stopped = f"separated at {cfg.confidence:.0%} confidence"
+            break
+        if cfg.min_success is not None:
+            qualifying = [c for c in alive if c.p_interval(conf)[1] >= cfg.min_success]
+            if len(qualifying) == 1 and all(
+                c is qualifying[0] or c.p_interval(conf)[2] < cfg.min_success for c in alive
+            ):
+                stopped = f"only one candidate clears P(success) >= {cfg.min_success:g}"
+                break
+        if cancelled():
+            stopped = "cancelled"
+            break
+        if cfg.budget_s is not None and time.monotonic() - t0 >= cfg.budget_s:
+            stopped = f"time budget of {cfg.budget_s:g} s spent"
+            break
+        room = None if cfg.rollouts is None else cfg.rollouts - used
+        if room is not None and room < len(alive):
+            stopped = f"rollout cap of {cfg.rollouts} reached"
+            break
+        per = cfg.batch if room is None else min(cfg.batch, room // len(alive))
+        calls = [(c.index, c.path_xyz.tolist(), rollout_seed(cfg.seed, c.index, c.n + j))
+                 for c in alive if c.n < cfg.max_per_candidate for j in range(per)]  # fmt: skip
+        if not calls:
+            stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
+            break
+        for rec in run_rollouts(calls):
+            candidates[rec["candidate"]].rollouts.append(rec)
+        for c in alive:  # the order rollouts came back in must not matter
+            c.rollouts.sort(key=lambda r: r["seed"])
+        used += len(calls)
+        _eliminate(alive, conf, cfg.min_success)
+        if progress is not None:
+            frac = used / cfg.rollouts if cfg.rollouts else (time.monotonic() - t0) / (cfg.budget_s or 1)
+            left = sum(not c.out for c in candidates)
+            progress(f"{used} rollouts, {left} of {len(candidates)} candidates in the race", min(frac, 1.0))
+    ordered = rank(candidates, conf, cfg.min_success)
+    chosen = next((c.index for c in ordered if c.successes), None)
+    return Choice(
+        chosen=chosen,
+        ranking=[c.summary(conf, mass) for c in ordered],
+        stopped=stopped,
+        rollouts=used,
+        wall_time=time.monotonic() - t0,
+        candidates=candidates,
+    )
+
+
+def validate(
+    choice: Choice,
+    repeats: int,
+    run_rollouts: Callable[[list[tuple]], list[dict]],
+    *,
+    seed: int,
+) -> dict:
+    """Drive every candidate `repeats` more times with fresh seeds (stream 1) and compare with
+    the predicted P(success): Brier score and a reliability table."""
+    calls = [(c.index, c.path_xyz.tolist(), rollout_seed(seed, c.index, k, stream=1))
+             for c in choice.candidates for k in range(repeats)]  # fmt: skip
+    observed: dict[int, list[int]] = {c.index: [] for c in choice.candidates}
+    for rec in run_rollouts(calls):
+        observed[rec["candidate"]].append(int(rec["outcome"] == "success"))
+    predicted = {row["candidate"]: row for row in choice.ranking}
+    pairs = [(predicted[i]["p_success"], o) for i, obs in observed.items() for o in obs]
+    brier = float(np.mean([(p - o) ** 2 for p, o in pairs])) if pairs else math.nan
+    rows = []
+    for i, obs in observed.items():
+        row = predicted[i]
+        rate = float(np.mean(obs)) if obs else math.nan
+        rows.append({"candidate": i, "predicted": row["p_success"], "low": row["p_low"],
+                     "high": row["p_high"], "observed": rate, "rollouts": len(obs),
+                     "inside": bool(row["p_low"] - 1e-12 <= rate <= row["p_high"] + 1e-12)})  # fmt: skip
+    bins = [(0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0001)]
+    table = []
+    for lo, hi in bins:
+        sel = [(p, o) for p, o in pairs if lo <= p < hi]
+        if sel:
+            table.append({"bin": f"[{lo:.2f}, {min(hi, 1):.2f}]", "rollouts": len(sel),
+                          "mean_predicted": float(np.mean([p for p, _ in sel])),
+                          "observed": float(np.mean([o for _, o in sel]))})  # fmt: skip
+    return {"repeats": repeats, "brier": brier, "candidates": rows, "reliability": table}
+
+
+def choose(
+    scene,
+    cfg: ChooseConfig,
+    *,
+    workers: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    validate_repeats: int = 0,
+    progress: Callable[[str, float], None] | None = None,
+    cancelled: Callable[[], bool] = lambda: False,
+) -> tuple[Choice, dict | None]:
+    """Plan the candidates on `scene` (a loaded Scene with start and goal), race them on a pool
+    of `workers` (local processes, or Ray), and with validate_repeats > 0 validate the
+    prediction. Returns (choice, validation or None)."""
+    from scenes import build_world
+
+    from ._runner import _make_pool
+    from ._spec import ExperimentSpec
+
+    world = build_world(scene)
+    t0 = time.monotonic()
+    if progress is not None:
+        progress(f"planning {cfg.candidates} candidate paths", 0.0)
+    candidates = plan_candidates(world, cfg, budget=cfg.budget_s)
+    if not candidates:
+        raise ChooseError(f"{scene.name}: the planner found no path to choose from")
+    spec = ExperimentSpec(name=f"choose-{scene.name}", path=scene.path, scene=scene.path,
+                          planner=scene.planner, sim=scene.sim, driver=scene.driver)  # fmt: skip
+    pool = _make_pool(spec, workers, backend, address)
+
+    def run_rollouts(calls: list[tuple]) -> list[dict]:
+        return list(pool.run(("rollout", (*c, cfg.uncertainty)) for c in calls))
+
+    try:
+        left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)
+        choice = race(candidates, dataclass_replace(cfg, budget_s=left), run_rollouts,
+                      mass=world.robot.mass, progress=progress, cancelled=cancelled)  # fmt: skip
+        checked = validate(choice, validate_repeats, run_rollouts, seed=cfg.seed) if (
+            validate_repeats > 0 and choice.stopped != "cancelled") else None  # fmt: skip
+    finally:
+        pool.close()
+    return dataclass_replace(choice, wall_time=time.monotonic() - t0), checked
+
+
+class ChooseError(ExperimentError):
+    """A choice that cannot be made as asked."""
