@@ -40,6 +40,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_perception.py
 	$(BIN)/python benchmarks/bench_app.py
 	$(BIN)/python benchmarks/bench_drivable.py
+	$(BIN)/python benchmarks/bench_choose.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

@@ -11,6 +11,7 @@ import sys
 
 import numpy as np
 
+from app._choose_cli import add_choose_parser
 from experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
 from perception import CaptureError
 from planning import PLANNER_NAMES, PlanningError
@@ -22,8 +23,6 @@ class UsageError(ValueError):
     """A command-line value out of its range; the message names the flag, the value and the
     range."""
 
-
-from app._choose_cli import add_choose_parser
 
 USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError, CaptureError, OutputError,
                UsageError)  # fmt: skip

@@ -145,11 +145,12 @@ _RAISE_IT = "raise it with `position: [x, y, z]`, or give `ground: null` if it h
 
 def below_ground_problem(mesh: trimesh.Trimesh, ground: float | None) -> str:
     """Why a placed terrain object (world frame [m]) cannot be part of a world with a ground
-    plane at z = ground [m] (None: no plane): it lies entirely under the plane; else ""."""
+    plane at z = ground [m] (None: no plane): it lies entirely under the plane, more than 1 mm
+    (a model flush with the plane is a patch of floor); else ""."""
     if ground is None or len(mesh.faces) == 0:
         return ""
     top = float(mesh.bounds[1][2])
-    if top > ground:
+    if top >= ground - 1e-3:  # up to flush with the plane (a floor patch) is fine
         return ""
     return (
         f"lies entirely under the ground plane: its top is at z = {top:.3g} m, "

@@ -169,19 +169,17 @@ def test_simplify_and_smooth_keep_the_path_valid(world):
     def length(pl):
         return float(np.sum(np.linalg.norm(np.diff(pl.states[:, :2], axis=0), axis=1)))
 
+    # OMPL's own simplification and smoothing of the planner's path (not drivable plans).
+    own = dataclasses.replace(world.scene.planner, turning_radius=None)
     shortened = []
     for seed in range(4):
-        raw = plan(world, seed=seed)
-        short = plan(
-            world, seed=seed, planner=dataclasses.replace(world.scene.planner, simplify=True)
-        )
+        raw = plan(world, seed=seed, planner=own)
+        short = plan(world, seed=seed, planner=dataclasses.replace(own, simplify=True))
         assert length(short) <= length(raw) + 1e-9
         assert independent_check(world, short.states) == []
         shortened.append(length(raw) - length(short))
     assert max(shortened) > 0.05
-    smooth = plan(
-        world, seed=2, planner=dataclasses.replace(world.scene.planner, simplify=True, smooth=True)
-    )
+    smooth = plan(world, seed=2, planner=dataclasses.replace(own, simplify=True, smooth=True))
     assert len(smooth.states) > len(short.states)  # B-spline smoothing adds states
     assert independent_check(world, smooth.states) == []
     # Waypoints carry z on the terrain surface: 0.2 m on the bridges.
@@ -196,7 +194,7 @@ def test_simplify_and_smooth_keep_the_path_valid(world):
         (("--goal=5,5,90",), "goal (5.000, 5.000) is invalid: outside the planning area x in [-1, 1]"),
         (("--scene", "heightmap", "--start=-0.62,0,0"), "start (-0.620, 0.000, yaw 0 deg) is invalid: ground too steep"),
         (("--start", "1,2"), "--start '1,2': expected x,y,yaw_deg"),
-        (("--count", "0"), "--count 0: must be 1 or more"),
+        (("--count", "0"), "--count 0: expected a whole number from 1 to 100"),
     ],
 )  # fmt: skip
 def test_invalid_requests_name_what_failed(args, message):
@@ -262,7 +260,8 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
 def test_keep_roadmap_returns_the_planners_graph(world, name):
     """The graph the app can show: edges between states in the planning area, the start among
     them, and more edges than the path has."""
-    cfg = dataclasses.replace(world.scene.planner, name=name, keep_roadmap=True)
+    # The planner's own path (a drivable one is sampled every 5 cm: more states than edges).
+    cfg = dataclasses.replace(world.scene.planner, name=name, keep_roadmap=True, turning_radius=None)
     planned = plan(world, seed=2, planner=cfg)
     graph = planned.roadmap
     assert planned.found and graph.shape[1:] == (2, 2) and len(graph) >= len(planned.states) - 1
