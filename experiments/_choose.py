@@ -175,14 +175,18 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
 
     vias = {name: v for name, region in world.scene.routes
             if (v := _via_pose(world, region)) is not None}  # fmt: skip
-    tries = 0
+    tries, misses = 0, Counter()
     while vias and len(picked) < cfg.candidates and tries < 3 * cfg.candidates:
         for name, via in list(vias.items()):
             if len(picked) >= cfg.candidates or (deadline and time.monotonic() > deadline):
                 break
             planned = _plan_via(world, via, seed=cfg.seed + tries)
+            before = len(picked)
             if planned is not None and world.route(planned.path_xyz[:, :2]) == name:
                 add(name, planned)
+            misses[name] = 0 if len(picked) > before else misses[name] + 1
+            if misses[name] >= 3:  # three plans in a row gave nothing new on this route
+                del vias[name]
         tries += 1
     if len(picked) < cfg.candidates:
         left = None if deadline is None else max(deadline - time.monotonic(), 0.0)
@@ -303,6 +307,7 @@ def race(
     conf = 1 - (1 - cfg.confidence) / k
     used = 0
     stopped = ""
+    last_round = 0.0  # expected wall time of the next round [s]
     while True:
         alive = [c for c in candidates if not c.out]
         if len(alive) <= 1:
@@ -318,8 +323,10 @@ def race(
         if cancelled():
             stopped = "cancelled"
             break
-        if cfg.budget_s is not None and time.monotonic() - t0 >= cfg.budget_s:
-            stopped = f"time budget of {cfg.budget_s:g} s spent"
+        # Stop before a round that would overrun the budget (a round takes about as long as
+        # the last one per rollout).
+        if cfg.budget_s is not None and time.monotonic() - t0 + last_round >= cfg.budget_s:
+            stopped = f"time budget of {cfg.budget_s:.1f} s spent"
             break
         room = None if cfg.rollouts is None else cfg.rollouts - used
         if room is not None and room < len(alive):
@@ -331,12 +338,15 @@ def race(
         if not calls:
             stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
             break
+        t_round = time.monotonic()
         for rec in run_rollouts(calls):
             candidates[rec["candidate"]].rollouts.append(rec)
+        per_rollout = (time.monotonic() - t_round) / len(calls)
         for c in alive:  # the order rollouts came back in must not matter
             c.rollouts.sort(key=lambda r: r["seed"])
         used += len(calls)
         _eliminate(alive, conf, cfg.min_success)
+        last_round = per_rollout * cfg.batch * sum(not c.out for c in candidates)
         if progress is not None:
             frac = used / cfg.rollouts if cfg.rollouts else (time.monotonic() - t0) / (cfg.budget_s or 1)
             left = sum(not c.out for c in candidates)

@@ -243,7 +243,8 @@ class _Tracking:
         """Arc length of the point of the path nearest p among the segments from the progress
         to a lookahead and a bit beyond (not the whole path: a path that comes back near
         itself must not pull the progress forward or back)."""
-        k0 = max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1)
+        last = len(self.seg_len) - 1  # at the path's end the window is its last segment
+        k0 = min(max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1), last)
         k1 = int(np.searchsorted(self.cum, self.s + 2 * self.cfg.lookahead + 0.1, side="right"))
         k1 = min(max(k1, k0 + 1), len(self.seg_len))
         a, length = self.xy[k0:k1], self.seg_len[k0:k1]

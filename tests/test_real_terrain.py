@@ -187,3 +187,68 @@ def test_a_millimetre_model_as_a_scene_is_refused_then_scaled(tmp_path):
     assert done.returncode == 0, done.stderr
     r = json.loads(done.stdout)
     assert r["outcome"] == "success" and math.dist(r["start"][:2], r["goal"][:2]) >= 1.0
+
+
+def _tilted_room_bag(path, with_imu: bool) -> np.ndarray:
+    """A ROS 2 bag (MCAP) from a sensor mounted 75 degrees off level, in its own frame (not an
+    optical one): a 2 m x 2 m floor, and a 2 m x 1 m wall standing on it whose normal lies 15
+    degrees from the frame's z axis, so that "z is up" would take the wall for the ground. With
+    with_imu, an Imu topic reads gravity's reaction along the floor's normal. Returns that
+    normal (the sensor frame's true up)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    a = np.radians(75.0)
+    rot = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    u, v = np.meshgrid(np.arange(-1, 1, 0.02), np.arange(-1, 1, 0.02))
+    floor = np.column_stack([u.ravel(), v.ravel(), np.zeros(u.size)])
+    wu, wh = np.meshgrid(np.arange(-1, 1, 0.02), np.arange(0.02, 1, 0.02))
+    wall = np.column_stack([wu.ravel(), np.full(wu.size, 1.0), wh.ravel()])  # the y = 1 side
+    pts = ((np.vstack([floor, wall]) - [0, 0, 1.2]) @ rot.T).astype(np.float32)
+    up = rot @ np.array([0.0, 0.0, 1.0])
+    header = T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="sensor"
+    )
+    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+              for i, n in enumerate("xyz")]  # fmt: skip
+    cloud = T["sensor_msgs/msg/PointCloud2"](
+        header=header, height=1, width=len(pts), fields=fields, is_bigendian=False,
+        point_step=12, row_step=12 * len(pts), data=pts.view(np.uint8).reshape(-1), is_dense=True,
+    )  # fmt: skip
+    vec = T["geometry_msgs/msg/Vector3"]
+    quat = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+    rng = np.random.default_rng(0)
+    with Writer(path, version=8, storage_plugin=StoragePlugin["MCAP"]) as writer:
+        c = writer.add_connection("/points", cloud.__msgtype__, typestore=ts)
+        writer.write(c, 1, ts.serialize_cdr(cloud, cloud.__msgtype__))
+        if with_imu:
+            i = writer.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
+            for k in range(20):
+                acc = 9.81 * up + rng.normal(0, 0.05, 3)  # at rest: the reaction to gravity
+                msg = T["sensor_msgs/msg/Imu"](
+                    header=header, orientation=quat, orientation_covariance=np.zeros(9),
+                    angular_velocity=vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=vec(x=float(acc[0]), y=float(acc[1]), z=float(acc[2])),
+                    linear_acceleration_covariance=np.zeros(9),
+                )  # fmt: skip
+                writer.write(i, 2 + k, ts.serialize_cdr(msg, msg.__msgtype__))
+    return up
+
+
+@pytest.mark.parametrize("with_imu", [True, False])
+def test_a_bags_imu_gives_up_and_the_floor_not_the_wall_is_the_ground(tmp_path, with_imu):
+    _tilted_room_bag(tmp_path / "room", with_imu)
+    bag = next((tmp_path / "room").glob("*.mcap"))
+    done = roachplan("mesh", str(bag), "-o", str(tmp_path / "room.stl"), "--json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    ground = report.get("ground") or {}
+    # The floor has 10,000 points, the wall 4,900: the ground's support says which was taken.
+    if with_imu:
+        assert report["up_source"] == "the IMU" and any("IMU" in n for n in report["notes"])
+        assert ground.get("support_points", 0) > 9000, report
+    else:  # the frame's z is 75 degrees off the true up: the floor is not the ground found
+        assert report["up_source"] != "the IMU"
+        assert ground.get("support_points", 0) < 9000, report
