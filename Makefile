@@ -10,7 +10,7 @@ PORT   ?= 8080
 RUN_DEBS  := openscad libusb-1.0-0
 TEST_DEBS := $(RUN_DEBS) chromium
 
-.PHONY: setup run test fuzz bench lint clean
+.PHONY: setup run test fuzz bench loadtest lint clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ bench: setup
 	$(BIN)/python benchmarks/bench_app.py
 	$(BIN)/python benchmarks/bench_drivable.py
 	$(BIN)/python benchmarks/bench_choose.py
+	$(BIN)/python benchmarks/load_test.py
+
+# Five browsers clicking and uploading at once for 2 minutes (issue 15); needs chromium.
+loadtest: setup
+	$(BIN)/python benchmarks/load_test.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts

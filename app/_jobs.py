@@ -17,6 +17,7 @@ from pathlib import Path
 
 from experiments import finish_trial, plan_many
 from perception import mesh_capture
+from planning._isolated import limit_child_memory
 from scenes import World, build_world, load_scene
 
 from ._relevel import CaptureView
@@ -110,6 +111,7 @@ def _plan_job(conn, world: World, count: int, request: dict, deadline: float) ->
     """request: plan_many's keyword arguments (seed, start, goal, planner); deadline: the end of
     the whole plan's budget on time.monotonic() (CLOCK_MONOTONIC is one clock for every process
     on Linux, so the budget counts from the click, not from this child's start)."""
+    limit_child_memory()  # a runaway plan ends in a notification, not by taking the machine
     try:
         plan_many(world, count, **request, budget=max(0.0, deadline - time.monotonic()),
                   on_attempt=lambda seed, lp: conn.send(("attempt", (seed, lp))))  # fmt: skip
@@ -120,6 +122,9 @@ def _plan_job(conn, world: World, count: int, request: dict, deadline: float) ->
 
 
 def _drive_job(conn, world: World, planned, start, goal) -> None:
+    # (The load job is not limited here: the OpenSCAD it starts sets its own, possibly higher,
+    # limit, which an inherited hard limit would forbid.)
+    limit_child_memory()
     try:
         result = finish_trial(
             world, planned, start=start, goal=goal, on_frame=lambda f: conn.send(("frame", f))

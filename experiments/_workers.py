@@ -78,12 +78,13 @@ class TrialWorker:
         scene = self.world.scene
         w = draw(uncertainty, seed)
         start = tuple(float(a + b) for a, b in zip(scene.start, w.start_offset, strict=True))
-        self.sim.perturb(friction=scene.sim.friction * w.friction_scale,
-                         mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
-        try:
-            driven = drive(self.world, np.asarray(path), start=start, sim=self.sim)
-        finally:
-            self.sim.perturb(friction=scene.sim.friction, mass_scale=1.0, motor_gain=(1.0, 1.0))
+        # A fresh PyBullet world per rollout: after changed masses and friction a reused one
+        # drove the same seed differently depending on what it had driven before (measured:
+        # 8 of 28 rollouts), and a rollout must re-run exactly from its seed alone.
+        with self.world.simulation() as sim:
+            sim.perturb(friction=scene.sim.friction * w.friction_scale,
+                        mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
+            driven = drive(self.world, np.asarray(path), start=start, sim=sim)
         return {
             "candidate": candidate, "seed": seed, "world": w.to_json(),
             "outcome": driven.outcome, "reason": driven.reason,

@@ -93,26 +93,19 @@ def find_planes(
     points: np.ndarray, up: np.ndarray, cfg: GroundConfig, toward_sensor: bool = True
 ) -> list[Plane]:
     """Up to cfg.max_planes planes of points ((N, 3), capture frame [m]), by sequential seeded
-    RANSAC (Open3D). toward_sensor: each normal faces the sensor (the origin), so a surface
-    seen from below (a ceiling, a table's underside) faces away from up and cannot be the
-    ground; else (a world-frame cloud, whose origin may be anywhere) each faces up ((3,))."""
-    import open3d as o3d
-
+    RANSAC (_ransac_plane). toward_sensor: each normal faces the sensor (the origin), so a
+    surface seen from below (a ceiling, a table's underside) faces away from up and cannot be
+    the ground; else (a world-frame cloud, whose origin may be anywhere) each faces up ((3,))."""
     if len(points) < 3:
         raise CaptureError("too few points left to find the ground plane")
-    o3d.utility.random.seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
     rest = points
     planes: list[Plane] = []
     min_points = max(50, int(0.01 * len(points)))
     while len(planes) < cfg.max_planes and len(rest) >= min_points:
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
-        (a, b, c, d), inliers = cloud.segment_plane(cfg.threshold, 3, cfg.iterations)
-        inliers = np.asarray(inliers, dtype=np.int64)
+        n, d, inliers = _ransac_plane(rest, cfg.threshold, cfg.iterations, rng)
         if len(inliers) < min_points:
             break
-        n = np.array([a, b, c])
-        norm = np.linalg.norm(n)
-        n, d = n / norm, d / norm
         if (d < 0) if toward_sensor else (n @ up < 0):
             n, d = -n, -d
         planes.append(
@@ -125,6 +118,34 @@ def find_planes(
         keep[inliers] = False
         rest = rest[keep]
     return planes
+
+
+def _ransac_plane(
+    points: np.ndarray, threshold: float, iterations: int, rng: np.random.Generator
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """(unit normal (3,), offset d, inlier indices) of the plane n . p + d = 0 through three of
+    the points ((N, 3) [m]) that the most points lie within threshold [m] of, over `iterations`
+    random triples. Ours, not Open3D's segment_plane: that one draws its triples across
+    OpenMP threads, so the same seed gave different planes under different machine load."""
+    pts = np.asarray(points, dtype=np.float64)
+    triples = rng.integers(0, len(pts), size=(iterations, 3))
+    a, b, c = pts[triples[:, 0]], pts[triples[:, 1]], pts[triples[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 1e-12  # three distinct, not collinear points
+    normals, a = normals[ok] / length[ok, None], a[ok]
+    offsets = -np.einsum("ij,ij->i", normals, a)
+    best, best_count = 0, -1
+    for k0 in range(0, len(normals), 64):  # 64 candidates x N distances at a time
+        dist = np.abs(normals[k0 : k0 + 64] @ pts.T + offsets[k0 : k0 + 64, None])
+        counts = np.sum(dist <= threshold, axis=1)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best, best_count = k0 + k, int(counts[k])
+    if best_count < 0:
+        return np.array([0.0, 0.0, 1.0]), 0.0, np.zeros(0, dtype=np.int64)
+    n, d = normals[best], float(offsets[best])
+    return n, d, np.flatnonzero(np.abs(pts @ n + d) <= threshold)
 
 
 def _area(points: np.ndarray, normal: np.ndarray, cell: float = 0.05) -> float:
