@@ -80,8 +80,9 @@ REFERENCE_DRIVES = Path(__file__).parent / "data" / "reference_drives.json"
 
 @pytest.mark.parametrize("k", [0, 1])
 def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
-    """Two STRIDE paths on kinect_bridge driven by algorithms 1-2 (one success, one that gets
-    stuck circling a waypoint), recorded before the tracking driver existed."""
+    """Two raw PRM paths on double_bridge_rough driven by algorithms 1-2, recorded with the
+    code from before the tracking driver existed (a scad scene: its terrain does not move when
+    perception changes, as a capture's does)."""
     import dataclasses
 
     from experiments._trial import drive
