@@ -188,7 +188,9 @@ def choose_ground(
     total = len(points[:: max(1, len(points) // 30000)])
     warnings: list[str] = []
     if near is not None:
-        return _ground_through(points, planes, np.asarray(near, dtype=np.float64), cfg, up)
+        return _ground_through(
+            points, planes, np.asarray(near, dtype=np.float64), cfg, up, toward_sensor
+        )
     candidates = [p for p in planes if p.angle_deg <= cfg.prior_tolerance_deg]
     if not candidates:
         best = min(planes, key=lambda p: p.angle_deg)
@@ -256,33 +258,53 @@ def choose_ground(
 
 
 def _ground_through(
-    points: np.ndarray, planes: list[Plane], near: np.ndarray, cfg: GroundConfig, up: np.ndarray
+    points: np.ndarray,
+    planes: list[Plane],
+    near: np.ndarray,
+    cfg: GroundConfig,
+    up: np.ndarray,
+    toward_sensor: bool = True,
 ) -> GroundChoice:
-    """The plane through a point the user picked: the found plane nearest it when it lies on
-    one (within 3 thresholds), else a plane fitted to the points within 25 cm of it."""
+    """The plane through a point the user picked ((3,), capture frame [m]).
+
+    The point comes from a click on the mesh, which is built from the highest point of each
+    cell, so it sits above the surface by about the sensor's noise, and a far floor comes out
+    of RANSAC as several slightly tilted slabs, so neither the point alone nor the slab nearest
+    it is the ground. The cloud's points within 25 cm of it decide: among the found planes that
+    hold at least 30 % of them (within 3 thresholds), the best supported is the ground, refitted
+    on all its points, so a click on a patch of floor levels the capture on the whole floor.
+    When a plane fitted to the local points holds most of them (a clear surface, not a noisy
+    far floor), only found planes parallel to it (within 10 deg) count: a click on a floor
+    beside a wall is not the wall. With none, the local plane is refitted on the cloud's points
+    that lie on it.
+    """
     total = len(points)
-    dist = [abs(p.normal @ near + p.offset) for p in planes]
-    k = int(np.argmin(dist))
-    if dist[k] <= 3 * cfg.threshold:
-        n, d = _refit(points, planes[k], cfg.threshold)
-        area = planes[k].area
+    local = points[np.linalg.norm(points - near, axis=1) <= 0.25]
+    if len(local) < 10:
+        raise CaptureError(
+            f"no points within 25 cm of the picked point {near.round(3).tolist()}: pick a "
+            f"point on the captured surface"
+        )
+    n_loc, d_loc, inliers = _ransac_plane(local, cfg.threshold, min(cfg.iterations, 300),
+                                          np.random.default_rng(cfg.seed))  # fmt: skip
+    clear = len(inliers) >= 0.5 * len(local)
+    on_it = [p for p in planes
+             if np.mean(np.abs(local @ p.normal + p.offset) <= 3 * cfg.threshold) >= 0.3
+             and (not clear or _angle(p.normal, n_loc) <= 10.0 or _angle(p.normal, -n_loc) <= 10.0)]
+    if on_it:
+        n, d = _refit(points, max(on_it, key=lambda p: p.support), cfg.threshold)
     else:
-        local = points[np.linalg.norm(points - near, axis=1) <= 0.25]
-        if len(local) < 10:
-            raise CaptureError(
-                f"no points within 25 cm of the picked point {near.round(3).tolist()}: pick a "
-                f"point on the captured surface"
-            )
-        centre = local.mean(axis=0)
-        n = np.linalg.svd(local - centre, full_matrices=False)[2][2]
-        if n @ up < 0:
-            n = -n
-        d = float(-n @ centre)
-        area = _area(local, n)
-    support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
+        if (d_loc < 0) if toward_sensor else (n_loc @ up < 0):
+            n_loc, d_loc = -n_loc, -d_loc
+        n, d = n_loc, float(d_loc)
+        for _ in range(3):  # refit on the cloud's points on it; a few rounds settle it
+            n, d = _refit(points, Plane(normal=n, offset=d, support=0, area=0.0, angle_deg=0.0),
+                          cfg.threshold)  # fmt: skip
+    on = np.abs(points @ n + d) <= cfg.threshold
+    support = int(np.sum(on))
     return GroundChoice(
-        normal=n, offset=float(d), support=support, fraction=support / total, area=area,
-        planes=tuple(planes), warnings=(),
+        normal=n, offset=float(d), support=support, fraction=support / total,
+        area=_area(points[on], n), planes=tuple(planes), warnings=(),
     )  # fmt: skip
 
 
