@@ -14,7 +14,7 @@ import stat
 import zipfile
 from pathlib import Path, PurePosixPath
 
-from scenes import SceneError
+from roachplan.scenes import SceneError
 
 MAX_MEMBERS = 2000
 """Most files an uploaded archive may hold."""

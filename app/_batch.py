@@ -11,8 +11,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from experiments import ExperimentSpec
-from experiments._workers import LocalPool
+from roachplan.experiments import ExperimentSpec
+from roachplan.experiments._workers import LocalPool
 
 
 @dataclass(eq=False)

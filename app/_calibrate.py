@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments import atomic_path, atomic_write
-from sim import (
+from roachplan.experiments import atomic_path, atomic_write
+from roachplan.sim import (
     DriverConfig,
     RobotConfig,
     SimConfig,

@@ -47,7 +47,7 @@ def add_choose_parser(sub, terrain_help: str) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
-    from experiments._choose import ChooseError
+    from roachplan.experiments._choose import ChooseError
 
     def bad(flag: str, value, accepted: str) -> ChooseError:
         return ChooseError(f"{flag} {value}: {accepted}")
@@ -120,10 +120,10 @@ def cmd_choose(args: argparse.Namespace) -> int:
     import os
     from pathlib import Path
 
-    from experiments import atomic_write, prepare_output_folder
-    from experiments._choose import ChooseConfig, choose
-    from experiments._spec import reference_settings
-    from scenes import load_scene
+    from roachplan.experiments import atomic_write, prepare_output_folder
+    from roachplan.experiments._choose import ChooseConfig, choose
+    from roachplan.experiments._spec import reference_settings
+    from roachplan.scenes import load_scene
 
     _check(args)
     out = None

@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from experiments import TrialResult
-from planning import PlanResult
+from roachplan.experiments import TrialResult
+from roachplan.planning import PlanResult
 
 from ._draw import BLACK, BLUE, path_fraction
 from ._jobs import Cmd, Job, _drive_job, _plan_job

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from scenes import World
+from roachplan.scenes import World
 
 BLACK, BLUE = (0, 0, 0), (30, 90, 255)
 MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 from pathlib import Path
 
-from experiments import finish_trial, plan_many
-from perception import mesh_capture
-from planning._isolated import limit_child_memory
-from scenes import World, build_world, load_scene
+from roachplan.experiments import finish_trial, plan_many
+from roachplan.perception import mesh_capture
+from roachplan.planning._isolated import limit_child_memory
+from roachplan.scenes import World, build_world, load_scene
 
 from ._relevel import CaptureView
 
@@ -104,7 +104,7 @@ NAMES = {PlanCmd: "Plan", DriveCmd: "Drive", ResetCmd: "Reset", BestPathCmd: "Be
 # -- work in child processes --------------------------------------------------------------------
 
 _CTX = mp.get_context("forkserver")
-_CTX.set_forkserver_preload(["experiments._trial"])
+_CTX.set_forkserver_preload(["roachplan.experiments._trial"])
 
 
 def _plan_job(conn, world: World, count: int, request: dict, deadline: float) -> None:
@@ -244,8 +244,7 @@ def _recording_reconstructions():
     also shows the camera and ground that meshing found, and meshing again for them doubled
     every capture load. scenes has no hook to hand the reconstruction out, so its module's
     reference is wrapped for the duration (in a load's own process)."""
-    import scenes._world as world_module
-
+    import roachplan.scenes._world as world_module
     made: list = []
     original = getattr(world_module, "mesh_capture", None)
     if original is None:  # scenes changed how it meshes: capture_view meshes once more

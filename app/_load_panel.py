@@ -16,8 +16,8 @@ from pathlib import Path
 
 import yaml
 
-from perception import METHODS, PRESETS, CaptureError, MeshingConfig, load_calibration, load_yaml
-from scenes import DEFAULT_TIMEOUT, MAX_TIMEOUT
+from roachplan.perception import METHODS, PRESETS, CaptureError, MeshingConfig, load_calibration, load_yaml
+from roachplan.scenes import DEFAULT_TIMEOUT, MAX_TIMEOUT
 
 from ._relevel import (
     CaptureView,

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from scenes import list_scenes
+from roachplan.scenes import list_scenes
 
 from ._jobs import Cmd, Job, _load_job
 from ._load_panel import needs_millimetre_scale

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from planning import PlanningError
-from scenes import World, pose_problem
+from roachplan.planning import PlanningError
+from roachplan.scenes import World, pose_problem
 
 from ._draw import INVALID, MARKER_COLOURS, SceneView, yaw_wxyz
 from ._jobs import MarkersCmd

@@ -7,8 +7,8 @@ import io
 
 import numpy as np
 
-from experiments import summarize
-from experiments._summary import format_markdown
+from roachplan.experiments import summarize
+from roachplan.experiments._summary import format_markdown
 
 COLUMNS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "from")
 CSV_FIELDS = ("trial", "label", "scene", "seed", "planner", "route", "outcome", "reason",

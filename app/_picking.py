@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planning import HeightField
+from roachplan.planning import HeightField
 
 
 def ray_hit_heightfield(

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from perception import load_yaml
+from roachplan.perception import load_yaml
 
 _LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 """Columns: the level camera's x, y, z axes in the world (looking along world +y)."""
@@ -113,7 +113,7 @@ def adopt_capture_scene(scene_path: Path, folder: Path) -> Path:
     elsewhere (the library, `serve --scene`): the capture and a calibration file beside it by
     absolute path, its perception settings and the scene's other keys kept; start, goal and
     bounds left out (they are picked again)."""
-    from scenes import TERRAIN_SUFFIXES
+    from roachplan.scenes import TERRAIN_SUFFIXES
 
     scene_path = Path(scene_path).resolve()
     if scene_path.suffix.lower() in TERRAIN_SUFFIXES:  # a capture file as a scene of its own

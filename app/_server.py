@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from experiments import ExperimentSpec
-from planning import PLANNER_NAMES
-from scenes import LIBRARY, World, list_scenes
-from sim import Frame
+from roachplan.experiments import ExperimentSpec
+from roachplan.planning import PLANNER_NAMES
+from roachplan.scenes import LIBRARY, World, list_scenes
+from roachplan.sim import Frame
 
 from ._batch import Batch, BatchPanel
 from ._commands import do_best_path, do_drive, do_plan, record, show_trial

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from perception import CAPTURE_SUFFIXES, load_yaml
-from scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
+from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
+from roachplan.scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
@@ -165,8 +165,8 @@ def prepare_upload_scene(scene_path: Path):
     plan; both at the centre, with the reason in world.notes, when none is found) and written
     back into the file, so batch workers and `roachplan trial` rebuild the same world without
     picking again. Returns the World (its notes say what was picked)."""
-    from scenes import build_terrain_mesh, build_world, load_scene
-    from scenes._autopose import auto_bounds
+    from roachplan.scenes import build_terrain_mesh, build_world, load_scene
+    from roachplan.scenes._autopose import auto_bounds
 
     raw = load_yaml(scene_path.read_bytes(), scene_path.name, SceneError)
     scene = load_scene(scene_path)

@@ -11,12 +11,12 @@ import sys
 
 import numpy as np
 
-from app._choose_cli import add_choose_parser
-from experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
-from perception import CaptureError
-from planning import PLANNER_NAMES, PlanningError
-from scenes import MAX_SEED, SceneError, list_scenes
-from sim import SimError
+from roachplan.app._choose_cli import add_choose_parser
+from roachplan.experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
+from roachplan.perception import CaptureError
+from roachplan.planning import PLANNER_NAMES, PlanningError
+from roachplan.scenes import MAX_SEED, SceneError, list_scenes
+from roachplan.sim import SimError
 
 
 class UsageError(ValueError):
@@ -41,8 +41,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
-    from experiments import run_trial
-    from scenes import build_world, load_scene
+    from roachplan.experiments import run_trial
+    from roachplan.scenes import build_world, load_scene
 
     if args.from_dir is not None or args.trial is not None:
         return _rerun_trial(args)
@@ -72,7 +72,7 @@ def _print_trial(r: dict, as_json: bool) -> None:
 
 def _rerun_trial(args: argparse.Namespace) -> int:
     """`trial --from DIR --trial K`: re-run a stored trial and compare."""
-    from experiments import rerun_trial
+    from roachplan.experiments import rerun_trial
 
     if args.from_dir is None or args.trial is None:
         raise ExperimentError("give both --from DIR and --trial K to re-run a stored trial")
@@ -101,7 +101,7 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     from concurrent.futures.process import BrokenProcessPool
     from pathlib import Path
 
-    from experiments import (
+    from roachplan.experiments import (
         check_results_folder,
         describe_best,
         load_experiment,
@@ -184,8 +184,8 @@ def _planner_config(scene, args: argparse.Namespace):
 def _cmd_plan(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from experiments import plan_many
-    from scenes import build_world, load_scene
+    from roachplan.experiments import plan_many
+    from roachplan.scenes import build_world, load_scene
 
     if args.count < 1:
         raise PlanningError(f"--count {args.count}: must be 1 or more")
@@ -240,7 +240,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 
 def _cmd_scene_list(args: argparse.Namespace) -> int:
-    from scenes import load_scene
+    from roachplan.scenes import load_scene
 
     for name in list_scenes():
         print(f"{name:24s} {load_scene(name).description}")
@@ -249,7 +249,7 @@ def _cmd_scene_list(args: argparse.Namespace) -> int:
 
 def _scene_options(scene, args: argparse.Namespace):
     """The scene with the command line's --scale and --scad-timeout applied, where given."""
-    from scenes import scaled_scene, with_scad_timeout
+    from roachplan.scenes import scaled_scene, with_scad_timeout
 
     if getattr(args, "scale", None) is not None:
         scene = scaled_scene(scene, args.scale)
@@ -264,14 +264,14 @@ def _as_reference(scene_or_spec):
     """--reference: the report's raw paths and algorithms 1-2 (tables 7.1-7.3)."""
     import dataclasses
 
-    from experiments._spec import reference_settings
+    from roachplan.experiments._spec import reference_settings
 
     planner, driver = reference_settings(scene_or_spec.planner, scene_or_spec.driver)
     return dataclasses.replace(scene_or_spec, planner=planner, driver=driver)
 
 
 def _cmd_scene_check(args: argparse.Namespace) -> int:
-    from scenes import build_world, load_scene
+    from roachplan.scenes import build_world, load_scene
 
     _scene_options(load_scene("flat"), args)  # a bad flag is refused once (exit 2), not per file
     failed = 0
@@ -298,7 +298,7 @@ def _export_mesh(mesh, out) -> None:
     """Write the mesh in the format out's suffix names, atomically (a failure leaves no
     half-written file), marked WRITTEN_BY where the format has room, so that a later -o may
     replace it without --force."""
-    from experiments import atomic_write
+    from roachplan.experiments import atomic_write
 
     fmt = out.suffix.lower().lstrip(".")
     if fmt == "obj":
@@ -328,7 +328,7 @@ def _scene_inputs(scene) -> list:
 
 
 def _cmd_scene_build(args: argparse.Namespace) -> int:
-    from scenes import build_terrain_mesh, load_scene
+    from roachplan.scenes import build_terrain_mesh, load_scene
 
     scene = load_scene(args.scene)
     out = check_output_file(args.output, suffixes=(".stl", ".obj", ".ply", ".glb"),
@@ -388,7 +388,7 @@ def _intrinsics_flags(args: argparse.Namespace) -> str | dict | None:
 
 
 def _capture_settings(args: argparse.Namespace):
-    from perception import capture_settings
+    from roachplan.perception import capture_settings
 
     voxel = _numbers(args.voxel, "--voxel", (1, 3))
     given = {
@@ -427,7 +427,7 @@ def _capture_settings(args: argparse.Namespace):
 
 
 def _cmd_mesh(args: argparse.Namespace) -> int:
-    from perception import mesh_capture
+    from roachplan.perception import mesh_capture
 
     settings = _capture_settings(args)
     out = check_output_file(args.output, suffixes=(".stl", ".ply", ".obj"),
@@ -461,9 +461,9 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
 
 
 def _cmd_voxel_study(args: argparse.Namespace) -> int:
-    from experiments import atomic_write
-    from perception import load_capture
-    from perception._voxel_study import (
+    from roachplan.experiments import atomic_write
+    from roachplan.perception import load_capture
+    from roachplan.perception._voxel_study import (
         format_study,
         planarity_warning,
         plane_region,
@@ -526,8 +526,8 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
     import numpy as np
     import trimesh
 
-    from perception import NO_NOISE, NoiseModel, load_intrinsics, look_at, render_depth, save_depth
-    from scenes import build_terrain_mesh, load_scene
+    from roachplan.perception import NO_NOISE, NoiseModel, load_intrinsics, look_at, render_depth, save_depth
+    from roachplan.scenes import build_terrain_mesh, load_scene
 
     scene = load_scene(args.scene)
     eye = _numbers(args.eye, "--eye", (3,))
@@ -557,7 +557,7 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
 
 
 def _add_perception_parsers(sub) -> None:
-    from perception import FRAMES, METHODS, PRESETS
+    from roachplan.perception import FRAMES, METHODS, PRESETS
 
     def capture_flags(p):
         p.add_argument("--intrinsics", default=None,
@@ -649,7 +649,7 @@ CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json")
 
 
 def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
-    from experiments import is_partial, prepare_output_folder
+    from roachplan.experiments import is_partial, prepare_output_folder
 
     from ._calibrate import calibrate_turning
 
@@ -678,7 +678,7 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
 
 
 def _add_experiment_parser(sub) -> None:
-    from experiments import list_experiments
+    from roachplan.experiments import list_experiments
 
     p = sub.add_parser(
         "experiment", help="a batch of trials in parallel: tables 7.1/7.2, figures, best path"
@@ -898,7 +898,7 @@ def report_error(exc: BaseException, debug: bool) -> int:
         where = f"{_clip(os.fsdecode(exc.filename), 300)}: " if exc.filename is not None else ""
         print(f"roachplan: error: {where}{exc.strerror or _clip(exc, 300)}", file=sys.stderr)
         return 2 if exc.errno in PATH_ERRNOS else 1
-    from planning._isolated import IsolationError
+    from roachplan.planning._isolated import IsolationError
 
     if isinstance(exc, IsolationError):  # a planning child hit its memory limit or crashed
         print(f"roachplan: error: {_clip(exc, 600)}", file=sys.stderr)

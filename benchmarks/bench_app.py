@@ -17,8 +17,8 @@ import socket
 import statistics
 import time
 
-from app._server import RoachApp
-from scenes import build_world, load_scene
+from roachplan.app._server import RoachApp
+from roachplan.scenes import build_world, load_scene
 
 
 def free_port() -> int:

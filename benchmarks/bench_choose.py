@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
-from experiments._choose import ChooseConfig, choose, plan_candidates, race, rank
-from experiments._runner import _make_pool
-from experiments._spec import ExperimentSpec
-from experiments._uncertainty import rollout_seed
-from scenes import build_world, load_scene
+from roachplan.experiments._choose import ChooseConfig, choose, plan_candidates, race, rank
+from roachplan.experiments._runner import _make_pool
+from roachplan.experiments._spec import ExperimentSpec
+from roachplan.experiments._uncertainty import rollout_seed
+from roachplan.scenes import build_world, load_scene
 
 
 def _pool(scene, workers: int):

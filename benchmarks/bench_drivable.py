@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments import load_experiment, plan, run_experiment
-from experiments._spec import reference_settings
-from scenes import build_world, load_scene
+from roachplan.experiments import load_experiment, plan, run_experiment
+from roachplan.experiments._spec import reference_settings
+from roachplan.scenes import build_world, load_scene
 
 
 def run(spec, trials: int, workers: int) -> dict:

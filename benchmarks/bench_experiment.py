@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from experiments import load_experiment, run_experiment
+from roachplan.experiments import load_experiment, run_experiment
 
 
 def timed_run(spec, trials: int, workers: int) -> tuple[float, float, int]:

@@ -48,8 +48,8 @@ import numpy as np
 import open3d as o3d
 import trimesh
 
-from scenes import LIBRARY, list_scenes, load_scene
-from scenes._openscad import _scad_literal, scad_dependencies
+from roachplan.scenes import LIBRARY, list_scenes, load_scene
+from roachplan.scenes._openscad import _scad_literal, scad_dependencies
 
 HERE = Path(__file__).resolve().parent
 AGREE_BOUNDS = 1e-3

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from perception import (
+from roachplan.perception import (
     PRESETS,
     MeshingConfig,
     NoiseModel,
@@ -27,7 +27,7 @@ from perception import (
     render_depth,
     save_depth,
 )
-from scenes import build_terrain_mesh, load_scene
+from roachplan.scenes import build_terrain_mesh, load_scene
 
 
 def run_once(png: Path, stl: Path) -> dict[str, float]:

@@ -19,9 +19,9 @@ import time
 
 import numpy as np
 
-from experiments import plan
-from planning import PLANNER_NAMES, check_states
-from scenes import build_world, load_scene
+from roachplan.experiments import plan
+from roachplan.planning import PLANNER_NAMES, check_states
+from roachplan.scenes import build_world, load_scene
 
 
 def main() -> None:

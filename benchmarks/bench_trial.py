@@ -20,9 +20,9 @@ import time
 
 import pybullet as p
 
-from experiments import plan
-from scenes import build_world, load_scene
-from sim import drive_path
+from roachplan.experiments import plan
+from roachplan.scenes import build_world, load_scene
+from roachplan.sim import drive_path
 
 
 def record_torques(world, path_xyz) -> list[list[float]]:

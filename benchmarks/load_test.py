@@ -200,7 +200,7 @@ async def load(url: str, seconds: float, rngs, files) -> list[PageStats]:
 def start_server(log: Path) -> tuple[subprocess.Popen, str]:
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "serve", "--port", str(port)], cwd=ROOT,
+        [sys.executable, "-m", "roachplan", "serve", "--port", str(port)], cwd=ROOT,
         stdout=log.open("w"), stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
     deadline = time.monotonic() + 120

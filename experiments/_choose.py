@@ -33,7 +33,7 @@ from dataclasses import replace as dataclass_replace
 import numpy as np
 from scipy import stats
 
-from planning import PlanResult
+from roachplan.planning import PlanResult
 
 from ._errors import ExperimentError
 from ._trial import _resample, plan, plan_many
@@ -205,7 +205,7 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
 def _via_pose(world, region) -> tuple[float, float, float] | None:
     """A pose inside the route's region ((xmin, ymin), (xmax, ymax)) where the robot can
     stand, heading from start to goal: the standable cell nearest the region's centre."""
-    from scenes._world import pose_problem
+    from roachplan.scenes._world import pose_problem
 
     sc = world.scene
     heading = math.atan2(sc.goal[1] - sc.start[1], sc.goal[0] - sc.start[0])
@@ -412,7 +412,7 @@ def choose(
     """Plan the candidates on `scene` (a loaded Scene with start and goal), race them on a pool
     of `workers` (local processes, or Ray), and with validate_repeats > 0 validate the
     prediction. Returns (choice, validation or None)."""
-    from scenes import build_world
+    from roachplan.scenes import build_world
 
     from ._runner import _make_pool
     from ._spec import ExperimentSpec

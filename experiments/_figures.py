@@ -11,7 +11,7 @@ matplotlib.use("Agg")  # files only; never a window
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from planning import HeightField  # noqa: E402
+from roachplan.planning import HeightField  # noqa: E402
 
 from ._summary import route_key  # noqa: E402
 

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from perception import short_repr
-from planning import PlannerConfig
-from scenes import World
-from sim import DriverConfig, SimConfig
+from roachplan.perception import short_repr
+from roachplan.planning import PlannerConfig
+from roachplan.scenes import World
+from roachplan.sim import DriverConfig, SimConfig
 
 from ._errors import ExperimentError
 from ._outputs import atomic_write

@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from scenes import build_world
+from roachplan.scenes import build_world
 
 from ._errors import ExperimentError, OutputError
 from ._manifest import (

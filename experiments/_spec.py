@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from perception import short_repr
-from planning import PlannerConfig
-from scenes import (
+from roachplan.perception import short_repr
+from roachplan.planning import PlannerConfig
+from roachplan.scenes import (
     TERRAIN_SUFFIXES,
     Scene,
     SceneError,
@@ -25,7 +25,7 @@ from scenes import (
     read_yaml,
     resolve_in_library,
 )
-from sim import DriverConfig, SimConfig
+from roachplan.sim import DriverConfig, SimConfig
 
 from ._errors import ExperimentError
 

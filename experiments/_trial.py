@@ -11,9 +11,9 @@ from typing import Literal
 
 import numpy as np
 
-from planning import PlannerConfig, PlanResult, plan_path
-from scenes import World
-from sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
+from roachplan.planning import PlannerConfig, PlanResult, plan_path
+from roachplan.scenes import World
+from roachplan.sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
 
 TrialOutcome = Literal["success", "fell", "flipped", "stuck", "timeout", "missed", "no_path"]
 MIN_ATTEMPT_TIME = 0.05

@@ -18,9 +18,9 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 
 import numpy as np
 
-from planning import PlanResult
-from planning._isolated import limit_child_memory
-from scenes import build_world
+from roachplan.planning import PlanResult
+from roachplan.planning._isolated import limit_child_memory
+from roachplan.scenes import build_world
 
 from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL

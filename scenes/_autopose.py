@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from planning import VALID, PlanningError, check_states, plan_path, standable_map
+from roachplan.planning import VALID, PlanningError, check_states, plan_path, standable_map
 
 MAX_AUTO_DISTANCE = 4.0
 """Longest start-goal distance picked automatically [m]: on a room's floor the far wall is

@@ -29,7 +29,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from perception import short_repr
+from roachplan.perception import short_repr
 
 from . import _jail
 from ._errors import SceneError

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from perception import (
+from roachplan.perception import (
     CAPTURE_SUFFIXES,
     MAX_YAML_BYTES,
     CaptureError,
@@ -24,8 +24,8 @@ from perception import (
     load_yaml,
     short_repr,
 )
-from planning import PlannerConfig
-from sim import DriverConfig, SimConfig
+from roachplan.planning import PlannerConfig
+from roachplan.sim import DriverConfig, SimConfig
 
 from ._errors import SceneError
 from ._openscad import DEFAULT_TIMEOUT, param_problem, scad_variables, timeout_problem

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from perception import CaptureError, mesh_capture
-from planning import (
+from roachplan.perception import CaptureError, mesh_capture
+from roachplan.planning import (
     VALID,
     PlanningError,
     Footprint,
@@ -23,7 +23,7 @@ from planning import (
     signature_label,
     standable_map,
 )
-from sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
+from roachplan.sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
 
 from ._autopose import auto_bounds, pick_start_goal
 from ._errors import SceneError

@@ -24,7 +24,7 @@ settings.load_profile("fuzz" if os.environ.get("ROACHPLAN_FUZZ") else "test")
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
-ROACHPLAN = [sys.executable, "-m", "app.cli"]
+ROACHPLAN = [sys.executable, "-m", "roachplan"]
 
 
 def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
@@ -36,7 +36,7 @@ def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="session")
 def world():
-    from scenes import build_world, load_scene
+    from roachplan.scenes import build_world, load_scene
 
     return build_world(load_scene("double_bridge"))
 

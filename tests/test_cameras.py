@@ -19,7 +19,7 @@ from conftest import roachplan
 from PIL import Image
 from test_perception import REAL
 
-from perception import (
+from roachplan.perception import (
     PRESETS,
     CaptureError,
     capture_settings,

@@ -11,8 +11,8 @@ import pytest
 import trimesh
 from conftest import roachplan
 
-from experiments._choose import Candidate, ChooseConfig, rank, wilson
-from experiments._uncertainty import UncertaintyConfig, draw, rollout_seed
+from roachplan.experiments._choose import Candidate, ChooseConfig, rank, wilson
+from roachplan.experiments._uncertainty import UncertaintyConfig, draw, rollout_seed
 
 
 def test_wilson_intervals_hold_their_coverage():

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from test_planning import independent_check
 
-from experiments import plan
-from experiments._trial import drive
-from planning._drivable import max_curvature
-from planning._dubins import dubins_path
-from scenes import build_world, load_scene
+from roachplan.experiments import plan
+from roachplan.experiments._trial import drive
+from roachplan.planning._drivable import max_curvature
+from roachplan.planning._dubins import dubins_path
+from roachplan.scenes import build_world, load_scene
 
 
 def test_dubins_curves_end_on_the_goal_and_are_as_long_as_ompls():
-    from planning._ompl_import import ob
+    from roachplan.planning._ompl_import import ob
 
     rng = np.random.default_rng(7)
     space = ob.DubinsStateSpace(0.15, False)
@@ -111,8 +111,8 @@ def test_a_goal_passed_too_wide_is_missed_not_circled(tmp_path):
 def test_progress_at_the_very_end_of_the_path_still_projects():
     """The robot abreast of the goal but wider than r_end: its progress is the path's length,
     and the projection window must still hold the last segment (it was empty)."""
-    from sim import DriverConfig
-    from sim._driver import _Tracking
+    from roachplan.sim import DriverConfig
+    from roachplan.sim._driver import _Tracking
 
     path = np.column_stack([np.linspace(0, 1, 21), np.zeros(21), np.zeros(21)])
     t = _Tracking(path, DriverConfig())

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim import (
+from roachplan.sim import (
     DriverConfig,
     RobotConfig,
     SimConfig,
@@ -85,8 +85,8 @@ def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
     perception changes, as a capture's does)."""
     import dataclasses
 
-    from experiments._trial import drive
-    from scenes import build_world, load_scene
+    from roachplan.experiments._trial import drive
+    from roachplan.scenes import build_world, load_scene
 
     rec = json.loads(REFERENCE_DRIVES.read_text())["drives"][k]
     world = build_world(load_scene(rec["scene"]))

@@ -189,9 +189,9 @@ def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_wo
     """Against the same figure drawn without trials: the paths add dark and blue pixels."""
     import matplotlib.image
 
-    from experiments import load_experiment
-    from experiments._figures import paths_figure
-    from scenes import build_world
+    from roachplan.experiments import load_experiment
+    from roachplan.experiments._figures import paths_figure
+    from roachplan.scenes import build_world
 
     out, _ = run_one_worker
     spec = load_experiment("bridge_rough")
@@ -277,7 +277,7 @@ def test_bad_spec_names_file_and_key(tmp_path, body, message):
 
 
 def test_store_drops_a_torn_line_and_keeps_the_first_of_a_key(tmp_path):
-    from experiments import ResultStore
+    from roachplan.experiments import ResultStore
 
     path = tmp_path / "trials.jsonl"
     path.write_bytes(
@@ -291,7 +291,7 @@ def test_store_drops_a_torn_line_and_keeps_the_first_of_a_key(tmp_path):
 
 
 def test_summary_statistics_on_known_records():
-    from experiments import summarize
+    from roachplan.experiments import summarize
 
     recs = [
         {"target_route": "a", "outcome": "success", "relative_energy": 1.0, "energy": 2.0, "drive_time": 10.0},
@@ -314,7 +314,7 @@ def test_summary_statistics_on_known_records():
 
 def test_a_reused_simulation_drives_exactly_as_a_fresh_one(world):
     """Workers keep one PyBullet client for all their trials; that must not change a trial."""
-    from experiments import drive, plan
+    from roachplan.experiments import drive, plan
 
     first, second = plan(world, seed=1), plan(world, seed=2)
     with world.simulation() as sim:

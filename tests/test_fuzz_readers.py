@@ -16,9 +16,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from test_perception import REAL
 
-from perception import CaptureError, load_capture
-from perception._camera import MAX_IMAGE_SIDE, parse_calibration
-from perception._headers import (
+from roachplan.perception import CaptureError, load_capture
+from roachplan.perception._camera import MAX_IMAGE_SIDE, parse_calibration
+from roachplan.perception._headers import (
     HEAD_BYTES,
     LZF_MAX_RATIO,
     MAX_CLOUD_POINTS,
@@ -283,7 +283,7 @@ def test_mutated_clouds_load_or_refuse(tmp_path, case):
 
 def test_captured_output_restores_the_terminal(capfd):
     """The PLY fallback silences Open3D on file descriptors 1 and 2, then gives them back."""
-    from perception._capture import _captured_output
+    from roachplan.perception._capture import _captured_output
 
     with _captured_output() as said:
         os.write(1, b"hidden out\n")

@@ -12,8 +12,8 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from perception import MAX_YAML_BYTES, load_yaml, short_repr
-from scenes import Scene, SceneError, load_scene
+from roachplan.perception import MAX_YAML_BYTES, load_yaml, short_repr
+from roachplan.scenes import Scene, SceneError, load_scene
 
 SCENE_KEYS = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
               "planner", "sim", "driver", "seed")  # fmt: skip

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from planning import COLLISION, FOOT, OFF_MAP, VALID, ValidityConfig, check_states, describe_state
-from scenes import load_scene, render_scad
+from roachplan.planning import COLLISION, FOOT, OFF_MAP, VALID, ValidityConfig, check_states, describe_state
+from roachplan.scenes import load_scene, render_scad
 
 
 def test_rendered_double_bridge_matches_table_c1(world):

@@ -25,7 +25,7 @@ from conftest import roachplan
 from hostile import Case, run_case
 from test_perception import FRAME_PCD
 
-from experiments import WRITTEN_BY, OutputError, atomic_path, atomic_write, prepare_output_folder
+from roachplan.experiments import WRITTEN_BY, OutputError, atomic_path, atomic_write, prepare_output_folder
 
 SEED_20 = "12345678901234567890"
 
@@ -269,7 +269,7 @@ CASES = [
 def _cloud(tmp: Path, name: str) -> Path:
     """A point-cloud .ply (a capture the user keeps), written by trimesh: the real capture's
     points, every 50th."""
-    from perception import load_capture
+    from roachplan.perception import load_capture
 
     path = tmp / name
     points = load_capture(FRAME_PCD).finite_points()[::50]
@@ -294,7 +294,7 @@ def test_debug_shows_the_traceback_that_is_otherwise_hidden(where):
 
 
 def test_a_bug_is_one_line_naming_it_and_asking_for_debug(capsys):
-    from app.cli import report_error
+    from roachplan.app.cli import report_error
 
     assert report_error(KeyError("no such column"), debug=False) == 1
     err = capsys.readouterr().err

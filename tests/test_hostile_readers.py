@@ -395,8 +395,8 @@ def test_a_bag_chunk_that_unpacks_past_its_declared_size_is_refused(
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    import perception._capture as capture
-    from perception import CaptureError, load_capture
+    import roachplan.perception._capture as capture
+    from roachplan.perception import CaptureError, load_capture
 
     ts = get_typestore(Stores.ROS1_NOETIC)
     msg = _cloud_msg(ts.types, 40, 50)

@@ -28,8 +28,8 @@ import yaml
 from conftest import ROOT
 from hostile import Case, run_case
 
-from planning._isolated import IsolationError, child_memory_limit, run_isolated
-from scenes._openscad import JAIL_OUT, _sandbox_available, confined
+from roachplan.planning._isolated import IsolationError, child_memory_limit, run_isolated
+from roachplan.scenes._openscad import JAIL_OUT, _sandbox_available, confined
 
 SECRET_HEIGHT = 7.0
 """Height of the secret height map and of the secret solids [m]; nothing a model may read
@@ -266,7 +266,7 @@ def test_without_namespaces_a_render_is_refused_unless_opted_out(tmp_path, unsaf
     if unsafe:
         env["ROACHPLAN_UNSAFE_SCAD"] = "1"
     proc = subprocess.run(
-        [*_NO_NAMESPACES, sys.executable, "-m", "app.cli", *argv],
+        [*_NO_NAMESPACES, sys.executable, "-m", "roachplan", *argv],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=120, check=False,
     )  # fmt: skip
     out = proc.stdout + proc.stderr
@@ -412,7 +412,7 @@ def test_a_runaway_planning_child_is_stopped_at_its_memory_limit(monkeypatch, is
 
 
 def test_a_real_plan_runs_under_the_default_limit(world, monkeypatch):
-    from experiments._trial import plan
+    from roachplan.experiments._trial import plan
 
     monkeypatch.delenv("ROACHPLAN_CHILD_MEMORY", raising=False)
     limit = child_memory_limit()

@@ -13,7 +13,7 @@ import trimesh
 from hostile import Case, run_case
 from PIL import Image
 
-from perception import MAX_YAML_BYTES
+from roachplan.perception import MAX_YAML_BYTES
 
 # A model with top-level variables (one an expression of another), a module with a parameter,
 # and a call argument: only the top-level assignments are the model's parameters.

@@ -18,8 +18,8 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not in
 
 @pytest.fixture
 def app():
-    from app._server import RoachApp
-    from scenes import build_world, load_scene
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
 
     app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
     yield app

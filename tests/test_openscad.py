@@ -12,8 +12,8 @@ import pytest
 import trimesh
 import yaml
 
-from scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
-from scenes._openscad import _sandbox_available, confined, scad_variables
+from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
+from roachplan.scenes._openscad import _sandbox_available, confined, scad_variables
 
 LIBRARY = Path(__file__).resolve().parent.parent / "scenes" / "library"
 

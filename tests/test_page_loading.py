@@ -13,10 +13,10 @@ import yaml
 from conftest import free_port
 from test_perception import REAL
 
-from app._jobs import load_world
-from app._relevel import adopt_capture_scene, rewrite_capture_settings
-from app._uploads import prepare_upload_scene, scene_from_upload
-from scenes import LIBRARY, build_world, load_scene
+from roachplan.app._jobs import load_world
+from roachplan.app._relevel import adopt_capture_scene, rewrite_capture_settings
+from roachplan.app._uploads import prepare_upload_scene, scene_from_upload
+from roachplan.scenes import LIBRARY, build_world, load_scene
 
 RTAB = REAL / "rtabmap"
 
@@ -24,8 +24,7 @@ RTAB = REAL / "rtabmap"
 @pytest.fixture
 def count_meshing(monkeypatch):
     """Calls of perception.mesh_capture made through scenes (where a load meshes)."""
-    import scenes._world as world_module
-
+    import roachplan.scenes._world as world_module
     calls = []
     original = world_module.mesh_capture
 
@@ -57,7 +56,7 @@ def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
     shutil.copy(RTAB / "calib_154.yaml", cli_dir / "depth_154.yaml")  # found beside the image
     cli = build_world(load_scene(cli_dir / "depth_154.png"))
 
-    from app._load_panel import DEFAULTS
+    from roachplan.app._load_panel import DEFAULTS
 
     page_settings = {}  # the load panel passes only what differs from DEFAULTS
     assert DEFAULTS.voxel[0] == pytest.approx(0.01) and DEFAULTS.method == "grid"
@@ -97,7 +96,7 @@ def test_a_capture_from_elsewhere_is_copied_then_remeshed(tmp_path):
 def test_a_scene_file_outside_the_library_joins_the_picker(tmp_path):
     """`serve --scene FILE.yaml` named like no library scene (the issue's islands.yaml) starts
     (viser refused a dropdown value outside its options)."""
-    from app._server import RoachApp
+    from roachplan.app._server import RoachApp
 
     scene = tmp_path / "islands.yaml"
     text = (LIBRARY / "flat.yaml").read_text()
@@ -113,7 +112,7 @@ def test_a_scene_file_outside_the_library_joins_the_picker(tmp_path):
 
 def test_a_multi_path_plan_keeps_one_budget(world):
     """plan_many with a budget: 20 paths asked, 1.5 s for all the tries (not each)."""
-    from experiments import plan_many
+    from roachplan.experiments import plan_many
 
     attempts = []
     plans = plan_many(world, 20, seed=0, budget=1.5,

@@ -26,8 +26,8 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not in
 
 
 def _app(scene):
-    from app._server import RoachApp
-    from scenes import build_world, load_scene
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
 
     return RoachApp(build_world(load_scene(scene)), host="127.0.0.1", port=free_port())
 

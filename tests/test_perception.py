@@ -14,7 +14,7 @@ import pytest
 import trimesh
 from conftest import ROOT, roachplan
 
-from perception import (
+from roachplan.perception import (
     NO_NOISE,
     PRESETS,
     CaptureError,
@@ -327,7 +327,7 @@ def test_grid_mesh_does_not_bridge_the_shadow_behind_the_box(box_capture):
 def test_voxel_study_of_a_wall_at_6_m(tmp_path):
     """Table 3.1's setup: a wall 6 m in front, a 2 m x 2 m square of it. Bigger voxels keep
     fewer points; the iterative 5-sigma fit discards injected gross outliers."""
-    from perception._voxel_study import voxel_study
+    from roachplan.perception._voxel_study import voxel_study
 
     wall = trimesh.creation.box((4.0, 0.05, 4.0))
     wall.apply_translation((0, 6.025, 0))
@@ -355,7 +355,7 @@ def test_voxel_study_of_a_wall_at_6_m(tmp_path):
 def test_kinect_bridge_scene_matches_the_model_it_was_captured_from():
     """The shipped synthetic capture, through the pipeline, puts the plank where the model has
     it: top at 12 cm, along x."""
-    from scenes import build_world, load_scene
+    from roachplan.scenes import build_world, load_scene
 
     world = build_world(load_scene("kinect_bridge"))
     hf = world.heightfield

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from conftest import roachplan
 
-from experiments import plan, plan_many
-from planning import PLANNER_NAMES, homology_signature
+from roachplan.experiments import plan, plan_many
+from roachplan.planning import PLANNER_NAMES, homology_signature
 
 BRIDGE_HALF_LENGTH = 0.5
 GAP_HALF_WIDTH = 0.5
@@ -230,7 +230,7 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
     plan runs in a child of the clean fork server, and gives the very path a fork gives."""
     import threading
 
-    from planning import _isolated, plan_path
+    from roachplan.planning import _isolated, plan_path
 
     sc = world.scene
     kw = dict(bounds=sc.bounds, cfg=sc.planner, seed=5, regions=world.regions)

@@ -154,7 +154,7 @@ def test_a_floor_capture_is_a_scene_that_plans_and_drives(tmp_path, name):
 
 def test_a_scene_file_may_omit_start_goal_and_bounds(tmp_path):
     """The picked poses are valid, joined, and the same on every build (workers rebuild it)."""
-    from scenes import build_world, load_scene, pose_problem
+    from roachplan.scenes import build_world, load_scene, pose_problem
 
     scene = tmp_path / "floor.yaml"
     scene.write_text(yaml.safe_dump({"terrain": [{"scad": str(tmp_path / "slab.scad")}],

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from conftest import roachplan
 
-from sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
-from sim._calibration import walk
+from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
+from roachplan.sim._calibration import walk
 
 
 def flat_sim(robot: RobotConfig | None = None, cfg: SimConfig | None = None) -> Simulation:
@@ -109,7 +109,7 @@ def test_a_robot_that_makes_no_progress_is_stuck():
 
 
 def test_a_straight_path_on_the_floor_costs_about_one_relative_unit():
-    from sim import reference_energy_per_metre
+    from roachplan.sim import reference_energy_per_metre
 
     with flat_sim() as sim:
         sim.reset(0.0, 0.0, math.pi / 2)

@@ -12,7 +12,7 @@ import trimesh
 import yaml
 from conftest import roachplan
 
-from scenes import (
+from roachplan.scenes import (
     LIBRARY,
     SceneError,
     build_world,

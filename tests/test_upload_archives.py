@@ -11,9 +11,9 @@ import pytest
 import yaml
 from test_perception import REAL
 
-from app._uploads import prepare_upload_scene, public_message, scene_from_upload
-from scenes import SceneError
-from scenes._autopose import MAX_AUTO_EXTENT
+from roachplan.app._uploads import prepare_upload_scene, public_message, scene_from_upload
+from roachplan.scenes import SceneError
+from roachplan.scenes._autopose import MAX_AUTO_EXTENT
 
 
 def _zip(files: dict[str, bytes], links: tuple[str, ...] = ()) -> bytes:

@@ -8,8 +8,8 @@ import trimesh
 import yaml
 from conftest import ROOT
 
-from app._uploads import prepare_upload_scene, safe_name, scene_from_upload
-from scenes import LIBRARY, SceneError
+from roachplan.app._uploads import prepare_upload_scene, safe_name, scene_from_upload
+from roachplan.scenes import LIBRARY, SceneError
 
 CAPTURE = {"method": "grid", "voxel": 0.02, "intrinsics": "kinect2-qhd"}
 
@@ -30,7 +30,7 @@ def test_a_depth_capture_becomes_a_capture_scene_with_valid_poses(tmp_path):
     world = prepare_upload_scene(path)
     raw = yaml.safe_load(path.read_text())
     assert raw["terrain"][0]["capture"] == "kinect_bridge_depth.png" and raw["ground"] is None
-    from scenes import pose_problem
+    from roachplan.scenes import pose_problem
 
     assert (
         pose_problem(world, world.scene.start) == "" and pose_problem(world, world.scene.goal) == ""

@@ -12,8 +12,8 @@ import pytest
 from conftest import roachplan
 from test_perception import REAL
 
-from perception import CaptureError
-from perception._voxel_study import (
+from roachplan.perception import CaptureError
+from roachplan.perception._voxel_study import (
     MIN_KEPT,
     VoxelStudyRow,
     planarity_warning,
