@@ -1,5 +1,6 @@
 """`roachplan calibrate-turning`: the sweep of appendix A, written as CSV, a figure like 3.4,
-and the fitted model with the P gain it implies."""
+the fitted turning curve (what the tracking driver and drivable plans use) and the report's
+log-linear model with the P gain it implies (the reference driver's)."""
 
 from __future__ import annotations
 
@@ -11,17 +12,24 @@ import numpy as np
 
 from roachplan.experiments import atomic_path, atomic_write
 from roachplan.sim import (
+    PLAN_HEADROOM,
     DriverConfig,
     RobotConfig,
     SimConfig,
+    TurningFit,
     TurningModel,
     TurningSample,
     fit_turning,
+    fit_turning_curve,
     turning_sweep,
 )
 
-DEFAULT_RATIOS = (1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0)
-"""Right/left motor-speed ratios of the sweep: up to the controller's cap (max_ratio)."""
+REPORT_RATIOS = (1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0)
+"""The report's sweep (figure 3.4): its log-linear fit gives the reference driver's gain."""
+DEFAULT_RATIOS = tuple(sorted({*REPORT_RATIOS, *(round(1 + 0.1 * i, 1) for i in range(21))}))
+"""Right/left motor-speed ratios of the sweep, up to the controller's cap (max_ratio): every
+0.1 and the report's, 23 in all. The turning curve has four parameters, and the 7 report
+ratios put one point only on its steep end near 3."""
 
 
 def calibrate_turning(
@@ -32,11 +40,17 @@ def calibrate_turning(
     robot: RobotConfig | None = None,
     sim: SimConfig | None = None,
     driver: DriverConfig | None = None,
-) -> tuple[list[TurningSample], TurningModel]:
-    """Run the sweep on an open floor and write turning.csv, turning.png, turning_model.json."""
+) -> tuple[list[TurningSample], TurningModel, TurningFit]:
+    """Run the sweep on an open floor and write turning.csv, turning.png, turning_model.json.
+
+    Returns the samples, the report's log-linear model (fitted on the report's ratios when the
+    sweep has them all, else on every sample) and the turning curve fitted on every sample."""
     robot, sim, driver = robot or RobotConfig(), sim or SimConfig(), driver or DriverConfig()
     samples = turning_sweep(robot, sim, driver.omega0, ratios, duration)
-    model = fit_turning(samples)
+    fit = fit_turning_curve(samples)
+    report = [s for s in samples if s.ratio in REPORT_RATIOS]
+    model = fit_turning(report if len(report) == len(REPORT_RATIOS) else samples)
+    curve = fit.curve
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_dir / "turning.csv") as tmp, tmp.open("w", newline="") as f:
         w = csv.writer(f)
@@ -50,7 +64,23 @@ def calibrate_turning(
         out_dir / "turning_model.json",
         json.dumps(
             {
-                "model": "curvature_per_m = slope * ln(motor_speed_ratio) + intercept",
+                "curve": "curvature_per_m = kappa_sat * (1 - r^-rate) + lock * ln(r) / "
+                "(ln(lock_ratio) - ln(r)), r = motor_speed_ratio",
+                "kappa_sat_per_m": curve.kappa_sat,
+                "rate": curve.rate,
+                "lock_per_m": curve.lock,
+                "lock_ratio": curve.lock_ratio,
+                "curve_r_squared": fit.r_squared,
+                "curve_rms_residual_per_m": fit.rms_residual,
+                "curve_max_residual_per_m": fit.max_residual,
+                "max_ratio": driver.max_ratio,
+                "max_curvature_per_m": curve.curvature(driver.max_ratio),
+                "plan_headroom": PLAN_HEADROOM,
+                "min_turning_radius_m": curve.min_turning_radius(driver.max_ratio),
+                "min_turning_radius_rule": "1 / (plan_headroom * curve(max_ratio)): "
+                "drivable plans' tightest arc (planner.turning_radius)",
+                "model": "curvature_per_m = slope * ln(motor_speed_ratio) + intercept "
+                "(the report's, fitted on its ratios 1, 1.25, 1.5, 1.75, 2, 2.5, 3)",
                 "slope_per_m": model.slope,
                 "intercept_per_m": model.intercept,
                 "r_squared": model.r_squared,
@@ -66,11 +96,11 @@ def calibrate_turning(
         + "\n",
     )
     with atomic_path(out_dir / "turning.png") as tmp:
-        _plot(tmp, samples, model)
-    return samples, model
+        _plot(tmp, samples, model, fit)
+    return samples, model, fit
 
 
-def _plot(path: Path, samples: list[TurningSample], model: TurningModel) -> None:
+def _plot(path: Path, samples: list[TurningSample], model: TurningModel, fit: TurningFit) -> None:
     import matplotlib
 
     matplotlib.use("Agg")  # files only, no display
@@ -81,8 +111,14 @@ def _plot(path: Path, samples: list[TurningSample], model: TurningModel) -> None
     fig, ax = plt.subplots(figsize=(5, 3.6), dpi=120)
     ax.plot(x, k, "o", label="simulated roach")
     xs = np.linspace(0, x.max(), 50)
-    ax.plot(xs, model.slope * xs + model.intercept, "-",
-            label=f"fit: {model.slope:.2f} ln(r) {model.intercept:+.2f}  (R² {model.r_squared:.3f})")  # fmt: skip
+    c = fit.curve
+    # Up to the largest swept ratio only: the curve is fitted there and has a pole above it.
+    ax.plot(xs, [c.curvature(v) for v in np.exp(xs)], "-",
+            label=f"curve: {c.kappa_sat:.2f}(1 - r^-{c.rate:.2f}) + {c.lock:.3f} ln r / "
+                  f"(ln {c.lock_ratio:.3f} - ln r)  (R² {fit.r_squared:.3f})")  # fmt: skip
+    ax.plot(xs, model.slope * xs + model.intercept, "--", color="0.5",
+            label=f"report's line: {model.slope:.2f} ln(r) {model.intercept:+.2f}  "
+                  f"(R² {model.r_squared:.3f})")  # fmt: skip
     ax.set_xlabel("ln(motor speed ratio)  [right / left]")
     ax.set_ylabel("curvature 2πn/d  [1/m]")
     ax.set_title("Turning at various motor ratios (cf. Tong 2018, fig. 3.4)")

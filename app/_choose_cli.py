@@ -17,7 +17,8 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         "choose",
         help="choose the path to take by simulation: K candidates raced under uncertainty",
         description="Plan K distinct candidate paths, drive each many times in worlds drawn "
-        "from the uncertainty model (start pose, friction, motors, mass), and rank them by "
+        "from the uncertainty model (start pose, friction, motors, mass: the scene's "
+        "`uncertainty:`, else the defaults), and rank them by "
         "P(success) with confidence intervals, then energy. Rollouts are spent where they "
         "decide something: a candidate leaves the race once it is clearly beaten.",
     )
@@ -36,7 +37,12 @@ def add_choose_parser(sub, terrain_help: str) -> None:
                    help="the report's raw paths and algorithms 1-2 instead of drivable plans "
                         "and the tracking driver")  # fmt: skip
     p.add_argument("--backend", choices=("local", "ray"), default="local")
-    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores)")
+    p.add_argument("--address", default=None, metavar="RAY_ADDRESS",
+                   help="Ray cluster address, with --backend ray (default: start a local Ray "
+                        "instance)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=None,
+                   help="parallel workers (default: this machine's cores, or with --address "
+                        "one per CPU of the Ray cluster)")  # fmt: skip
     p.add_argument("--validate", type=int, default=0, metavar="R",
                    help="then drive every candidate R more times with fresh seeds and compare "
                         "predicted with observed success (Brier score, reliability table)")  # fmt: skip
@@ -68,6 +74,8 @@ def _check(args: argparse.Namespace) -> None:
         raise bad("--workers", args.workers, "give 1 or more workers")
     if args.validate < 0:
         raise bad("--validate", args.validate, "give 0 or more repeats")
+    if args.address is not None and args.backend != "ray":
+        raise bad("--address", args.address, "a Ray cluster address is for --backend ray")
 
 
 def _fmt(v: float, digits: int = 2) -> str:
@@ -140,15 +148,18 @@ def cmd_choose(args: argparse.Namespace) -> int:
     cfg = ChooseConfig(
         candidates=args.candidates, rollouts=args.rollouts, budget_s=budget,
         confidence=args.confidence, min_success=args.min_success,
-        seed=scene.seed if args.seed is None else args.seed,
+        seed=scene.seed if args.seed is None else args.seed, uncertainty=scene.uncertainty,
     )  # fmt: skip
 
     def progress(message: str, fraction: float) -> None:
         bar = "#" * round(20 * fraction)
         print(f"\rchoose [{bar:<20}] {message}   ", end="", file=sys.stderr, flush=True)
 
+    # Ray with a cluster address: one worker per CPU of the cluster unless told (as `experiment`).
+    cluster = args.backend == "ray" and args.address is not None
+    workers = args.workers or (None if cluster else os.cpu_count() or 1)
     choice, checked = choose(
-        scene, cfg, workers=args.workers or os.cpu_count() or 1, backend=args.backend,
+        scene, cfg, workers=workers, backend=args.backend, address=args.address,
         validate_repeats=args.validate, progress=progress,
     )  # fmt: skip
     print(file=sys.stderr)

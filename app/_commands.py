@@ -28,8 +28,10 @@ def do_plan(app, cmd: Cmd) -> None:
     count, seed, planner = int(app.count.value), app._next_seed, app._planner()
     budget = planner.time_limit
     app._show_robot_at_start()
-    app.server.scene.remove_by_name("/plans")
-    app.plans, tried, plans, errors = [], [], [], []
+    # Only what this plan finds is shown: no earlier paths, roadmap or trajectories.
+    app.set_plans([])
+    app.server.scene.remove_by_name("/trajectories")
+    tried, plans, errors = [], [], []
     deadline = time.monotonic() + budget
     request = dict(seed=seed, start=start, goal=goal, planner=planner)
     job = Job(_plan_job, app.world, count, request, deadline)
@@ -40,8 +42,7 @@ def do_plan(app, cmd: Cmd) -> None:
                 tried.append(payload[0])
                 if payload[1] is not None:
                     plans.append(payload[1])
-                    app._draw(f"/plans/{len(plans) - 1}",
-                              payload[1].plan.path_xyz + [0, 0, 0.005], BLACK)  # fmt: skip
+                    app.view.add_path(payload[1].plan.path_xyz)
             elif kind == "error":
                 errors.append(str(payload))
         t = job.elapsed
@@ -57,9 +58,8 @@ def do_plan(app, cmd: Cmd) -> None:
         app.status.content = f"Planning failed: {errors[0]}"
         app._notify(cmd.client_id, "Planning failed", errors[0], error=True)
         return
-    app.plans, app.plan_endpoints = plans, (start, goal)
-    if plans:
-        app.view.draw_roadmap(app.world, plans[0].plan.roadmap)
+    app.plan_endpoints = (start, goal)
+    app.set_plans(plans)
     seeds = f"seeds {seed}-{seed + len(tried) - 1}" if len(tried) > 1 else f"seed {seed}"
     tries = f"{len(tried)} {'try' if len(tried) == 1 else 'tries'}"
     routes = ", ".join(lp.route for lp in plans)
@@ -73,7 +73,8 @@ def do_plan(app, cmd: Cmd) -> None:
         text = f"No path found in {elapsed:.1f} s{why} ({planner.name}, {tries}, {seeds})."
     elif spent:
         text = (f"{len(plans)} of {count} paths found in {elapsed:.1f} s: the {budget:g} s "
-                f"budget is spent ({seeds}; routes {routes}). **Drive** drives the first.")  # fmt: skip
+                f"budget is spent ({seeds}; routes {routes}). **Drive** drives the marked one "
+                f"(choose it in *Drive path*).")  # fmt: skip
     elif count == 1:
         first = plans[0].plan
         text = f"Path found in {first.plan_time:.2f} s (seed {first.seed}). Press **Drive**."
@@ -82,7 +83,8 @@ def do_plan(app, cmd: Cmd) -> None:
     else:
         text = (f"{len(plans)} paths found in {elapsed:.1f} s (seeds "
                 f"{', '.join(str(lp.plan.seed) for lp in plans)}; routes {routes}). "
-                f"**Drive** drives the first.")  # fmt: skip
+                f"**Drive** drives the marked one "
+                f"(choose it in *Drive path*).")  # fmt: skip
     app.status.content = text
 
 
@@ -91,7 +93,9 @@ def do_drive(app, cmd: Cmd) -> None:
         app._notify(cmd.client_id, "Nothing to drive", "Plan a path first.", error=True)
         return
     start, goal = app.plan_endpoints
-    result = drive(app, app.plans[0].plan, start, goal, cmd)
+    if not app.view.path_nodes:  # (hidden by Best path or Show trial: show what is driven)
+        app.show_plans()
+    result = drive(app, app.plans[app.drive_path].plan, start, goal, cmd)
     if result is not None:
         record(app, result.to_json(), "")
 
@@ -161,7 +165,8 @@ def do_best_path(app, cmd: Cmd) -> None:
         return
     k, best = min(ok, key=lambda kt: kt[1]["relative_energy"])
     planned = stub_plan(best)
-    app._draw("/plans/0", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
+    app.view.hide_paths()  # (the plan's paths and roadmap: Drive shows them again)
+    app._draw("/plans/best", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
     result = drive(app, planned, tuple(best["start"]), tuple(best["goal"]), cmd, name="Best path")
     if result is not None:
         record(app, result.to_json(), f"best (trial {k + 1})")
@@ -179,7 +184,7 @@ def show_trial(app) -> None:
     if app.show_trial.value == "-":
         return
     t = app.scene_trials[int(app.show_trial.value) - 1]
-    app.server.scene.remove_by_name("/plans")
+    app.view.hide_paths()
     app.server.scene.remove_by_name("/trajectories")
     app._draw("/plans/shown", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
     app._draw("/trajectories/shown", [p[1:] for p in t["trajectory"]], BLUE)

@@ -15,6 +15,17 @@ BLACK, BLUE = (0, 0, 0), (30, 90, 255)
 MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}
 INVALID = (220, 30, 30)
 TERRAIN_COLOUR = (196, 164, 120)
+PATH_COLOURS = ((20, 20, 20), (170, 40, 200), (0, 150, 170), (230, 0, 120), (110, 190, 30),
+                (20, 40, 120), (220, 180, 0), (90, 140, 140))  # fmt: skip
+"""Path k's colour is PATH_COLOURS[k % 8] (none near the legs' orange, the trajectory's blue
+or the invalid red, so each stays readable over the tan terrain); labels 1..K tell them apart
+beyond 8."""
+STANDABLE_COLOURS = {"region": (40, 200, 80), "other": (250, 200, 60)}
+"""The standability overlay: cells of the start's region, and other cells it can stand on."""
+VIEW_DIRECTION = np.array([0.8, -1.0, 0.75]) / np.linalg.norm([0.8, -1.0, 0.75])
+"""From the look-at point towards the camera of a framed view (world frame, unit)."""
+ROBOT_PIXELS = 160.0
+"""How tall [px] the robot's body length appears after Zoom to robot and while following."""
 
 
 def wxyz_from_xyzw(q) -> tuple[float, float, float, float]:
@@ -60,11 +71,14 @@ class SceneView:
         """Marker name ("start", "goal") -> the marker's transform control (drag it)."""
         self.balls: dict = {}
         """Marker name ("start", "goal") -> the marker's sphere (its colour says valid or not)."""
+        self.path_nodes: list = []
+        """Path k's line segments (index k of the app's plans), while the paths are shown."""
+        self.standable_node = None
 
     def show(self, world: World, on_marker) -> None:
         """Replace everything drawn by this world, with the markers at its start and goal."""
         s, scene, r = self.scene, world.scene, world.robot
-        for name in ("/terrain", "/plans", "/trajectories", "/robot", "/markers"):
+        for name in ("/terrain", "/plans", "/trajectories", "/robot", "/markers", "/standable"):
             s.remove_by_name(name)
         s.set_up_direction("+z")
         if len(world.mesh.faces):
@@ -85,6 +99,7 @@ class SceneView:
                       position=(0.0, 0.0, -r.leg_length / 2))  # fmt: skip
             self.hip_nodes.append(hip_node)
         self.controls, self.balls = {}, {}
+        self.path_nodes, self.standable_node = [], None
         for which, pose in (("start", scene.start), ("goal", scene.goal)):
             ctl = s.add_transform_controls(
                 f"/markers/{which}", scale=0.25, disable_rotations=True,
@@ -119,3 +134,79 @@ class SceneView:
             segs = np.concatenate([graph, np.nan_to_num(z) + 0.003], axis=2).astype(np.float32)
             self.scene.add_line_segments("/plans/roadmap", segs, colors=(150, 150, 150),
                                          thickness=1.0, thickness_units="screen")  # fmt: skip
+
+    def show_paths(self, paths: list, selected: int) -> None:
+        """Paths ((N, 3) [m] each) in distinct colours with labels 1..K at their middle; the
+        selected one (index) thicker and labelled "Drive". Replaces the paths drawn before."""
+        self.hide_paths()
+        for points in paths:
+            self.add_path(points)
+        self.mark_path(selected)
+
+    def add_path(self, points) -> None:
+        """One more path ((N, 3) [m]), unmarked, in the next colour, labelled with its number."""
+        k = len(self.path_nodes)
+        pts = np.asarray(points) + [0, 0, 0.005]
+        self.path_nodes.append(self.scene.add_line_segments(
+            f"/plans/{k}", segments(pts), colors=PATH_COLOURS[k % len(PATH_COLOURS)],
+            thickness=3.0, thickness_units="screen"))  # fmt: skip
+        self.scene.add_label(f"/plans/{k}/label", str(k + 1),
+                             position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]))  # fmt: skip
+
+    def mark_path(self, selected: int) -> None:
+        """Make path `selected` (index) the marked one: thick, its label saying Drive takes it."""
+        for k, node in enumerate(self.path_nodes):
+            thickness = 7.0 if k == selected else 3.0
+            if node.thickness != thickness:
+                node.thickness = thickness
+                text = f"{k + 1}: Drive" if k == selected else str(k + 1)
+                pts = node.points.reshape(-1, 3)
+                self.scene.add_label(f"/plans/{k}/label", text,
+                                     position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]))  # fmt: skip
+
+    def hide_paths(self) -> None:
+        """Remove every path, the roadmap and a shown trial's path."""
+        self.scene.remove_by_name("/plans")
+        self.path_nodes = []
+
+    def show_standable(self, world: World, sm) -> None:
+        """The standability overlay of a StandableMap: each standable cell a square draped on
+        the surface (its corners' heights), translucent, green in the start's region, else
+        yellow. Replaces the overlay drawn before."""
+        self.scene.remove_by_name("/standable")
+        self.standable_node = self.scene.add_frame("/standable", show_axes=False)
+        for which, mask in (("region", sm.reachable), ("other", sm.standable & ~sm.reachable)):
+            centres = sm.cell_centres(mask)
+            if not len(centres):
+                continue
+            half = 0.45 * sm.cell  # (a gap between cells keeps the terrain's shape readable)
+            corners = centres[:, None, :] + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+            z = np.nan_to_num(world.heightfield.sample(corners.reshape(-1, 2))) + 0.002
+            vertices = np.column_stack([corners.reshape(-1, 2), z]).astype(np.float32)
+            first = 4 * np.arange(len(centres))[:, None]
+            faces = np.concatenate([first + [0, 1, 2], first + [0, 2, 3]]).astype(np.uint32)
+            self.scene.add_mesh_simple(f"/standable/{which}", vertices, faces,
+                                       color=STANDABLE_COLOURS[which], opacity=0.7,
+                                       side="double")  # fmt: skip
+
+
+def framing(points, fov: float, *, margin: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """(camera position, look-at) [m], world frame, of a view from VIEW_DIRECTION that holds
+    points ((N, 3) [m]) with margin [m] around them in a vertical field of view fov [rad]."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
+    radius = float(np.max(np.linalg.norm(pts - centre, axis=1))) + margin
+    distance = radius / math.tan(fov / 2)
+    return centre + distance * VIEW_DIRECTION, centre
+
+
+def robot_distance(length: float, fov: float, image_height: int, pixels: float) -> float:
+    """How far [m] a camera with vertical field of view fov [rad] over image_height [px] must be
+    for a thing of this length [m], face on, to span `pixels` [px]."""
+    return length * image_height / (2 * math.tan(fov / 2) * pixels)
+
+
+def projected_pixels(length: float, distance: float, fov: float, image_height: int) -> float:
+    """How many pixels a thing of this length [m] spans, face on, at distance [m] from a camera
+    with vertical field of view fov [rad] over image_height [px]."""
+    return length * image_height / (2 * distance * math.tan(fov / 2))

@@ -95,6 +95,15 @@ class CancelCmd(Cmd):
     what: str
 
 
+
+@dataclass(frozen=True)
+class ViewCmd(Cmd):
+    """A change of what is seen, handled at once even while a command runs: "roadmap",
+    "standable" (the toggles), "drive_path" (the Drive path picker), "follow", "zoom" (the
+    clicking client's camera)."""
+
+    what: str
+
 NAMES = {PlanCmd: "Plan", DriveCmd: "Drive", ResetCmd: "Reset", BestPathCmd: "Best path",
          PlaceCmd: "Click", MarkersCmd: "Marker check", RunTrialsCmd: "Run trials",
          ShowTrialCmd: "Show trial"}  # fmt: skip

@@ -103,23 +103,34 @@ def report_failure(app, ld: Loading) -> None:
     app.loading.show("")
     app.status.content = f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays."
     app.scene_picker.value = app._picker_label()
-    mm = ld.from_upload and needs_millimetre_scale(message)
+    mm = ld.from_upload and needs_millimetre_scale(ld.error)  # (the advice as scenes words it)
     app.load_panel.offer_scale((Path(ld.ref), ld.label) if mm else None)
-    if mm:
+    if mm and "Scale x0.001" not in message:  # (public_message words it so, as a rule)
         message += " Press Scale x0.001 (Scene folder) to load it in metres."
     app._notify(ld.client_id, f"Could not load {ld.label}", message, error=True)
+
+
+def next_seed(app, world) -> int:
+    """The seed the next plan or batch on world's scene starts from: where that scene's seeds
+    stopped when it was switched away from (its plans' tries included), and past every seed
+    recorded in its trials, so that switching back never repeats a trial; the scene file's own
+    seed on a first visit."""
+    key = str(world.scene.path)
+    recorded = [int(t["seed"]) + 1 for t in app.trials.get(key, ())]
+    return max(app.next_seeds.get(key, world.scene.seed), *recorded, world.scene.seed)
 
 
 def swap_in(app, ld: Loading) -> None:
     """The loaded world replaces the current one."""
     world, view = ld.result
     app.load_panel.offer_scale(None)
+    app.next_seeds[str(app.world.scene.path)] = app._next_seed
     app.world = world
     if ld.from_upload or ld.label in app.files:
         app.files[ld.label] = (ld.ref, ld.from_upload)
         app.scene_picker.options = (*list_scenes(), *app.files)
     app.scene_picker.value = app._picker_label()
-    app._next_seed = world.scene.seed
+    app._next_seed = next_seed(app, world)
     app._show_world()
     app.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
     took = ld.job.elapsed

@@ -25,13 +25,23 @@ import numpy as np
 import viser
 
 from roachplan.experiments import ExperimentSpec
-from roachplan.planning import PLANNER_NAMES
+from roachplan.planning import PLANNER_NAMES, PlanningError, standable_map
 from roachplan.scenes import LIBRARY, World, list_scenes
 from roachplan.sim import Frame
 
 from ._batch import Batch, BatchPanel
+from ._choose_panel import ChooseCmd, ChoosePanel, do_choose
 from ._commands import do_best_path, do_drive, do_plan, record, show_trial
-from ._draw import SceneView, on_surface, wxyz_from_xyzw, yaw_wxyz
+from ._draw import (
+    ROBOT_PIXELS,
+    VIEW_DIRECTION,
+    SceneView,
+    framing,
+    on_surface,
+    robot_distance,
+    wxyz_from_xyzw,
+    yaw_wxyz,
+)
 from ._jobs import (
     NAMES,
     BestPathCmd,
@@ -48,6 +58,7 @@ from ._jobs import (
     RunTrialsCmd,
     ShowTrialCmd,
     UploadCmd,
+    ViewCmd,
     _warm_job,
     load_world,
     run_to_end,
@@ -58,9 +69,10 @@ from ._markers import StartGoal
 from ._panel import energy_plot, summary_markdown, trials_csv, trials_markdown
 from ._picking import ray_hit_heightfield
 from ._relevel import CaptureView
+from ._replay import ShareCmd, share_trial
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
 
-AT_ONCE = (LoadSceneCmd, UploadCmd, PanelCmd, ExportCmd, CancelCmd)
+AT_ONCE = (LoadSceneCmd, UploadCmd, PanelCmd, ExportCmd, CancelCmd, ViewCmd)
 """Commands handled even while a plan or drive runs: they start or stop background work."""
 
 
@@ -84,11 +96,22 @@ class RoachApp:
         """Trial records (TrialResult.to_json() + "label") per scene file."""
         self.plans: list = []
         self.plan_endpoints: tuple[tuple, tuple] | None = None
+        self.drive_path = 0
+        """Index in plans of the path Drive takes (select_path)."""
+        self._standable = None
+        """(StandableMap, the start's cell (i, j) it was made for) of this world, made when the
+        overlay is first shown."""
+        self._followed = 0.0
+        self._follow_offsets: dict[int, np.ndarray] = {}
+        """Client id -> its camera's offset from the robot while following [m], world frame."""
+        """When the cameras last moved with the robot (time.monotonic() [s])."""
         self.files: dict[str, tuple[str, bool]] = {}
         """Scene picker label -> (scene file, written by the app) of each scene loaded from a
         file: uploads, re-meshed copies, `serve --scene FILE`."""
         self.upload_dir = Path(upload_dir or tempfile.mkdtemp(prefix="roachplan-uploads-"))
         self._next_seed = world.scene.seed
+        self.next_seeds: dict[str, int] = {}
+        """Scene file -> the next seed of the scenes switched away from (app/_loading.py)."""
         self.max_upload_bytes = max_upload_bytes
         limit_uploads(self.server, max_upload_bytes, self._refuse_upload)
         path = Path(world.scene.path).resolve()
@@ -159,15 +182,28 @@ class RoachApp:
             )  # fmt: skip
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
             self.show_roadmap = gui.add_checkbox("Show roadmap", False)
+            self.drive_path_picker = gui.add_dropdown(
+                "Drive path", ("-",), hint="The path Drive takes (the thick one, labelled Drive)"
+            )
             self.plan_button = gui.add_button("Plan")
             self.drive_button = gui.add_button("Drive", disabled=True)
             self.reset_button = gui.add_button("Reset")
             self.best_button = gui.add_button("Best path")
             self.speed = gui.add_slider("Playback speed [x real time]", 1, 10, 1, 1)
+        with gui.add_folder("View"):
+            self.follow = gui.add_checkbox("Follow robot", False,
+                                           hint="Every browser's camera follows the robot")  # fmt: skip
+            self.zoom_button = gui.add_button("Zoom to robot")
+            self.show_standable = gui.add_checkbox(
+                "Show where it can stand", False,
+                hint="Green: the region the start is in; yellow: other places it can stand",
+            )  # fmt: skip
+        self.choose_panel = ChoosePanel(gui, put)
         self.batch_panel = BatchPanel(gui, put)
         with gui.add_folder("Results"):
             self.show_trial = gui.add_dropdown("Show trial", ("-",))
             self.export_button = gui.add_button("Export CSV")
+            self.share_button = gui.add_button("Share")  # the shown trial as an offline page
             self.table = gui.add_markdown(trials_markdown([]))
             self.summary = gui.add_markdown("")
             self.plot = gui.add_image(energy_plot([]), label="Energy per trial")
@@ -187,6 +223,12 @@ class RoachApp:
         self.cancel_job.on_click(lambda ev: put(CancelCmd(ev.client_id, "job")))
         self.show_trial.on_update(lambda ev: put(ShowTrialCmd(ev.client_id)))
         self.export_button.on_click(lambda ev: put(ExportCmd(ev.client_id)))
+        self.share_button.on_click(lambda ev: put(ShareCmd(ev.client_id)))
+        self.show_roadmap.on_update(lambda ev: put(ViewCmd(ev.client_id, "roadmap")))
+        self.drive_path_picker.on_update(lambda ev: put(ViewCmd(ev.client_id, "drive_path")))
+        self.follow.on_update(lambda ev: put(ViewCmd(ev.client_id, "follow")))
+        self.zoom_button.on_click(lambda ev: put(ViewCmd(ev.client_id, "zoom")))
+        self.show_standable.on_update(lambda ev: put(ViewCmd(ev.client_id, "standable")))
 
     def _set_click_mode(self) -> None:
         """Listen for clicks on the scene only while a marker is to be placed (a listening
@@ -203,6 +245,7 @@ class RoachApp:
     def _notify(self, client_id: int | None, title: str, body: str, *, error: bool = False):
         client = self.server.get_clients().get(client_id) if client_id is not None else None
         if client is not None:
+            body = public_message(body, self.upload_dir)  # (the page's words, no server paths)
             client.add_notification(
                 title, body, auto_close_seconds=None if error else 4.0,
                 color="red" if error else None,
@@ -232,13 +275,24 @@ class RoachApp:
         scene = self.world.scene
         self.view.show(self.world, lambda ev: self.commands.put(MarkersCmd(ev.client_id)))
         self.markers.reset(self.world)
-        self.plans, self.plan_endpoints = [], None
+        self.plan_endpoints, self._standable = None, None
+        self.set_plans([])
+        self.choose_panel.clear()
         self._check_markers()
         self._show_robot_at_start()
-        (lo, hi) = np.asarray(scene.bounds)
-        c, ext = (lo + hi) / 2, float(np.max(hi - lo))
-        self.server.initial_camera.position = (c[0] + 0.8 * ext, c[1] - 1.0 * ext, 0.75 * ext)
-        self.server.initial_camera.look_at = (c[0], c[1], 0.0)
+        if self.show_standable.value:
+            self._show_standable()
+        # The first view frames start and goal (the robot's world), not the terrain's bounds:
+        # a 10 m capture would leave the 10 cm robot a few pixels wide. Browsers already open
+        # are turned to the new world too.
+        ends = [on_surface(self.world, p) for p in (scene.start, scene.goal)]
+        position, look_at = framing(ends, self.server.initial_camera.fov)
+        self.server.initial_camera.position = tuple(position)
+        self.server.initial_camera.look_at = tuple(look_at)
+        for client in self.server.get_clients().values():
+            position, look_at = framing(ends, client.camera.fov or self.server.initial_camera.fov)
+            with client.atomic():
+                client.camera.look_at, client.camera.position = look_at, position
         self.title.content = f"**roachplan** — scene `{scene.name}`  \n{scene.description}"
         self._refresh_results()
 
@@ -246,7 +300,10 @@ class RoachApp:
         return self.markers.pose(which)
 
     def _check_markers(self) -> bool:
-        return self.markers.check(self.world)
+        valid = self.markers.check(self.world)
+        if self.show_standable.value and self._standable is not None:
+            self._show_standable()  # (the start's region, when the start left it)
+        return valid
 
     def _show_robot_at_start(self) -> None:
         start = self._marker_pose("start")
@@ -258,6 +315,105 @@ class RoachApp:
     def _show_frame(self, f: Frame) -> None:
         self.view.show_robot(self.server, f.p_world_body, wxyz_from_xyzw(f.quat_world_body),
                              f.leg_angles)  # fmt: skip
+        now = time.monotonic()
+        if self.follow.value and now - self._followed > 1 / 20:  # (20 camera moves a second)
+            self._followed = now
+            for client in self.server.get_clients().values():
+                self._aim(client, f.p_world_body, zoom=False)
+
+    # the view ----------------------------------------------------------------------------
+
+    def _aim(self, client, p_world_robot, *, zoom: bool) -> None:
+        """Turn client's camera to the robot at p_world_robot [m]. zoom: from the camera's
+        direction (at least 20 degrees above the ground), where the robot's body spans
+        ROBOT_PIXELS of the view's height; that offset is then kept while following. (A
+        camera's reported position can lag behind its look-at by one update; following by
+        what it reports would drift to the ground.)"""
+        cam, target = client.camera, np.asarray(p_world_robot, dtype=float)
+        offset = self._follow_offsets.get(client.client_id)
+        if zoom or offset is None:
+            fov = cam.fov or self.server.initial_camera.fov
+            near = robot_distance(self.world.robot.body_length, fov, cam.image_height or 900,
+                                  ROBOT_PIXELS)  # fmt: skip
+            offset = np.asarray(cam.position) - np.asarray(cam.look_at)
+            d = float(np.linalg.norm(offset))
+            offset = offset / d if d > 1e-6 and offset[2] > 0.34 * d else VIEW_DIRECTION
+            offset = near * offset
+            self._follow_offsets[client.client_id] = offset
+        with client.atomic():
+            cam.look_at, cam.position = target, target + offset
+
+    def select_path(self, k: int) -> None:
+        """Make path k (an index into self.plans, 0 to K - 1; the page labels it k + 1) the one
+        Drive takes: it is drawn thick and labelled Drive, and the Drive path picker shows it.
+        Run on the loop thread (a command's handler), like every change of state."""
+        if not 0 <= k < len(self.plans):
+            raise PlanningError(f"path {k + 1}: there are {len(self.plans)} planned path(s); "
+                                f"choose 1 to {len(self.plans)} (Plan first if there are none)")  # fmt: skip
+        self.drive_path = k
+        self.view.mark_path(k)
+        if self.drive_path_picker.value != str(k + 1):  # (the picker calls back: a no-op)
+            self.drive_path_picker.value = str(k + 1)
+
+    def set_plans(self, plans: list) -> None:
+        """The plan's paths (LabelledPlans; none: nothing drawn), drawn with the first marked
+        for Drive; and the roadmap of the first, always kept (so Show roadmap acts at once)."""
+        self.plans, self.drive_path = list(plans), 0
+        self.roadmap = self.plans[0].plan.roadmap if self.plans else None
+        names = tuple(str(k + 1) for k in range(len(self.plans))) or ("-",)
+        self.drive_path_picker.options = names
+        self.drive_path_picker.value = names[0]
+        if self.plans:
+            self.show_plans()
+        else:
+            self.view.hide_paths()
+
+    def show_plans(self) -> None:
+        """Draw the planned paths (Drive's marked) and, when ticked, the roadmap."""
+        self.view.show_paths([lp.plan.path_xyz for lp in self.plans], self.drive_path)
+        self._show_roadmap()
+
+    def _show_roadmap(self) -> None:
+        if self.show_roadmap.value and self.roadmap is not None and self.view.path_nodes:
+            self.view.draw_roadmap(self.world, self.roadmap)
+        else:
+            self.server.scene.remove_by_name("/plans/roadmap")
+
+    def _show_standable(self) -> None:
+        """The standability overlay, computed once per world (the planner's own standable map:
+        4 cm cells, 8 headings), again only when the start leaves the region drawn."""
+        (x, y, _), done = self.markers.pose("start"), self._standable
+        if done is not None and self.view.standable_node is not None:
+            sm, cell = done
+            i, j = round((x - sm.x0) / sm.cell), round((y - sm.y0) / sm.cell)
+            inside = 0 <= j < sm.reachable.shape[0] and 0 <= i < sm.reachable.shape[1]
+            if (i, j) == cell or (inside and sm.reachable[j, i]):
+                return
+        w = self.world
+        sm = standable_map(w.heightfield, w.footprint, w.scene.planner.validity, w.scene.bounds,
+                           (x, y))  # fmt: skip
+        self._standable = (sm, (round((x - sm.x0) / sm.cell), round((y - sm.y0) / sm.cell)))
+        self.view.show_standable(w, sm)
+
+    def _do_view(self, cmd: ViewCmd) -> None:
+        match cmd.what:
+            case "roadmap":
+                self._show_roadmap()
+            case "drive_path":
+                if self.drive_path_picker.value != "-":
+                    self.select_path(int(self.drive_path_picker.value) - 1)
+            case "standable":
+                if self.show_standable.value:
+                    self._show_standable()
+                if self.view.standable_node is not None:
+                    self.view.standable_node.visible = bool(self.show_standable.value)
+            case "follow" | "zoom":
+                clients = self.server.get_clients()
+                chosen = clients.values() if cmd.what == "follow" else [clients.get(cmd.client_id)]
+                if cmd.what == "zoom" or self.follow.value:
+                    for client in chosen:
+                        if client is not None:
+                            self._aim(client, self.view.robot_node.position, zoom=True)
 
     def _draw(self, name: str, points, colour) -> None:
         self.view.draw(name, points, colour)
@@ -378,6 +534,8 @@ class RoachApp:
                 self.status.content = "Robot back at the start."
             case BestPathCmd():
                 do_best_path(self, cmd)
+            case ChooseCmd():
+                do_choose(self, self.choose_panel, cmd)
             case CancelCmd(what="job"):
                 self._cancel = self.running is not None
             case CancelCmd(what="load"):
@@ -405,6 +563,10 @@ class RoachApp:
                 self._start_batch(cmd)
             case ShowTrialCmd():
                 show_trial(self)
+            case ViewCmd():
+                self._do_view(cmd)
+            case ShareCmd():
+                share_trial(self, cmd)
             case ExportCmd():
                 client = self.server.get_clients().get(cmd.client_id)
                 if client is not None:
@@ -454,7 +616,7 @@ class RoachApp:
     def _planner(self):
         return dataclasses.replace(self.world.scene.planner, name=self.planner.value,
                                    time_limit=float(self.time_limit.value),
-                                   keep_roadmap=bool(self.show_roadmap.value))  # fmt: skip
+                                   keep_roadmap=True)  # (Show roadmap shows it at once)  # fmt: skip
 
     # batches -----------------------------------------------------------------------------
 

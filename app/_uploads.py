@@ -206,12 +206,55 @@ def _pose_yaml(pose) -> list[float]:
     return [round(float(pose[0]), 4), round(float(pose[1]), 4), round(math.degrees(pose[2]), 3)]
 
 
+PAGE_ADVICE = (
+    (r"pass units mm \(--units mm\), or units m \(--units m\) if it really is in metres",
+     "the page reads a point cloud in metres: save this one in metres and load it again"),
+    (r"pass --depth-scale ([0-9.eE+-]+) \(depth_scale: [0-9.eE+-]+ in a scene\)",
+     r"set Camera (next capture) → Depth scale [units/m] to \1 and load the file again"),
+    (r"check the depth scale \(--depth-scale\)",
+     "check Camera (next capture) → Depth scale [units/m] and load the file again"),
+    (r"pass --intrinsics with a preset \(([^)]*)\) or a calibration file, or the numbers "
+     r"--fx --fy --cx --cy .*? beside it",
+     r"choose its camera in Camera (next capture) → Camera (\1, or numbers below: fx, fy, cx, "
+     r"cy), or load its calibration file first, then the depth image again"),
+    (r"crop it \(crop / --crop\) or use a larger voxel \(--voxel\)",
+     "tick Meshing (captures) → Crop and set its box, or set a larger Voxel [m], then press "
+     "Re-mesh loaded capture (or load the file again)"),
+    (r"add `scale: 0\.001` to this terrain object \(or --scale 0\.001\)",
+     "press Scale x0.001 (Scene folder) to load it in metres"),
+    (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), at most ([0-9.]+)",
+     r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
+    (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
+     "tick Loaded capture → Pick ground and click the ground, or type the camera's height, "
+     "pitch and roll there"),
+    (r"check the result, or give --up or the camera pose",
+     "check the result; if it is wrong, tick Loaded capture → Pick ground and click the ground"),
+    (r"; --topic, `topic:` in a scene\)", ")"),
+)
+"""Advice written for the command line (perception and scenes errors) -> the same advice in the
+page's own controls (folder → control)."""
+_PATH = re.compile(r"(?<![\w.~-])(?:/[^\s/:'\"`,;()\[\]]+)+/([^\s/:'\"`,;()\[\]]+)")
+"""An absolute path of two or more parts (the server's folders mean nothing in a browser)."""
+
+
 def public_message(message: str, root: Path) -> str:
-    """An error message without the app's internal upload folders: a file in an upload is
-    named by its own name."""
+    """A message as a page shows it: a file is named by its own name, without the app's
+    internal folders (upload folders, temporary and library paths), and command-line advice
+    (`--depth-scale 1000`, `--crop`, `--scale 0.001`, ...) is given in terms of the page's
+    controls. Idempotent (the app applies it to every notification)."""
     text = str(message)
     root = Path(root)
     for base in {str(root), str(root.resolve())}:
         text = re.sub(re.escape(base) + r"/upload-[^/\s]+/", "", text)
         text = text.replace(base + "/", "")
-    return text
+    text = _PATH.sub(r"\1", text)
+    # "x.yaml: terrain[0].capture: x.pcd: ..." -> "x.pcd: ...": the file's own message names
+    # it; the scene file around an upload is the app's.
+    text = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.(?:capture|mesh|scad): (?=[\w.-]+: )", "",
+                  text)  # fmt: skip
+    for pattern, page in PAGE_ADVICE:
+        text = re.sub(pattern, page, text)
+    # Anything else written for the command line: an aside naming only a flag goes, and a flag
+    # elsewhere is named as its setting (`--near 0.3` -> `near 0.3`).
+    text = re.sub(r" ?\((?:or )?--[a-z][\w-]*(?: [^()]*)?\)", "", text)
+    return re.sub(r"(?<![\w-])--([a-z][\w-]*)", r"\1", text)

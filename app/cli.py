@@ -184,7 +184,7 @@ def _planner_config(scene, args: argparse.Namespace):
 def _cmd_plan(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from roachplan.experiments import plan_many
+    from roachplan.experiments import path_settings, plan_many
     from roachplan.scenes import build_world, load_scene
 
     if args.count < 1:
@@ -218,7 +218,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         for lp in plans
     ]
     if args.json:
-        out = {"scene": scene.name, "planner": planner.name, "seed": seed}
+        out = {"scene": scene.name, "planner": planner.name, "seed": seed,
+               **path_settings(planner.turning_radius)}
         if args.count == 1 and rows:
             out.update(rows[0])
         out["paths"] = rows
@@ -239,11 +240,85 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_scene_list(args: argparse.Namespace) -> int:
-    from roachplan.scenes import load_scene
+def _planner_list(text: str) -> list[str]:
+    """'prm,rrtconnect' -> ['prm', 'rrtconnect'], each a planner, none twice, else UsageError."""
+    names = [n.strip() for n in text.split(",")]
+    for n in names:
+        if n not in PLANNER_NAMES:
+            raise UsageError(f"--planners {_clip(repr(text), 80)}: {_clip(repr(n), 40)} is not a "
+                             f"planner; choose from {', '.join(PLANNER_NAMES)}")  # fmt: skip
+    if len(set(names)) < len(names):
+        raise UsageError(f"--planners {_clip(repr(text), 80)}: a planner is named twice")
+    return names
 
+
+def _cmd_benchmark(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from roachplan.experiments import atomic_write
+    from roachplan.experiments._benchmark import (
+        benchmark_bar,
+        benchmark_log,
+        is_benchmark_db,
+        run_benchmark,
+        write_benchmark_db,
+    )
+    from roachplan.scenes import build_world, load_scene
+
+    names = _planner_list(args.planners)
+    scene = load_scene(args.scene)
+    seed = scene.seed if args.seed is None else args.seed
+    if seed + args.runs - 1 > MAX_SEED:  # run k plans with seed + k
+        raise UsageError(f"--seed {seed} with --runs {args.runs}: the last run's seed "
+                         f"{seed + args.runs - 1} is above {MAX_SEED}; give a smaller --seed")  # fmt: skip
+    # Refused before the runs, not after them; the log and the database never replace each other.
+    inputs = _scene_inputs(scene)
+    log_path = check_output_file(args.output, suffixes=(".log",), inputs=inputs,
+                                 kind="a benchmark log roachplan wrote", force=args.force)  # fmt: skip
+    db_path = None
+    if args.db is not None:
+        db_path = check_output_file(
+            args.db, flag="--db", suffixes=(".db", ".sqlite", ".sqlite3"),
+            inputs=[*inputs, args.output], replaceable=is_benchmark_db,
+            kind="a benchmark database roachplan wrote", force=args.force,
+        )  # fmt: skip
+    world = build_world(_scene_options(scene, args))
+    for note in world.notes:
+        print(f"roachplan: {note}", file=sys.stderr)
+    base = world.scene.planner
+    time_limit = base.time_limit if args.time_limit is None else args.time_limit
+    planners = [dataclasses.replace(base, name=n, time_limit=time_limit) for n in names]
+    with benchmark_bar(not args.quiet, len(names) * args.runs) as bar:
+        result = run_benchmark(world, planners, runs=args.runs, seed=seed,
+                               simulate=args.simulate, on_run=lambda run: bar.update())  # fmt: skip
+    atomic_write(log_path, benchmark_log(result))
+    if db_path is not None:
+        write_benchmark_db(result, db_path)
+    for name in names:
+        runs = result.runs_of(name)
+        solved = [r for r in runs if r.solved]
+        line = (f"{name:16s} solved {len(solved)}/{len(runs)}  median plan time "
+                f"{float(np.median([r.time for r in runs])):.3f} s")  # fmt: skip
+        if args.simulate:
+            ok = [r for r in runs if r.simulated_success]
+            energy = f"{np.mean([r.energy for r in ok]):.3f} J" if ok else "-"
+            line += f"  reached the goal {len(ok)}/{len(runs)}  mean energy (reached) {energy}"
+        print(line)
+    print(f"wrote {log_path}" + (f" and {db_path}" if db_path is not None else "")
+          + f" ({result.total_time:.1f} s)")  # fmt: skip
+    return 0
+
+
+def _cmd_scene_list(args: argparse.Namespace) -> int:
+    from roachplan.perception import load_yaml
+    from roachplan.scenes import LIBRARY
+
+    # The description as written (read, not built: listing answers at once; `scene check`
+    # and the tests validate the library's files).
     for name in list_scenes():
-        print(f"{name:24s} {load_scene(name).description}")
+        path = LIBRARY / f"{name}.yaml"
+        raw = load_yaml(path.read_bytes(), path.name)
+        print(f"{name:24s} {raw.get('description', '') if isinstance(raw, dict) else ''}")
     return 0
 
 
@@ -653,10 +728,15 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
 
     from ._calibrate import calibrate_turning
 
-    ratios = _numbers(args.ratios, "--ratios", tuple(range(2, 33)), SimError)
+    from ._calibrate import DEFAULT_RATIOS
+
+    ratios = _numbers(args.ratios, "--ratios", tuple(range(2, 33)), SimError) or DEFAULT_RATIOS
     if any(r < 1.0 for r in ratios):
         raise SimError(f"--ratios {_clip(repr(args.ratios), 80)}: give two or more right/left "
                        f"ratios >= 1")  # fmt: skip
+    if len(set(ratios)) < 5:  # the turning curve has four parameters
+        raise SimError(f"--ratios {_clip(repr(args.ratios), 80)}: the turning curve needs 5 or "
+                       f"more distinct right/left ratios >= 1")  # fmt: skip
     # Its own earlier calibration may be replaced; a folder of anything else is refused.
     def earlier_calibration(folder) -> bool:
         return {n for n in os.listdir(folder) if not is_partial(n)} <= {*CALIBRATION_FILES}
@@ -666,12 +746,16 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
         accepts=f"--out takes a new or empty folder, or one holding only an earlier "
         f"calibration ({', '.join(CALIBRATION_FILES)})",
     )  # fmt: skip
-    samples, model = calibrate_turning(out, ratios=ratios, duration=args.duration)
+    samples, model, fit = calibrate_turning(out, ratios=ratios, duration=args.duration)
     print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
     for s in samples:
         print(f"{s.ratio:6.2f} {s.distance:10.3f} {s.revolutions:7.3f} {s.curvature:13.3f}")
+    c = fit.curve
     print(
-        f"fit: curvature = {model.slope:.3f} ln(ratio) {model.intercept:+.3f}  "
+        f"curve: curvature = {c.kappa_sat:.3f} (1 - r^-{c.rate:.3f}) + {c.lock:.4f} ln r / "
+        f"(ln {c.lock_ratio:.4f} - ln r)  (R^2 {fit.r_squared:.3f}, rms residual "
+        f"{fit.rms_residual:.3f} /m)\n"
+        f"report's line: curvature = {model.slope:.3f} ln(ratio) {model.intercept:+.3f}  "
         f"(R^2 {model.r_squared:.3f})\nwrote {args.out}/turning.csv, turning.png, turning_model.json"
     )
     return 0
@@ -706,6 +790,40 @@ def _add_experiment_parser(sub) -> None:
                    help="Ray cluster address (default: start a local Ray instance)")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_experiment)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from ._replay import SUFFIXES, load_replay, replay_inputs, replay_written, write_replay
+
+    out = check_output_file(args.output, suffixes=SUFFIXES, inputs=replay_inputs(args.folder),
+                            replaceable=replay_written, kind="a replay roachplan wrote",
+                            force=args.force)  # fmt: skip
+    replay = load_replay(args.folder, trial=args.trial)
+    size = write_replay(replay, out)
+    shown = replay.trials[replay.shown]
+    print(f"wrote {out} ({size / 1e6:.1f} MB): {replay.title}; {shown['label']} plays "
+          f"({len(replay.frames)} frames, {shown['outcome']})")  # fmt: skip
+    if replay.note:
+        print(f"roachplan: {replay.note}", file=sys.stderr)
+    return 0
+
+
+def _add_replay_parser(sub) -> None:
+    p = sub.add_parser(
+        "replay", help="a trial, experiment or choice as one HTML file that plays offline"
+    )
+    p.add_argument("folder", metavar="DIR",
+                   help="an experiment's results folder (`experiment --out`) or a choice's "
+                        "(`choose --out`)")  # fmt: skip
+    p.add_argument("--trial", type=int, default=None, metavar="K",
+                   help="only trial K of the experiment (default: every trial drawn, the best "
+                        "path's trial walking)")  # fmt: skip
+    p.add_argument("-o", "--output", required=True,
+                   help=".html (standalone: viser's client and the recording in one file, opens "
+                        "offline) or .viser (viser's recording), in an existing folder; an "
+                        "existing file is replaced only if roachplan wrote it (else --force)")  # fmt: skip
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.set_defaults(func=_cmd_replay)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -746,6 +864,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_experiment_parser(sub)
     add_choose_parser(sub, terrain_help)
+    _add_replay_parser(sub)
     _add_perception_parsers(sub)
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
@@ -770,13 +889,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_plan)
 
+    p = sub.add_parser("benchmark",
+                       help="compare planners on a scene: an OMPL benchmark log (Planner Arena)")  # fmt: skip
+    p.add_argument("--scene", default="double_bridge", help=terrain_help)
+    p.add_argument("--planners", required=True, metavar="P,Q,...",
+                   help=f"comma-separated, from {', '.join(PLANNER_NAMES)}")  # fmt: skip
+    p.add_argument("--runs", type=int, required=True, help="plans per planner (run k: seed + k)")
+    p.add_argument(
+        "--time-limit", type=float, default=None, help="per plan [s] (default: the scene's)"
+    )
+    p.add_argument("--seed", type=int, default=None, help="first seed (default: the scene's)")
+    p.add_argument("--simulate", action="store_true",
+                   help="drive every plan in PyBullet: success, energy, drive time, failure mode")  # fmt: skip
+    p.add_argument("-o", "--output", required=True,
+                   help="the OMPL benchmark log (.log), in an existing folder; an existing file is "
+                        "replaced only if roachplan wrote it (else --force), never an input")  # fmt: skip
+    p.add_argument("--db", default=None,
+                   help="also the SQLite database Planner Arena opens (.db, .sqlite, .sqlite3)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_benchmark)
+
     p = sub.add_parser(
         "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"
     )
     p.add_argument("--out", required=True,
                    help="folder for turning.csv/.png/_model.json, created if new; an existing "
                         "one must be empty or hold only an earlier calibration")  # fmt: skip
-    p.add_argument("--ratios", default="1,1.25,1.5,1.75,2,2.5,3", help="right/left speed ratios")
+    p.add_argument("--ratios", default=None,
+                   help="right/left speed ratios (default: every 0.1 from 1 to 3 and 1.25, 1.75)")
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per ratio")
     p.set_defaults(func=_cmd_calibrate_turning)
 
@@ -844,11 +985,14 @@ def _clip(text: str, limit: int = 2000) -> str:
 
 MAX_PLAN_COUNT = 100
 """`plan --count` at most: each path costs up to 3 plans (plan_many), each up to --time-limit."""
+MAX_BENCHMARK_RUNS = 10000
+"""`benchmark --runs` at most: per planner, each run up to --time-limit."""
 MAX_RUN_SECONDS = 3600.0
 """`plan --time-limit` and `calibrate-turning --duration` at most [s]."""
 INT_FLAGS = {  # argparse dest: (flag, lowest, highest or None)
     "seed": ("--seed", 0, MAX_SEED),  # the scene files' range: what OMPL's generator takes
     "count": ("--count", 1, MAX_PLAN_COUNT),
+    "runs": ("--runs", 1, MAX_BENCHMARK_RUNS),
     "trials": ("--trials", 1, None),
     "workers": ("--workers", 1, None),
     "repeats": ("--repeats", 0, None),

@@ -1,6 +1,7 @@
 """Choose by simulation (issue 17), measured side by side in one run.
 
-    make bench        (or: .venv/bin/python benchmarks/bench_choose.py [--quick])
+    make bench        (or: .venv/bin/python benchmarks/bench_choose.py [--quick] [--parts 1,3]
+                       [--bank N] [--races N] [--fresh N]: fewer counts on a busy machine)
 
 1. Decision time: `double_bridge_rough`, K = 8, 95 % confidence, 60 s budget, 2 workers; the wall
    time as a ratio to the report's minute per trial and to the robot's own traverse time.
@@ -8,8 +9,12 @@
    with different seeds replayed from the bank (each race draws its rollouts from a candidate's
    bank in its own seeded order): how often the race picks brute force's choice, and the share of
    the bank's rollouts it used. Goal: >= 95 % agreement with <= 50 % of the rollouts.
-3. The chosen path against the first planned path on fresh rollouts (stream 1 seeds), on
-   `double_bridge_rough` and `kinect_bridge`.
+3. The chosen path against the first planned path on fresh rollouts, on `double_bridge_rough`
+   and `kinect_bridge`. The first planned path is the planner's plain first plan (the scene's
+   planner with the choice's seed, start to goal, as `roachplan trial` plans it), not candidate
+   0 (which is planned through a route's via pose). Both drive the same fresh worlds (stream 4
+   seeds, unused by the race (0), --validate (1), the bank (2) and scaling (3)): a paired
+   comparison.
 4. Scaling: the same rollouts on 1 and 2 local workers.
 """
 
@@ -21,29 +26,45 @@ import time
 
 import numpy as np
 
-from roachplan.experiments._choose import ChooseConfig, choose, plan_candidates, race, rank
+from roachplan.experiments._choose import (
+    Candidate,
+    ChooseConfig,
+    choose,
+    plan_candidates,
+    race,
+    rank,
+)
 from roachplan.experiments._runner import _make_pool
 from roachplan.experiments._spec import ExperimentSpec
+from roachplan.experiments._trial import plan
 from roachplan.experiments._uncertainty import rollout_seed
 from roachplan.scenes import build_world, load_scene
 
 
 def _pool(scene, workers: int):
     spec = ExperimentSpec(name="bench", path=scene.path, scene=scene.path,
-                          planner=scene.planner, sim=scene.sim, driver=scene.driver)  # fmt: skip
+                          planner=scene.planner, sim=scene.sim, driver=scene.driver,
+                          uncertainty=scene.uncertainty)  # fmt: skip
     return _make_pool(spec, workers, "local", None)
 
 
-def _drive_all(pool, cfg, candidates, n: int, stream: int) -> dict[int, list[dict]]:
-    calls = [("rollout", (c.index, c.path_xyz.tolist(), rollout_seed(cfg.seed, c.index, k, stream),
-                          cfg.uncertainty)) for c in candidates for k in range(n)]  # fmt: skip
+def _drive_all(pool, cfg, candidates, n: int, stream: int, *, paired: bool = False,
+               uncertainty=None) -> dict[int, list[dict]]:  # fmt: skip
+    """Drive each candidate n times; paired: rollout k of every candidate in the same world."""
+    u = uncertainty or cfg.uncertainty
+
+    def seed(c, k):
+        return rollout_seed(cfg.seed, 0 if paired else c.index, k, stream)
+
+    calls = [("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u))
+             for c in candidates for k in range(n)]  # fmt: skip
     out: dict[int, list[dict]] = {c.index: [] for c in candidates}
     for rec in pool.run(calls):
         out[rec["candidate"]].append(rec)
     return out
 
 
-def decision_time(quick: bool) -> None:
+def decision_time(quick: bool, args) -> None:
     scene = load_scene("double_bridge_rough")
     cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=0)
     choice, _ = choose(scene, cfg, workers=2)
@@ -56,12 +77,13 @@ def decision_time(quick: bool) -> None:
           f"{choice.wall_time / row['drive_time_s']:.2f}")
 
 
-def racing_vs_bank(quick: bool) -> None:
+def racing_vs_bank(quick: bool, args) -> None:
     scene = load_scene("double_bridge_rough")
     world = build_world(scene)
-    cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=None, seed=0)
+    cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=None, seed=0,
+                       uncertainty=scene.uncertainty)  # fmt: skip
     candidates = plan_candidates(world, cfg)
-    n_full = 12 if quick else 40
+    n_full = args.bank or (12 if quick else 40)
     pool = _pool(scene, 2)
     try:
         bank = _drive_all(pool, cfg, candidates, n_full, stream=2)
@@ -70,7 +92,7 @@ def racing_vs_bank(quick: bool) -> None:
     full = [dataclasses.replace(c, rollouts=bank[c.index], out="") for c in candidates]
     truth = rank(full, 1 - (1 - cfg.confidence) / len(full), None)[0].index
     agree, used = 0, []
-    runs = 5 if quick else 20
+    runs = args.races or (5 if quick else 20)
     for r in range(runs):
         order = {c.index: np.random.default_rng([r, c.index]).permutation(n_full) for c in candidates}
         taken = {c.index: 0 for c in candidates}
@@ -93,29 +115,45 @@ def racing_vs_bank(quick: bool) -> None:
           f"{np.max(used):.0%})")
 
 
-def chosen_vs_first(quick: bool) -> None:
-    fresh = 20 if quick else 100
+def chosen_vs_first(quick: bool, args) -> None:
+    fresh = args.fresh or (20 if quick else 100)
     for name in ("double_bridge_rough", "kinect_bridge"):
         scene = load_scene(name)
-        cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=0)
+        cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=scene.seed,
+                           uncertainty=scene.uncertainty)  # fmt: skip
         choice, _ = choose(scene, cfg, workers=2)
-        first = next(c for c in choice.candidates if c.index == 0)
-        chosen = next(c for c in choice.candidates if c.index == choice.chosen)
+        if choice.chosen is None:
+            print(f"3. {name}: no candidate succeeded in any rollout; nothing to compare")
+            continue
+        picked = next(c for c in choice.candidates if c.index == choice.chosen)
+        # The planner's plain first plan: what a user gets without choose (`roachplan trial
+        # --seed S` plans the same path).
+        world = build_world(scene)
+        planned = plan(world, seed=cfg.seed)
+        if not planned.found:
+            print(f"3. {name}: the planner's first plan found no path ({planned.message})")
+            continue
+        xyz = planned.path_xyz
+        length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
+        first = Candidate(index=0, route=world.route(xyz[:, :2]) or "-", seed=cfg.seed,
+                          path_xyz=xyz, length=length)  # fmt: skip
+        chosen = dataclasses.replace(picked, index=1, rollouts=[])
         pool = _pool(scene, 2)
         try:
-            got = _drive_all(pool, cfg, [first, chosen] if chosen is not first else [first],
-                             fresh, stream=1)  # fmt: skip
+            got = _drive_all(pool, cfg, [first, chosen], fresh, stream=4, paired=True)
         finally:
             pool.close()
         rate = {i: np.mean([r["outcome"] == "success" for r in recs]) for i, recs in got.items()}
-        print(f"3. {name}: chosen candidate {chosen.index} succeeds {rate[chosen.index]:.0%} of "
-              f"{fresh} fresh rollouts; the first planned path {rate[first.index]:.0%}")
+        print(f"3. {name}: chosen candidate {picked.index} ({picked.route}) succeeds "
+              f"{rate[1]:.0%} of {fresh} fresh rollouts; the planner's first plan "
+              f"({first.route}, seed {cfg.seed}) {rate[0]:.0%} of the same {fresh} worlds "
+              f"(race: {choice.rollouts} rollouts, {choice.wall_time:.1f} s, {choice.stopped})")
 
 
-def scaling(quick: bool) -> None:
+def scaling(quick: bool, args) -> None:
     scene = load_scene("double_bridge_rough")
     world = build_world(scene)
-    cfg = ChooseConfig(candidates=2, seed=0)
+    cfg = ChooseConfig(candidates=2, seed=0, uncertainty=scene.uncertainty)
     candidates = plan_candidates(world, cfg)
     n = 4 if quick else 12
     walls = {}
@@ -135,11 +173,17 @@ def scaling(quick: bool) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer candidates and rollouts")
+    ap.add_argument("--parts", default="1,2,3,4", help="which parts to run, e.g. 1,3")
+    ap.add_argument("--bank", type=int, default=None, help="part 2: rollouts per candidate (40)")
+    ap.add_argument("--races", type=int, default=None, help="part 2: races replayed (20)")
+    ap.add_argument("--fresh", type=int, default=None, help="part 3: fresh rollouts each (100)")
     args = ap.parse_args()
-    decision_time(args.quick)
-    racing_vs_bank(args.quick)
-    chosen_vs_first(args.quick)
-    scaling(args.quick)
+    parts = {int(p) for p in args.parts.split(",")}
+    for number, part in enumerate((decision_time, racing_vs_bank, chosen_vs_first, scaling), 1):
+        if number in parts:
+            t0 = time.perf_counter()
+            part(args.quick, args)
+            print(f"   (part {number}: {time.perf_counter() - t0:.0f} s wall)", flush=True)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,13 @@ For each library spec it runs the experiment twice, `reference: true` (the repor
 `reference: false` (the default), and prints successes and relative energy (mean, max over
 successes). Goals: kinect_bridge (25 paths) mean <= 1.6, max <= 2.5, >= 24/25 successes;
 bridge_rough (50 trials) >= 48/50; the rough bridge still costs more than the smooth one.
-Then planning time of PRM and RRTConnect on double_bridge, raw vs drivable (goal: <= 2x).
+Then planning time of PRM and RRTConnect on double_bridge, raw vs drivable (goal: <= 2x), and
+the two ways to a drivable plan on double_bridge: searching OMPL's (x, y, yaw) space and
+Dubins-shortcutting the route (the default), against searching OMPL's DubinsStateSpace itself
+(RRT and KPIECE1: Dubins distance is not a metric, which PRM's undirected roadmap and
+RRTConnect's backward tree assume; OMPL gives a non-metric space a nearest-neighbour structure
+that does not assume one). Each Dubins-space path is checked independently: every state at
+1 cm along its curves valid, its curvature within 1 / radius.
 """
 
 from __future__ import annotations
@@ -24,6 +30,12 @@ import numpy as np
 
 from roachplan.experiments import load_experiment, plan, run_experiment
 from roachplan.experiments._spec import reference_settings
+from roachplan.planning import check_states
+from roachplan.planning._drivable import max_curvature
+from roachplan.planning._dubins import dubins_path
+from roachplan.planning._isolated import run_isolated
+from roachplan.planning._ompl import _budget_ptc, _se2_state, _seed_ompl, _TerrainSampler
+from roachplan.planning._ompl_import import ob, og
 from roachplan.scenes import build_world, load_scene
 
 
@@ -55,11 +67,135 @@ def settings(spec, reference: bool):
     return dataclasses.replace(spec, planner=planner, driver=driver, best_path_repeats=0)
 
 
+class _DubinsMotions(ob.MotionValidator):
+    """A motion in the Dubins space is the shortest Dubins curve between its ends: all its
+    states every `step` checked in one vectorised call (our curve, the same as OMPL's)."""
+
+    def __init__(self, si, radius: float, check, step: float) -> None:
+        super().__init__(si)
+        self._radius, self._check, self._step = radius, check, step
+
+    def checkMotion(self, s1, s2, *_last_valid) -> bool:
+        a, b = ((s.getX(), s.getY(), s.getYaw()) for s in (s1, s2))
+        return bool(self._check(dubins_path(a, b, self._radius).sample(self._step)).all())
+
+
+def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, planner: str,
+                          radius: float, seed: int, vcfg, time_limit: float,
+                          max_iterations: int, step: float) -> dict:  # fmt: skip
+    """In a child process (OMPL's seed): plan with `planner` in OMPL's DubinsStateSpace with
+    the terrain sampler and validity checker the default planner uses."""
+    t0 = time.perf_counter()
+    _seed_ompl(seed)
+    rng = np.random.default_rng(seed)
+    lo, hi = (np.asarray(v, dtype=float) for v in world_bounds)
+
+    def check(st: np.ndarray) -> np.ndarray:
+        inside = np.all((st[:, :2] >= lo) & (st[:, :2] <= hi), axis=1)
+        return inside & check_states(hf, fp, vcfg, st).valid if inside.all() else inside
+
+    known: dict = {}
+    keep: list = []
+
+    def alloc(sp):
+        keep.append(_TerrainSampler(sp, rng=rng, cells=cells, cell=cell, lo=lo, hi=hi,
+                                    check=check, known=known))  # fmt: skip
+        return keep[-1]
+
+    space = ob.DubinsStateSpace(radius, False)  # forward only: the roach does not reverse
+    rv = ob.RealVectorBounds(2)
+    for k in range(2):
+        rv.setLow(k, float(lo[k]))
+        rv.setHigh(k, float(hi[k]))
+    space.setBounds(rv)
+    space.setStateSamplerAllocator(ob.StateSamplerAllocator(alloc))
+    si = ob.SpaceInformation(space)
+
+    def is_valid(st) -> bool:
+        key = (st.getX(), st.getY(), st.getYaw())
+        v = known.get(key)
+        return bool(check(np.array([key]))[0]) if v is None else v
+
+    si.setStateValidityChecker(ob.StateValidityCheckerFn(is_valid))
+    si.setMotionValidator(_DubinsMotions(si, radius, check, step))
+    si.setup()
+    pdef = ob.ProblemDefinition(si)
+    pdef.setStartAndGoalStates(_se2_state(space, start), _se2_state(space, goal))
+    pl = getattr(og, planner)(si)
+    pl.setProblemDefinition(pdef)
+    pl.setup()
+    pl.solve(_budget_ptc(max_iterations, t0 + time_limit))
+    found = bool(pdef.hasExactSolution())
+    out = dict(found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace()))
+    if found:
+        poses = [(s.getX(), s.getY(), s.getYaw()) for s in pdef.getSolutionPath().getStates()]
+        curves = [dubins_path(a, b, radius) for a, b in zip(poses, poses[1:])]
+        dense = np.concatenate([c.sample(step) for c in curves])
+        out.update(length=sum(c.length for c in curves), states=dense,
+                   all_valid=bool(check_states(hf, fp, vcfg, dense).valid.all()))  # fmt: skip
+    return out
+
+
+def dubins_space_plan(world, planner: str, radius: float, seed: int) -> dict:
+    """One plan in OMPL's DubinsStateSpace between the scene's start and goal poses:
+    found, plan_time [s], and when found length [m], states ((N, 3) every cm), all_valid."""
+    sc, cfg, regions = world.scene, world.scene.planner, world.regions
+    from scipy import ndimage
+
+    cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
+    return run_isolated(
+        _plan_in_dubins_space, world.heightfield, world.footprint, isolation="fork",
+        world_bounds=sc.bounds, start=sc.start, goal=sc.goal, cells=cells, cell=regions.cell,
+        planner=planner, radius=radius, seed=seed, vcfg=cfg.validity,
+        time_limit=cfg.time_limit, max_iterations=cfg.max_iterations, step=cfg.check_resolution,
+    )  # fmt: skip
+
+
+def compare_spaces(seeds: int) -> None:
+    """Dubins shortcutting of (x, y, yaw) routes against planning in the Dubins space, on
+    double_bridge: successes, median plan time and path length, largest curvature."""
+    world = build_world(load_scene("double_bridge"))
+    radius = world.scene.planner.turning_radius
+    print(f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
+          f"(curvature limit {1 / radius:.2f} /m)")  # fmt: skip
+    print(f"  {'method':<40} {'success':>8} {'time s':>7} {'length m':>9} {'max curv.':>9} "
+          f"{'all valid':>9}")  # fmt: skip
+    rows = []
+    for name in ("prm", "rrtconnect", "rrt", "kpiece1"):
+        cfg = dataclasses.replace(world.scene.planner, name=name)
+        res = [plan(world, seed=s, planner=cfg) for s in range(seeds)]
+        ok = [r for r in res if r.found]
+        # Re-sampled every cm along the waypoints the driver gets, checked independently.
+        valid = all(check_states(world.heightfield, world.footprint, cfg.validity,
+                                 r.states).valid.all() for r in ok)  # fmt: skip
+        rows.append((f"(x,y,yaw) {name} + Dubins shortcuts", res, ok, valid,
+                     [float(np.sum(np.linalg.norm(np.diff(r.states[:, :2], axis=0), axis=1)))
+                      for r in ok], [max_curvature(r.states) for r in ok]))  # fmt: skip
+    for name in ("RRT", "KPIECE1"):
+        res = [dubins_space_plan(world, name, radius, s) for s in range(seeds)]
+        ok = [r for r in res if r["found"]]
+        assert not any(r["metric"] for r in res), "OMPL calls the Dubins space a metric"
+        rows.append((f"DubinsStateSpace {name}", [argparse.Namespace(**r) for r in res], ok,
+                     all(r["all_valid"] for r in ok), [r["length"] for r in ok],
+                     [max_curvature(r["states"]) for r in ok]))  # fmt: skip
+    for label, res, ok, valid, lengths, curv in rows:
+        t = statistics.median(r.plan_time for r in res)
+        print(f"  {label:<40} {len(ok):>3}/{len(res):<4} {t:>7.3f} "
+              f"{statistics.median(lengths) if lengths else float('nan'):>9.2f} "
+              f"{max(curv) if curv else float('nan'):>9.2f} {str(valid):>9}", flush=True)  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="a fifth of the trials")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--spaces-only", action="store_true",
+                    help="only the planner-space comparison on double_bridge")
+    ap.add_argument("--space-seeds", type=int, default=10, help="seeds per planner there")
     args = ap.parse_args()
+    if args.spaces_only:
+        compare_spaces(args.space_seeds)
+        return
     scale = 5 if args.quick else 1
     print(f"{'spec':<14} {'setting':<10} {'success':>9} {'rel. energy mean':>17} {'max':>6} "
           f"{'wall s':>7}")  # fmt: skip
@@ -85,6 +221,7 @@ def main() -> None:
             times[label] = np.median([plan(world, seed=s, planner=cfg).plan_time for s in range(10)])
         print(f"  {planner:<11} raw {times['raw']:.3f}  drivable {times['drivable']:.3f}  "
               f"ratio {times['drivable'] / times['raw']:.2f} (goal <= 2)")
+    compare_spaces(args.space_seeds)
 
 
 if __name__ == "__main__":

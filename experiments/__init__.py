@@ -1,33 +1,85 @@
 """The performance evaluator (Tong 2018, section 3.4): trials that plan with OMPL and drive in
 PyBullet, one at a time or as a parallel, resumable experiment with tables and figures."""
 
-from ._errors import ExperimentError as ExperimentError
-from ._errors import OutputError as OutputError
-from ._manifest import read_manifest as read_manifest
-from ._outputs import WRITTEN_BY as WRITTEN_BY
-from ._outputs import atomic_path as atomic_path
-from ._outputs import atomic_write as atomic_write
-from ._outputs import check_output_file as check_output_file
-from ._outputs import is_partial as is_partial
-from ._outputs import marked as marked
-from ._outputs import prepare_output_folder as prepare_output_folder
-from ._runner import ExperimentReport as ExperimentReport
-from ._runner import check_results_folder as check_results_folder
-from ._runner import describe_best as describe_best
-from ._runner import rerun_trial as rerun_trial
-from ._runner import run_experiment as run_experiment
-from ._spec import ExperimentSpec as ExperimentSpec
-from ._spec import list_experiments as list_experiments
-from ._spec import load_experiment as load_experiment
-from ._store import ResultStore as ResultStore
-from ._summary import RouteSummary as RouteSummary
-from ._summary import format_table as format_table
-from ._summary import summarize as summarize
-from ._trial import LabelledPlan as LabelledPlan
-from ._trial import TrialResult as TrialResult
-from ._trial import drive as drive
-from ._trial import finish_trial as finish_trial
-from ._trial import plan as plan
-from ._trial import plan_many as plan_many
-from ._trial import reference_energy as reference_energy
-from ._trial import run_trial as run_trial
+from typing import TYPE_CHECKING
+
+from roachplan._lazy import lazy_exports
+
+# Public names, imported on first use (roachplan._lazy): the command line answers at once.
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "BenchmarkResult": "._benchmark",
+        "benchmark_log": "._benchmark",
+        "run_benchmark": "._benchmark",
+        "write_benchmark_db": "._benchmark",
+        "ExperimentError": "._errors",
+        "OutputError": "._errors",
+        "read_manifest": "._manifest",
+        "WRITTEN_BY": "._outputs",
+        "atomic_path": "._outputs",
+        "atomic_write": "._outputs",
+        "check_output_file": "._outputs",
+        "is_partial": "._outputs",
+        "marked": "._outputs",
+        "prepare_output_folder": "._outputs",
+        "ExperimentReport": "._runner",
+        "check_results_folder": "._runner",
+        "describe_best": "._runner",
+        "rerun_trial": "._runner",
+        "run_experiment": "._runner",
+        "ExperimentSpec": "._spec",
+        "list_experiments": "._library",
+        "load_experiment": "._spec",
+        "ResultStore": "._store",
+        "RouteSummary": "._summary",
+        "format_table": "._summary",
+        "summarize": "._summary",
+        "LabelledPlan": "._trial",
+        "TrialResult": "._trial",
+        "drive": "._trial",
+        "finish_trial": "._trial",
+        "plan": "._trial",
+        "path_settings": "._trial",
+        "plan_many": "._trial",
+        "reference_energy": "._trial",
+        "run_trial": "._trial",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._benchmark import BenchmarkResult as BenchmarkResult
+    from ._benchmark import benchmark_log as benchmark_log
+    from ._benchmark import run_benchmark as run_benchmark
+    from ._benchmark import write_benchmark_db as write_benchmark_db
+    from ._errors import ExperimentError as ExperimentError
+    from ._errors import OutputError as OutputError
+    from ._manifest import read_manifest as read_manifest
+    from ._outputs import WRITTEN_BY as WRITTEN_BY
+    from ._outputs import atomic_path as atomic_path
+    from ._outputs import atomic_write as atomic_write
+    from ._outputs import check_output_file as check_output_file
+    from ._outputs import is_partial as is_partial
+    from ._outputs import marked as marked
+    from ._outputs import prepare_output_folder as prepare_output_folder
+    from ._runner import ExperimentReport as ExperimentReport
+    from ._runner import check_results_folder as check_results_folder
+    from ._runner import describe_best as describe_best
+    from ._runner import rerun_trial as rerun_trial
+    from ._runner import run_experiment as run_experiment
+    from ._spec import ExperimentSpec as ExperimentSpec
+    from ._library import list_experiments as list_experiments
+    from ._spec import load_experiment as load_experiment
+    from ._store import ResultStore as ResultStore
+    from ._summary import RouteSummary as RouteSummary
+    from ._summary import format_table as format_table
+    from ._summary import summarize as summarize
+    from ._trial import LabelledPlan as LabelledPlan
+    from ._trial import TrialResult as TrialResult
+    from ._trial import drive as drive
+    from ._trial import finish_trial as finish_trial
+    from ._trial import plan as plan
+    from ._trial import path_settings as path_settings
+    from ._trial import plan_many as plan_many
+    from ._trial import reference_energy as reference_energy
+    from ._trial import run_trial as run_trial

@@ -62,7 +62,9 @@ class ChooseConfig:
     max_per_candidate: int = 200
     """A candidate gets at most this many rollouts [-]."""
     seed: int = 0
-    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    uncertainty: UncertaintyConfig | None = None
+    """What each rollout's world is drawn from; None: the scene's (its `uncertainty:` key,
+    else the defaults of experiments/_uncertainty.py)."""
 
 
 def wilson(successes: int, n: int, confidence: float) -> tuple[float, float]:
@@ -402,7 +404,7 @@ def choose(
     scene,
     cfg: ChooseConfig,
     *,
-    workers: int = 1,
+    workers: int | None = 1,
     backend: str = "local",
     address: str | None = None,
     validate_repeats: int = 0,
@@ -417,6 +419,8 @@ def choose(
     from ._runner import _make_pool
     from ._spec import ExperimentSpec
 
+    if cfg.uncertainty is None:
+        cfg = dataclass_replace(cfg, uncertainty=scene.uncertainty)
     world = build_world(scene)
     t0 = time.monotonic()
     if progress is not None:
@@ -425,7 +429,8 @@ def choose(
     if not candidates:
         raise ChooseError(f"{scene.name}: the planner found no path to choose from")
     spec = ExperimentSpec(name=f"choose-{scene.name}", path=scene.path, scene=scene.path,
-                          planner=scene.planner, sim=scene.sim, driver=scene.driver)  # fmt: skip
+                          planner=scene.planner, sim=scene.sim, driver=scene.driver,
+                          uncertainty=cfg.uncertainty)  # fmt: skip
     pool = _make_pool(spec, workers, backend, address)
 
     def run_rollouts(calls: list[tuple]) -> list[dict]:

@@ -19,7 +19,7 @@ from roachplan.sim import DriverConfig, SimConfig
 
 from ._errors import ExperimentError
 from ._outputs import atomic_write
-from ._spec import ExperimentSpec, config_from_json
+from ._spec import ExperimentSpec, config_from_json, uncertainty_from_json
 
 MANIFEST = "manifest.json"
 FORMAT = 1
@@ -141,6 +141,8 @@ def spec_from_manifest(manifest: dict, where: Path) -> ExperimentSpec:
         planner=config_from_json(PlannerConfig, d["planner"], f"{where}: spec.planner"),
         sim=config_from_json(SimConfig, d["sim"], f"{where}: spec.sim"),
         driver=config_from_json(DriverConfig, d["driver"], f"{where}: spec.driver"),
+        # Manifests written before `uncertainty:` existed ran with the defaults.
+        uncertainty=uncertainty_from_json(d.get("uncertainty", {}), f"{where}: spec"),
         routes=tuple(d["routes"]),
         trials_per_route=d["trials_per_route"],
         seed=d["seed"],

@@ -20,16 +20,15 @@ from roachplan.scenes import (
     Scene,
     SceneError,
     YamlFields,
-    library_names,
     load_scene,
     read_yaml,
     resolve_in_library,
 )
-from roachplan.sim import DriverConfig, SimConfig
+from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig
 
 from ._errors import ExperimentError
 
-LIBRARY = Path(__file__).parent / "library"
+from ._library import LIBRARY
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -47,6 +46,9 @@ class ExperimentSpec:
     sim: SimConfig
     driver: DriverConfig
     """The scene's settings with the spec's overrides applied."""
+    uncertainty: UncertaintyConfig = dataclasses.field(default_factory=UncertaintyConfig)
+    """What may differ between real runs: the scene's `uncertainty:` with the spec's fields
+    over it (experiments/_uncertainty.py; `roachplan choose` draws its rollouts from it)."""
     routes: tuple[str, ...] = ()
     """Routes to fill with trials_per_route paths each (the report: 20 over each bridge);
     () takes every planned path in seed order, whatever its route."""
@@ -77,17 +79,13 @@ class ExperimentSpec:
     def scene_with_settings(self) -> Scene:
         """The scene, with this spec's planner, sim and driver settings."""
         scene = load_scene(self.scene)
-        return dataclasses.replace(scene, planner=self.planner, sim=self.sim, driver=self.driver)
+        return dataclasses.replace(scene, planner=self.planner, sim=self.sim, driver=self.driver,
+                                   uncertainty=self.uncertainty)  # fmt: skip
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d["path"], d["scene"] = str(self.path), str(self.scene)
         return d
-
-
-def list_experiments() -> list[str]:
-    """Names of the experiments in the library."""
-    return library_names(LIBRARY)
 
 
 def resolve_experiment(name_or_path: str | Path) -> Path:
@@ -96,7 +94,7 @@ def resolve_experiment(name_or_path: str | Path) -> Path:
 
 
 _KEYS = ("description", "scene", "reference", "planner", "sim", "driver", "routes",
-         "trials_per_route", "seed", "max_plans", "best_path")  # fmt: skip
+         "trials_per_route", "seed", "max_plans", "best_path", "uncertainty")  # fmt: skip
 
 
 def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
@@ -153,6 +151,10 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
         planner=planner,
         sim=_override(f, scene.sim, data.get("sim"), "sim"),
         driver=driver,
+        uncertainty=f.uncertainty(
+            {} if data.get("uncertainty") is None else data["uncertainty"], "uncertainty",
+            base=scene.uncertainty,
+        ),
         routes=tuple(routes),
         trials_per_route=_count(f, data.get("trials_per_route", 20), "trials_per_route", 1),
         seed=f.seed(data.get("seed", scene.seed), "seed"),
@@ -192,6 +194,11 @@ def _merge(base: dict, changes: Any) -> Any:
 def config_from_json(cls: type, data: dict, where: str) -> Any:
     """A config dataclass from its recorded form (a manifest), validated like a scene's."""
     return YamlFields(Path(where), ExperimentError).config(cls, data, cls.__name__)
+
+
+def uncertainty_from_json(data: dict, where: str) -> UncertaintyConfig:
+    """The uncertainty model from its recorded form (a manifest), validated like a scene's."""
+    return YamlFields(Path(where), ExperimentError).uncertainty(data, "uncertainty")
 
 
 def jitter_pose(

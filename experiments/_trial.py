@@ -21,6 +21,18 @@ MIN_ATTEMPT_TIME = 0.05
 takes about that long."""
 
 
+def path_settings(turning_radius: float | None) -> dict:
+    """How a plan became the driven path, as the JSON outputs name it: planner_space "se2"
+    (OMPL's (x, y, yaw) with straight motions; drivable plans are made drivable afterwards, and
+    the Dubins space measured no better, README "Drivable plans"), smoothing "dubins_shortcuts"
+    (arcs of turning_radius [m] and lines) or "none" (the raw path, the report's)."""
+    return {
+        "planner_space": "se2",
+        "smoothing": "none" if turning_radius is None else "dubins_shortcuts",
+        "turning_radius": turning_radius,
+    }
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrialResult:
     """Everything recorded about one plan-and-drive trial."""
@@ -63,6 +75,7 @@ class TrialResult:
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
+        d.update(path_settings(self.turning_radius))
         d["path"] = [list(p) for p in self.path]
         d["trajectory"] = [list(p) for p in self.trajectory]
         return d

@@ -15,8 +15,18 @@ Defaults, and why:
 - motor mismatch: left/right x U(0.97, 1.03) in opposite senses: two DC motors of one type
   differ by a few per cent, which turns a straight command into a slow curve.
 - body mass: x U(0.9, 1.1) on the body: a payload (battery, camera) changes it by 10 %.
-Terrain height noise is not drawn: a capture's mesh already carries its sensor's noise once,
-and re-meshing per rollout would cost more than the drive.
+- terrain height (captures only): each mesh vertex up or down by N(0, (1.7 mm)^2): the Kinect
+  v2's axial noise at 2 m in the noise model of the synthetic captures (perception/_synthetic.py,
+  after Fankhauser et al. 2015: 1.5 - 0.5 z + 0.3 z^2 mm at depth z [m]). The measured mesh
+  is one draw of the sensor's error; the real surface is as far from it again. No re-meshing:
+  the vertices of the mesh already built move (each rollout builds a fresh PyBullet world
+  anyway). The planner still sees the measured mesh, as it would on the real robot. An upper
+  bound: the grid mesher averages several points per cell, which shrinks their error.
+
+A scene file (or an experiment spec, over its scene's) sets any of these under `uncertainty:`
+(start_xy [m], start_yaw [deg], friction, motor_speed, motor_mismatch, body_mass [-],
+terrain_height [m]); the
+ranges accepted are sim.UNCERTAINTY_RANGES, checked where the YAML is read.
 """
 
 from __future__ import annotations
@@ -26,23 +36,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-@dataclass(frozen=True, kw_only=True)
-class UncertaintyConfig:
-    """Spread of each uncertain quantity; 0 turns it off (see the module docstring)."""
-
-    start_xy: float = 0.01
-    """The start is uniform in a disc of this radius round the start pose [m]."""
-    start_yaw: float = 3.0
-    """The start heading is uniform within this many degrees of the start pose's [deg]."""
-    friction: float = 0.2
-    """Friction x U(1 - f, 1 + f) [-]."""
-    motor_speed: float = 0.05
-    """Both motors' speed x U(1 - m, 1 + m) [-]."""
-    motor_mismatch: float = 0.03
-    """Left x (1 + d), right x (1 - d), d ~ U(-m, m) [-]."""
-    body_mass: float = 0.1
-    """The body's mass (and inertia) x U(1 - m, 1 + m) [-]."""
+# The config itself lives in sim/ so that scene files can carry it (scenes/ may not import
+# experiments/); re-exported here beside the reasons for its defaults.
+from roachplan.sim import UncertaintyConfig  # noqa: F401 - re-exported
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,6 +75,14 @@ def draw(cfg: UncertaintyConfig, seed: int) -> WorldDraw:
         mass_scale=1 + cfg.body_mass * float(rng.uniform(-1.0, 1.0)),  # the seventh
         motor_gain=(speed * (1 + d), speed * (1 - d)),
     )
+
+
+def terrain_noise(cfg: UncertaintyConfig, seed: int, n: int) -> np.ndarray:
+    """(n,) height offsets [m] of the n terrain vertices in the rollout with this seed: its
+    own stream of the seed, so the seven draws of draw() stay as they were."""
+    if cfg.terrain_height == 0:
+        return np.zeros(n)
+    return np.random.default_rng([seed, 1]).normal(0.0, cfg.terrain_height, size=n)
 
 
 def rollout_seed(seed: int, candidate: int, k: int, stream: int = 0) -> int:

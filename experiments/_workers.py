@@ -21,11 +21,12 @@ import numpy as np
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 from roachplan.scenes import build_world
+from roachplan.sim import Simulation
 
 from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL
 from ._trial import drive, finish_trial, plan, reference_energy
-from ._uncertainty import draw
+from ._uncertainty import draw, terrain_noise
 
 Call = tuple[str, tuple] | tuple[str, tuple, dict]
 """(TrialWorker method name, its arguments[, its keyword arguments])."""
@@ -81,12 +82,23 @@ class TrialWorker:
         # A fresh PyBullet world per rollout: after changed masses and friction a reused one
         # drove the same seed differently depending on what it had driven before (measured:
         # 8 of 28 rollouts), and a rollout must re-run exactly from its seed alone.
-        with self.world.simulation() as sim:
+        captured = any(obj.kind == "capture" for obj in scene.terrain)
+        sigma = uncertainty.terrain_height if captured else 0.0
+        if sigma > 0:  # a capture's surface, moved by the sensor's error (_uncertainty.py)
+            mesh = self.world.mesh
+            vertices = np.array(mesh.vertices, dtype=np.float64)
+            vertices[:, 2] += terrain_noise(uncertainty, seed, len(vertices))
+            world_sim = Simulation(vertices, mesh.faces, ground_height=scene.ground,
+                                   robot=self.world.robot, cfg=scene.sim)  # fmt: skip
+        else:
+            world_sim = self.world.simulation()
+        with world_sim as sim:
             sim.perturb(friction=scene.sim.friction * w.friction_scale,
                         mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
             driven = drive(self.world, np.asarray(path), start=start, sim=sim)
         return {
-            "candidate": candidate, "seed": seed, "world": w.to_json(),
+            "candidate": candidate, "seed": seed,
+            "world": {**w.to_json(), "terrain_height": sigma},
             "outcome": driven.outcome, "reason": driven.reason,
             "drive_time": driven.drive_time, "energy": driven.energy,
             "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),

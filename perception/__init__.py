@@ -1,36 +1,82 @@
 """From a depth camera's capture to a simulation-ready terrain mesh (Tong 2018, 3.1-3.2)."""
 
-from ._camera import PRESET_DEPTH_SCALES as PRESET_DEPTH_SCALES
-from ._camera import PRESETS as PRESETS
-from ._camera import Calibration as Calibration
-from ._camera import Intrinsics as Intrinsics
-from ._camera import PinholeNumbers as PinholeNumbers
-from ._camera import load_calibration as load_calibration
-from ._camera import load_intrinsics as load_intrinsics
-from ._capture import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
-from ._capture import Capture as Capture
-from ._capture import depth_scale_advice as depth_scale_advice
-from ._capture import depth_to_points as depth_to_points
-from ._capture import load_capture as load_capture
-from ._errors import CaptureError as CaptureError
-from ._ground import GroundChoice as GroundChoice
-from ._ground import GroundConfig as GroundConfig
-from ._ground import choose_ground as choose_ground
-from ._pipeline import FRAMES as FRAMES
-from ._pipeline import METHODS as METHODS
-from ._pipeline import CaptureSettings as CaptureSettings
-from ._pipeline import MeshingConfig as MeshingConfig
-from ._pipeline import Reconstruction as Reconstruction
-from ._pipeline import capture_settings as capture_settings
-from ._pipeline import mesh_capture as mesh_capture
-from ._pipeline import reconstruct as reconstruct
-from ._pipeline import voxel_downsample as voxel_downsample
-from ._synthetic import NO_NOISE as NO_NOISE
-from ._synthetic import NoiseModel as NoiseModel
-from ._synthetic import look_at as look_at
-from ._synthetic import render_depth as render_depth
-from ._synthetic import save_depth as save_depth
-from ._yaml import MAX_YAML_BYTES as MAX_YAML_BYTES
-from ._yaml import load_yaml as load_yaml
-from ._yaml import load_yaml_documents as load_yaml_documents
-from ._yaml import short_repr as short_repr
+from typing import TYPE_CHECKING
+
+from roachplan._lazy import lazy_exports
+
+# Public names, imported on first use (roachplan._lazy): the command line answers at once.
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "PRESET_DEPTH_SCALES": "._camera",
+        "PRESETS": "._camera",
+        "Calibration": "._camera",
+        "Intrinsics": "._camera",
+        "PinholeNumbers": "._camera",
+        "load_calibration": "._camera",
+        "load_intrinsics": "._camera",
+        "CAPTURE_SUFFIXES": "._capture",
+        "Capture": "._capture",
+        "depth_scale_advice": "._capture",
+        "depth_to_points": "._capture",
+        "load_capture": "._capture",
+        "CaptureError": "._errors",
+        "GroundChoice": "._ground",
+        "GroundConfig": "._ground",
+        "choose_ground": "._ground",
+        "FRAMES": "._choices",
+        "METHODS": "._choices",
+        "CaptureSettings": "._pipeline",
+        "MeshingConfig": "._pipeline",
+        "Reconstruction": "._pipeline",
+        "capture_settings": "._pipeline",
+        "mesh_capture": "._pipeline",
+        "reconstruct": "._pipeline",
+        "voxel_downsample": "._pipeline",
+        "NO_NOISE": "._synthetic",
+        "NoiseModel": "._synthetic",
+        "look_at": "._synthetic",
+        "render_depth": "._synthetic",
+        "save_depth": "._synthetic",
+        "MAX_YAML_BYTES": "._yaml",
+        "load_yaml": "._yaml",
+        "load_yaml_documents": "._yaml",
+        "short_repr": "._yaml",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._camera import PRESET_DEPTH_SCALES as PRESET_DEPTH_SCALES
+    from ._camera import PRESETS as PRESETS
+    from ._camera import Calibration as Calibration
+    from ._camera import Intrinsics as Intrinsics
+    from ._camera import PinholeNumbers as PinholeNumbers
+    from ._camera import load_calibration as load_calibration
+    from ._camera import load_intrinsics as load_intrinsics
+    from ._capture import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
+    from ._capture import Capture as Capture
+    from ._capture import depth_scale_advice as depth_scale_advice
+    from ._capture import depth_to_points as depth_to_points
+    from ._capture import load_capture as load_capture
+    from ._errors import CaptureError as CaptureError
+    from ._ground import GroundChoice as GroundChoice
+    from ._ground import GroundConfig as GroundConfig
+    from ._ground import choose_ground as choose_ground
+    from ._choices import FRAMES as FRAMES
+    from ._choices import METHODS as METHODS
+    from ._pipeline import CaptureSettings as CaptureSettings
+    from ._pipeline import MeshingConfig as MeshingConfig
+    from ._pipeline import Reconstruction as Reconstruction
+    from ._pipeline import capture_settings as capture_settings
+    from ._pipeline import mesh_capture as mesh_capture
+    from ._pipeline import reconstruct as reconstruct
+    from ._pipeline import voxel_downsample as voxel_downsample
+    from ._synthetic import NO_NOISE as NO_NOISE
+    from ._synthetic import NoiseModel as NoiseModel
+    from ._synthetic import look_at as look_at
+    from ._synthetic import render_depth as render_depth
+    from ._synthetic import save_depth as save_depth
+    from ._yaml import MAX_YAML_BYTES as MAX_YAML_BYTES
+    from ._yaml import load_yaml as load_yaml
+    from ._yaml import load_yaml_documents as load_yaml_documents
+    from ._yaml import short_repr as short_repr

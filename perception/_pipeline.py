@@ -22,13 +22,10 @@ import trimesh
 
 from ._camera import PinholeNumbers
 from ._capture import Capture, depth_scale_advice, is_georeferenced
+from ._choices import FRAMES, METHODS, Frame, Method
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
 
-Method = Literal["grid", "poisson", "ball-pivot"]
-METHODS: tuple[str, ...] = ("grid", "poisson", "ball-pivot")
-Frame = Literal["auto", "camera", "world"]
-FRAMES: tuple[str, ...] = ("auto", "camera", "world")
 CAMERA_DEPTH_RANGE = (0.3, 8.0)
 """Default depth range of a camera-frame capture [m] (Kinect v2: 0.5-4.5 m rated)."""
 MAX_GRID_CELLS = 40_000_000

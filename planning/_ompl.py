@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Literal, get_args
 
 import numpy as np
 from scipy import ndimage
@@ -34,14 +33,11 @@ from scipy.sparse.csgraph import dijkstra
 from ._drivable import drivable_path
 from ._heightfield import HeightField
 from ._isolated import Method, run_isolated
+from ._names import PLANNER_NAMES, PlannerName, PlanningError
 from ._ompl_import import ob, og, ou
 from ._regions import StandableMap, homology_signature, standable_map
 from ._validity import Footprint, ValidityConfig, check_states, describe_state
 
-PlannerName = Literal[
-    "prm", "stride", "rrt", "rrtconnect", "rrtstar", "prmstar", "lazyprm", "bitstar",
-    "est", "sbl", "kpiece1", "bkpiece1", "lbkpiece1", "fmt", "trrt", "informedrrtstar",
-]  # fmt: skip
 _OMPL_CLASS: dict[str, str] = {
     "prm": "PRM",
     "stride": "STRIDE",
@@ -60,7 +56,6 @@ _OMPL_CLASS: dict[str, str] = {
     "trrt": "TRRT",
     "informedrrtstar": "InformedRRTstar",
 }
-PLANNER_NAMES: tuple[str, ...] = get_args(PlannerName)
 assert set(PLANNER_NAMES) == set(_OMPL_CLASS)
 
 ou.setLogLevel(ou.LOG_WARN)
@@ -68,10 +63,6 @@ ou.setLogLevel(ou.LOG_WARN)
 
 DRIVABLE_ATTEMPTS = 5
 """Routes searched, at most, for one the robot can follow (drivable plans) [-]."""
-
-
-class PlanningError(ValueError):
-    """A planning request that cannot be planned as asked (e.g. an invalid start)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -139,6 +130,8 @@ class PlanResult:
     """Samples drawn from the terrain sampler [-]."""
     roadmap: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     """(E, 2, 2) the planner's graph as xy segments [m] (with keep_roadmap; else empty)."""
+    graph_states: int = 0
+    """Vertices of the planner's graph, connected or not [-] (with keep_roadmap; else 0)."""
     turning_radius: float | None = None
     """The path is drivable: arcs of this radius [m] and straight lines (None: the planner's
     raw path, straight motions in (x, y, yaw))."""
@@ -463,7 +456,7 @@ def _plan_here(
         sampler_calls=sum(smp.calls for smp in samplers),
     )  # fmt: skip
     if cfg.keep_roadmap:
-        stats["roadmap"] = _graph_segments(si, planner)
+        stats["roadmap"], stats["graph_states"] = _graph_segments(si, planner)
     if states is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
         message = f"{cfg.name} found no path within its {why}"
@@ -499,8 +492,9 @@ def _plan_here(
     )
 
 
-def _graph_segments(si, planner) -> np.ndarray:
-    """(E, 2, 2) xy segments [m] of the planner's roadmap or tree (OMPL PlannerData)."""
+def _graph_segments(si, planner) -> tuple[np.ndarray, int]:
+    """(E, 2, 2) xy segments [m] of the planner's roadmap or tree (OMPL PlannerData), and its
+    number of vertices (an unconnected PRM milestone is in no segment)."""
     data = ob.PlannerData(si)
     planner.getPlannerData(data)
     xy = np.array([[v.getState().getX(), v.getState().getY()]
@@ -510,7 +504,7 @@ def _graph_segments(si, planner) -> np.ndarray:
     for i in range(data.numVertices()):
         data.getEdges(i, targets)
         segments.extend((xy[i], xy[j]) for j in targets)
-    return np.array(segments, dtype=np.float64).reshape(-1, 2, 2)
+    return np.array(segments, dtype=np.float64).reshape(-1, 2, 2), len(xy)
 
 
 def _solve_prm(si, planner: og.PRM, cfg: PlannerConfig, deadline: float) -> list | None:

@@ -1,29 +1,68 @@
 """Worlds to plan and drive in: scene files, OpenSCAD terrains, meshes and the scene library."""
 
-from ._adjust import scaled_scene as scaled_scene
-from ._adjust import with_scad_timeout as with_scad_timeout
-from ._errors import SceneError as SceneError
-from ._mesh import looks_like_millimetres as looks_like_millimetres
-from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
-from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
-from ._openscad import render_scad as render_scad
-from ._scene import LIBRARY as LIBRARY
-from ._scene import MAX_SEED as MAX_SEED
-from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
-from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
-from ._scene import terrain_file_scene as terrain_file_scene
-from ._scene import Scene as Scene
-from ._scene import TerrainObject as TerrainObject
-from ._scene import YamlFields as YamlFields
-from ._scene import library_names as library_names
-from ._scene import list_scenes as list_scenes
-from ._scene import load_scene as load_scene
-from ._scene import read_yaml as read_yaml
-from ._scene import resolve_in_library as resolve_in_library
-from ._scene import resolve_scene as resolve_scene
-from ._world import World as World
-from ._world import build_terrain_mesh as build_terrain_mesh
-from ._world import build_world as build_world
-from ._world import footprint_of as footprint_of
-from ._world import pose_problem as pose_problem
-from ._world import route_of as route_of
+from typing import TYPE_CHECKING
+
+from roachplan._lazy import lazy_exports
+
+# Public names, imported on first use (roachplan._lazy): the command line answers at once.
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "scaled_scene": "._adjust",
+        "with_scad_timeout": "._adjust",
+        "SceneError": "._errors",
+        "looks_like_millimetres": "._mesh",
+        "DEFAULT_TIMEOUT": "._openscad",
+        "MAX_TIMEOUT": "._openscad",
+        "render_scad": "._openscad",
+        "LIBRARY": "._library",
+        "MAX_SEED": "._library",
+        "MESH_SUFFIXES": "._scene",
+        "TERRAIN_SUFFIXES": "._scene",
+        "terrain_file_scene": "._scene",
+        "Scene": "._scene",
+        "TerrainObject": "._scene",
+        "YamlFields": "._scene",
+        "library_names": "._library",
+        "list_scenes": "._library",
+        "load_scene": "._scene",
+        "read_yaml": "._scene",
+        "resolve_in_library": "._scene",
+        "resolve_scene": "._scene",
+        "World": "._world",
+        "build_terrain_mesh": "._world",
+        "build_world": "._world",
+        "footprint_of": "._world",
+        "pose_problem": "._world",
+        "route_of": "._world",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._adjust import scaled_scene as scaled_scene
+    from ._adjust import with_scad_timeout as with_scad_timeout
+    from ._errors import SceneError as SceneError
+    from ._mesh import looks_like_millimetres as looks_like_millimetres
+    from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
+    from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
+    from ._openscad import render_scad as render_scad
+    from ._library import LIBRARY as LIBRARY
+    from ._library import MAX_SEED as MAX_SEED
+    from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
+    from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
+    from ._scene import terrain_file_scene as terrain_file_scene
+    from ._scene import Scene as Scene
+    from ._scene import TerrainObject as TerrainObject
+    from ._scene import YamlFields as YamlFields
+    from ._library import library_names as library_names
+    from ._library import list_scenes as list_scenes
+    from ._scene import load_scene as load_scene
+    from ._scene import read_yaml as read_yaml
+    from ._scene import resolve_in_library as resolve_in_library
+    from ._scene import resolve_scene as resolve_scene
+    from ._world import World as World
+    from ._world import build_terrain_mesh as build_terrain_mesh
+    from ._world import build_world as build_world
+    from ._world import footprint_of as footprint_of
+    from ._world import pose_problem as pose_problem
+    from ._world import route_of as route_of

@@ -25,18 +25,15 @@ from roachplan.perception import (
     short_repr,
 )
 from roachplan.planning import PlannerConfig
-from roachplan.sim import DriverConfig, SimConfig
+from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig, uncertainty_problem
 
 from ._errors import SceneError
+from ._library import LIBRARY, MAX_SEED, library_names
 from ._openscad import DEFAULT_TIMEOUT, param_problem, scad_variables, timeout_problem
 
-LIBRARY = Path(__file__).parent / "library"
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
 TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
 """Files that are a scene of their own wherever a scene is taken."""
-MAX_SEED = 2**31 - 2
-"""Largest seed accepted: OMPL's generator takes seed % (2^31 - 1) + 1 (planning/_ompl.py), so
-seeds 0..MAX_SEED are its seeds 1..2^31 - 1, each a different one."""
 MAX_SETTING_INT = 2**31 - 1
 """Largest integer setting (iterations, batch sizes): what a C int holds (PyBullet, OMPL)."""
 QUATERNION_TOLERANCE = 1e-3
@@ -99,13 +96,10 @@ class Scene:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     driver: DriverConfig = field(default_factory=DriverConfig)
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    """What may differ between real runs (`roachplan choose` draws its rollouts from it)."""
     seed: int = 0
     """Seed of the first trial; trial k uses seed + k."""
-
-
-def list_scenes() -> list[str]:
-    """Names of the scenes in the library."""
-    return library_names(LIBRARY)
 
 
 def resolve_scene(name_or_path: str | Path) -> Path:
@@ -145,11 +139,6 @@ def terrain_file_scene(path: Path) -> Scene:
 
 
 # -- YAML files in a library (scenes, experiment specs) ---------------------------------------
-
-
-def library_names(library: Path) -> list[str]:
-    """Names of the .yaml files in a library folder."""
-    return sorted(p.stem for p in library.glob("*.yaml"))
 
 
 def resolve_in_library(
@@ -301,6 +290,21 @@ class YamlFields:
                     raise self.fail(f"{key}.{k}", f"must be positive, got {short_repr(v)}")
         return cls(**kwargs)
 
+    def uncertainty(
+        self, value: Any, key: str, base: UncertaintyConfig | None = None
+    ) -> UncertaintyConfig:
+        """An `uncertainty:` mapping: its fields over `base` (default: the defaults), each a
+        number in its range (sim.UNCERTAINTY_RANGES; 0 turns that spread off, so unlike the
+        other settings 0 is accepted)."""
+        fields = tuple(f.name for f in dataclasses.fields(UncertaintyConfig))
+        kwargs = {}
+        for k, v in self.mapping(value, key, fields).items():
+            x = self.number(v, f"{key}.{k}")
+            if (problem := uncertainty_problem(k, x)) is not None:
+                raise self.fail(f"{key}.{k}", problem)
+            kwargs[k] = x
+        return dataclasses.replace(base or UncertaintyConfig(), **kwargs)
+
 
 def _existing_file(ctx: YamlFields, name: str, key: str) -> Path:
     """The file `name` (relative to the scene's folder) resolves to; refused when it is missing,
@@ -433,7 +437,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
     ctx = YamlFields(path)
     raw = read_yaml(path, "scene", SceneError)
     keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
-            "planner", "sim", "driver", "seed")  # fmt: skip
+            "planner", "sim", "driver", "uncertainty", "seed")  # fmt: skip
     data = ctx.mapping(raw, "", keys, required=("terrain",))
     terrain = data["terrain"]
     ground = data.get("ground", 0.0)
@@ -466,6 +470,9 @@ def load_scene(name_or_path: str | Path) -> Scene:
         planner=ctx.config(PlannerConfig, data.get("planner") or {}, "planner"),
         sim=ctx.config(SimConfig, data.get("sim") or {}, "sim"),
         driver=ctx.config(DriverConfig, data.get("driver") or {}, "driver"),
+        uncertainty=ctx.uncertainty(
+            {} if data.get("uncertainty") is None else data["uncertainty"], "uncertainty"
+        ),
         seed=seed,
     )
     if (scene.start is None) != (scene.goal is None):

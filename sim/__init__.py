@@ -1,21 +1,68 @@
 """Headless PyBullet simulation of a VelociRoACH-like hexapod and its path-following driver."""
 
-from ._calibration import TurningModel as TurningModel
-from ._calibration import TurningSample as TurningSample
-from ._calibration import fit_turning as fit_turning
-from ._calibration import reference_energy_per_metre as reference_energy_per_metre
-from ._calibration import turning_sweep as turning_sweep
-from ._config import DriverConfig as DriverConfig
-from ._config import SimConfig as SimConfig
-from ._driver import DriveResult as DriveResult
-from ._driver import Frame as Frame
-from ._driver import Outcome as Outcome
-from ._driver import drive_path as drive_path
-from ._driver import heading_error as heading_error
-from ._driver import motor_speeds as motor_speeds
-from ._driver import next_waypoint as next_waypoint
-from ._driver import quat_to_matrix as quat_to_matrix
-from ._robot import LEG_NAMES as LEG_NAMES
-from ._robot import RobotConfig as RobotConfig
-from ._simulation import SimError as SimError
-from ._simulation import Simulation as Simulation
+from typing import TYPE_CHECKING
+
+from roachplan._lazy import lazy_exports
+
+# Public names, imported on first use (roachplan._lazy): the command line answers at once.
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "TurningFit": "._calibration",
+        "TurningModel": "._calibration",
+        "fit_turning_curve": "._calibration",
+        "CALIBRATED_TURNING": "._turning",
+        "PLAN_HEADROOM": "._turning",
+        "TurningCurve": "._turning",
+        "TurningSample": "._calibration",
+        "fit_turning": "._calibration",
+        "reference_energy_per_metre": "._calibration",
+        "turning_sweep": "._calibration",
+        "DriverConfig": "._config",
+        "SimConfig": "._config",
+        "DriveResult": "._driver",
+        "Frame": "._driver",
+        "Outcome": "._driver",
+        "drive_path": "._driver",
+        "heading_error": "._driver",
+        "motor_speeds": "._driver",
+        "next_waypoint": "._driver",
+        "quat_to_matrix": "._driver",
+        "LEG_NAMES": "._robot",
+        "RobotConfig": "._robot",
+        "SimError": "._simulation",
+        "Simulation": "._simulation",
+        "UNCERTAINTY_RANGES": "._uncertainty",
+        "UncertaintyConfig": "._uncertainty",
+        "uncertainty_problem": "._uncertainty",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._calibration import TurningFit as TurningFit
+    from ._calibration import TurningModel as TurningModel
+    from ._calibration import fit_turning_curve as fit_turning_curve
+    from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING
+    from ._turning import PLAN_HEADROOM as PLAN_HEADROOM
+    from ._turning import TurningCurve as TurningCurve
+    from ._calibration import TurningSample as TurningSample
+    from ._calibration import fit_turning as fit_turning
+    from ._calibration import reference_energy_per_metre as reference_energy_per_metre
+    from ._calibration import turning_sweep as turning_sweep
+    from ._config import DriverConfig as DriverConfig
+    from ._config import SimConfig as SimConfig
+    from ._driver import DriveResult as DriveResult
+    from ._driver import Frame as Frame
+    from ._driver import Outcome as Outcome
+    from ._driver import drive_path as drive_path
+    from ._driver import heading_error as heading_error
+    from ._driver import motor_speeds as motor_speeds
+    from ._driver import next_waypoint as next_waypoint
+    from ._driver import quat_to_matrix as quat_to_matrix
+    from ._robot import LEG_NAMES as LEG_NAMES
+    from ._robot import RobotConfig as RobotConfig
+    from ._simulation import SimError as SimError
+    from ._simulation import Simulation as Simulation
+    from ._uncertainty import UNCERTAINTY_RANGES as UNCERTAINTY_RANGES
+    from ._uncertainty import UncertaintyConfig as UncertaintyConfig
+    from ._uncertainty import uncertainty_problem as uncertainty_problem

@@ -14,7 +14,8 @@ import numpy as np
 
 from ._config import SimConfig
 from ._robot import RobotConfig
-from ._simulation import Simulation
+from ._simulation import Simulation, SimError
+from ._turning import TurningCurve
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -103,6 +104,74 @@ def fit_turning(samples: list[TurningSample]) -> TurningModel:
     total = np.sum((k - k.mean()) ** 2)
     r2 = 1.0 - float(np.sum(residual**2) / total) if total > 0 else 1.0
     return TurningModel(slope=float(slope), intercept=float(intercept), r_squared=r2)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TurningFit:
+    """The turning curve fitted to a sweep, with how well it fits."""
+
+    curve: TurningCurve
+    """The fitted curve (sim/_turning.py)."""
+    r_squared: float
+    """Coefficient of determination over the sweep [-]."""
+    rms_residual: float
+    """Root mean square of measured minus fitted curvature [1/m]."""
+    max_residual: float
+    """Largest |measured - fitted| curvature [1/m]."""
+    residuals: tuple[float, ...]
+    """Measured minus fitted curvature, one per sample in sweep order [1/m]."""
+
+
+CURVE_MIN_RATIOS = 5
+"""Distinct ratios a turning-curve fit needs: it has four parameters [-]."""
+
+
+def fit_turning_curve(samples: list[TurningSample]) -> TurningFit:
+    """Least squares of the TurningCurve to the sweep's curvatures.
+
+    For a fixed (rate, lock_ratio) the curve is linear in (kappa_sat, lock), so those two come
+    from a non-negative linear solve on a grid of the other two (rate 0.1-30, lock_ratio from
+    just above the largest swept ratio to 4 times it, both log-spaced); the best grid point is
+    then refined by bounded least squares. Deterministic: no random starts.
+    """
+    from scipy.optimize import least_squares, nnls
+
+    r = np.array([s.ratio for s in samples], dtype=float)
+    k = np.array([s.curvature for s in samples], dtype=float)
+    if len(np.unique(r)) < CURVE_MIN_RATIOS or r.min() < 1.0:
+        raise SimError(f"a turning curve needs {CURVE_MIN_RATIOS} or more distinct ratios >= 1, "
+                       f"got {sorted(set(r.tolist()))}")  # fmt: skip
+    x, top = np.log(r), float(np.log(r.max()))
+
+    def basis(rate: float, lock_ratio: float) -> np.ndarray:
+        return np.column_stack([1.0 - np.exp(-rate * x), x / (np.log(lock_ratio) - x)])
+
+    best = (math.inf, 0.0, 0.0, 1.0, 2.0)
+    for rate in np.geomspace(0.1, 30.0, 60):
+        for gap in np.geomspace(1e-3, np.log(4.0), 60):  # ln(lock_ratio) - ln(max ratio)
+            lock_ratio = float(np.exp(top + gap))
+            coef, norm = nnls(basis(rate, lock_ratio), k)
+            if norm < best[0]:
+                best = (norm, *coef, rate, lock_ratio)
+    _, kappa_sat, lock, rate, lock_ratio = best
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return basis(p[2], np.exp(top + p[3])) @ p[:2] - k
+
+    p0 = np.array([kappa_sat, lock, rate, np.log(lock_ratio) - top])
+    lo, hi = np.array([0.0, 0.0, 0.05, 1e-4]), np.array([np.inf, np.inf, 50.0, 2.0])
+    p = least_squares(residual, np.clip(p0, lo, hi), bounds=(lo, hi)).x
+    curve = TurningCurve(kappa_sat=float(p[0]), lock=float(p[1]), rate=float(p[2]),
+                         lock_ratio=float(np.exp(top + p[3])))  # fmt: skip
+    res = k - np.array([curve.curvature(v) for v in r])
+    total = float(np.sum((k - k.mean()) ** 2))
+    return TurningFit(
+        curve=curve,
+        r_squared=1.0 - float(np.sum(res**2)) / total if total > 0 else 1.0,
+        rms_residual=float(np.sqrt(np.mean(res**2))),
+        max_residual=float(np.max(np.abs(res))),
+        residuals=tuple(res.tolist()),
+    )
 
 
 @functools.cache

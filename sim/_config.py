@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from ._turning import CALIBRATED_TURNING, TurningCurve
+
 
 @dataclass(frozen=True, kw_only=True)
 class SimConfig:
@@ -37,10 +39,11 @@ class DriverConfig:
     kinect_bridge and double_bridge_rough; at 0.2 m the robot drifted 2-3 cm outside a tight
     first turn on a real floor capture (region_growing) and flipped on the obstacle the path
     passes, every seed. 0.14 m (1.4 body lengths) succeeded on all three."""
-    turn_slope: float = 7.46
-    """tracking: d curvature / d ln(motor ratio) of the robot [1/m], from the turning
-    calibration (`roachplan calibrate-turning`): the motor ratio that drives a curvature k is
-    exp(k / turn_slope)."""
+    turning: TurningCurve = CALIBRATED_TURNING
+    """tracking: the robot's motor ratio -> curvature curve on flat ground, fitted by the turning
+    calibration (`roachplan calibrate-turning`, sim/_turning.py): the driver asks for the arc it
+    wants with the ratio `turning.ratio_for(curvature)`, so its steering gain follows from the
+    calibration rather than from tuning."""
 
     omega0: float = 20.0
     """Base leg speed of both sides [rad/s]."""

@@ -287,6 +287,6 @@ class _Tracking:
         reach = max(math.dist(pos[:2], target), 1e-6)
         # The arc through the target (pure pursuit); a target behind asks for the tightest turn.
         curvature = 2 * math.sin(theta) / reach if abs(theta) < math.pi / 2 else math.inf
-        ratio = math.exp(min(abs(curvature) / cfg.turn_slope, math.log(cfg.max_ratio)))
+        ratio = cfg.turning.ratio_for(curvature, cfg.max_ratio)
         fast = min(cfg.omega0 * ratio, omega_max)
         return (cfg.omega0, fast) if theta > 0 else (fast, cfg.omega0)

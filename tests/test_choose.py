@@ -128,3 +128,166 @@ def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, t
     proc = roachplan("choose", "--scene", str(two_bridges), "--out", str(tmp_path / "mine"))
     assert proc.returncode == 2 and "--out" in proc.stderr
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+# -- the uncertainty model from scene and spec YAML (`uncertainty:`) ------------------------------
+
+FLAT = ("terrain: []\nground: 0.0\nrobot: {start: [0.0, 0.0, 0]}\ngoal: [0.6, 0.0, 0]\n"
+        "bounds: [[-0.4, -0.4], [1.0, 0.4]]\nplanner: {name: rrtconnect}\n")  # fmt: skip
+
+
+def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
+    from roachplan.scenes import load_scene
+
+    path = tmp_path / "wide.yaml"
+    path.write_text(FLAT + "uncertainty: {friction: 0, start_xy: 0.05, motor_mismatch: 0.2}\n")
+    cfg = load_scene(path).uncertainty
+    assert (cfg.friction, cfg.start_xy, cfg.motor_mismatch) == (0.0, 0.05, 0.2)
+    assert cfg.body_mass == UncertaintyConfig().body_mass  # keys not given keep their default
+    seeds = [rollout_seed(1, 0, k) for k in range(200)]
+    ours = [draw(cfg, s) for s in seeds]
+    default = [draw(UncertaintyConfig(), s) for s in seeds]
+    assert all(d.friction_scale == 1.0 for d in ours)
+    assert any(abs(d.friction_scale - 1) > 0.05 for d in default)
+    # Start offsets beyond the default 1 cm disc, and a mismatch beyond the default 3 %.
+    assert max(math.hypot(*d.start_offset[:2]) for d in ours) > 0.03
+    assert max(math.hypot(*d.start_offset[:2]) for d in default) <= 0.01 + 1e-12
+    assert max(abs(d.motor_gain[0] / d.motor_gain[1] - 1) for d in ours) > 0.1
+
+    # Through `roachplan choose`: the rollouts it drove were drawn from the scene's model.
+    out = tmp_path / "choice"
+    proc = roachplan("choose", "--scene", str(path), "--candidates", "1", "--rollouts", "4",
+                     "--workers", "1", "--seed", "1", "--json", "--out", str(out),
+                     timeout=600)  # fmt: skip
+    assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    result = json.loads(proc.stdout)
+    assert result["uncertainty"]["friction"] == 0.0 and result["uncertainty"]["start_xy"] == 0.05
+    worlds = [json.loads(line)["world"] for line in (out / "rollouts.jsonl").read_text().splitlines()]
+    assert len(worlds) == 4 and all(w["friction_scale"] == 1.0 for w in worlds)
+    assert [w["seed"] for w in worlds] == [rollout_seed(1, 0, k) for k in range(4)]
+    for w in worlds:  # each the pure draw of its recorded seed; no capture, no terrain noise
+        assert w == {**draw(cfg, w["seed"]).to_json(), "terrain_height": 0.0}
+
+
+def test_a_spec_s_uncertainty_overrides_its_scene_s_field_by_field(tmp_path):
+    from roachplan.experiments import load_experiment
+
+    (tmp_path / "s.yaml").write_text(FLAT + "uncertainty: {start_xy: 0.05, friction: 0.1}\n")
+    (tmp_path / "e.yaml").write_text("scene: s.yaml\nuncertainty: {friction: 0.3}\n")
+    u = load_experiment(tmp_path / "e.yaml").uncertainty
+    assert (u.start_xy, u.friction, u.motor_speed) == (0.05, 0.3, UncertaintyConfig().motor_speed)
+    assert load_experiment(tmp_path / "e.yaml").scene_with_settings().uncertainty == u
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("uncertainty: {friction: 1.5}\n",
+         "uncertainty.friction: expected a number from 0 to below 1 [-], got 1.5"),
+        ("uncertainty: {start_yaw: -3}\n",
+         "uncertainty.start_yaw: expected a number from 0 to 180 [deg], got -3"),
+        ("uncertainty: {start_xy: 2}\n",
+         "uncertainty.start_xy: expected a number from 0 to 0.5 [m], got 2"),
+        ("uncertainty: {frction: 0.1}\n",
+         "uncertainty.frction: unknown key; accepted keys: start_xy, start_yaw, friction"),
+        ("uncertainty: {body_mass: lots}\n", "uncertainty.body_mass: expected a finite number"),
+        ("uncertainty: 0.2\n", "uncertainty: expected a mapping with keys start_xy"),
+    ],
+)  # fmt: skip
+def test_a_bad_uncertainty_is_refused_naming_file_key_and_range(tmp_path, body, message):
+    scene = tmp_path / "bad.yaml"
+    scene.write_text(FLAT + body)
+    proc = roachplan("choose", "--scene", str(scene), "--rollouts", "8", "--json")
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert str(scene) in proc.stderr and message in proc.stderr, proc.stderr
+    # The same check on an experiment spec's `uncertainty:` (over a good scene).
+    (tmp_path / "good.yaml").write_text(FLAT)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("scene: good.yaml\n" + body)
+    done = roachplan("experiment", str(spec), "--out", str(tmp_path / "out"))
+    assert done.returncode == 2 and str(spec) in done.stderr and message in done.stderr, done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_address_is_for_the_ray_backend():
+    proc = roachplan("choose", "--scene", "flat", "--address", "127.0.0.1:6379")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "--address 127.0.0.1:6379" in proc.stderr and "--backend ray" in proc.stderr
+    helped = roachplan("choose", "--help")
+    assert "--address RAY_ADDRESS" in helped.stdout
+
+
+def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path):
+    """A Ray instance started by another process (as a cluster would be), reached with
+    --address: the same seed and cap give the same ranking as local workers."""
+    import subprocess
+    import sys
+
+    scene = tmp_path / "flat.yaml"
+    scene.write_text(FLAT)
+    args = ("choose", "--scene", str(scene), "--candidates", "2", "--rollouts", "8",
+            "--seed", "3", "--json")  # fmt: skip
+    local = roachplan(*args, "--workers", "2", timeout=600)
+    assert local.returncode in (0, 1), local.stderr[-2000:]
+    # The holder starts Ray and, when its stdin closes, shuts down what it started.
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, ray; ray.init(num_cpus=2, include_dashboard=False, "
+         "logging_level='ERROR'); print(ray.get_runtime_context().gcs_address, flush=True); "
+         "sys.stdin.read(); ray.shutdown()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        address = holder.stdout.readline().strip()
+        assert ":" in address, "the Ray holder did not start"
+        on_ray = roachplan(*args, "--backend", "ray", "--address", address, timeout=600)
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=120)
+    assert on_ray.returncode == local.returncode, on_ray.stderr[-2000:]
+
+    def key(result):
+        return [(r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
+                for r in result["ranking"]]  # fmt: skip
+
+    a, b = json.loads(local.stdout), json.loads(on_ray.stdout)
+    assert key(b) == key(a) and b["chosen"] == a["chosen"]
+
+
+def test_a_capture_s_terrain_height_noise_reaches_the_physics_and_reruns_exactly():
+    """kinect_bridge (a synthetic Kinect capture): each rollout moves the mesh's vertices by
+    the sensor's error, drawn from the rollout's seed."""
+    import dataclasses
+
+    from roachplan.experiments._spec import ExperimentSpec
+    from roachplan.experiments._uncertainty import terrain_noise
+    from roachplan.experiments._workers import TrialWorker
+    from roachplan.scenes import load_scene
+
+    cfg = UncertaintyConfig()
+    dz = terrain_noise(cfg, 7, 20000)
+    assert np.array_equal(dz, terrain_noise(cfg, 7, 20000))
+    assert abs(np.std(dz) - cfg.terrain_height) < 0.05 * cfg.terrain_height
+    assert not np.array_equal(dz, terrain_noise(cfg, 8, 20000))
+    assert not terrain_noise(dataclasses.replace(cfg, terrain_height=0.0), 7, 5).any()
+
+    scene = load_scene("kinect_bridge")
+    spec = ExperimentSpec(name="t", path=scene.path, scene=scene.path, planner=scene.planner,
+                          sim=scene.sim, driver=scene.driver)  # fmt: skip
+    worker = TrialWorker(spec)
+    try:
+        from roachplan.experiments import plan
+
+        planned = plan(worker.world, seed=scene.seed)
+        assert planned.found
+        path = planned.path_xyz.tolist()
+        calm = dataclasses.replace(cfg, terrain_height=0.0)
+        rough = dataclasses.replace(cfg, terrain_height=0.02)  # 2 cm: it must show
+        a = worker.rollout(0, path, 11, rough)
+        assert worker.rollout(0, path, 11, rough) == a  # the same seed, the same rollout
+        b = worker.rollout(0, path, 11, calm)
+        assert a["world"]["terrain_height"] == 0.02 and b["world"]["terrain_height"] == 0.0
+        assert (a["energy"], a["end"]) != (b["energy"], b["end"])
+    finally:
+        worker.close()

@@ -71,19 +71,80 @@ def test_more_right_speed_turns_left_harder():
     assert 0.5 < gentle.curvature < hard.curvature
 
 
-def test_calibrate_turning_writes_the_sweep_and_the_gain_in_use(tmp_path):
+def test_calibrate_turning_fits_the_curve_the_driver_and_the_plans_use(tmp_path):
+    from roachplan.app._calibrate import DEFAULT_RATIOS, REPORT_RATIOS
+    from roachplan.planning import PlannerConfig
+
     out = roachplan("calibrate-turning", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr
     with (tmp_path / "turning.csv").open() as f:
         rows = list(csv.DictReader(f))
-    assert [float(r["motor_speed_ratio"]) for r in rows] == [1, 1.25, 1.5, 1.75, 2, 2.5, 3]
+    ratios = [float(r["motor_speed_ratio"]) for r in rows]
+    assert ratios == list(DEFAULT_RATIOS) and set(REPORT_RATIOS) <= set(ratios)
     curvature = [float(r["curvature_per_m"]) for r in rows]
     assert abs(curvature[0]) < 0.5 and curvature[-1] > 3.0
     model = json.loads((tmp_path / "turning_model.json").read_text())
-    assert model["slope_per_m"] > 0 and model["r_squared"] > 0.7
-    # The driver's default gain is the one this calibration derives (p = 2 / (slope r_path)).
+    # The curve fits where the report's line does not (R^2 0.78 on the report's ratios).
+    assert model["curve_r_squared"] > 0.97 > model["r_squared"]
+    assert model["curve_rms_residual_per_m"] < 0.3 and model["curve_max_residual_per_m"] < 0.6
+    # What the tracking driver uses is this calibration's curve, recorded with its source.
+    recorded = DriverConfig().turning
+    for key, field in (("kappa_sat_per_m", "kappa_sat"), ("rate", "rate"),
+                       ("lock_per_m", "lock"), ("lock_ratio", "lock_ratio")):  # fmt: skip
+        assert model[key] == pytest.approx(getattr(recorded, field), rel=2e-3), key
+    # Drivable plans' radius follows from it: 1 / (headroom * curvature at the largest ratio).
+    assert model["min_turning_radius_m"] == pytest.approx(
+        recorded.min_turning_radius(DriverConfig().max_ratio), rel=2e-3
+    )
+    assert PlannerConfig().turning_radius == pytest.approx(model["min_turning_radius_m"], abs=5e-3)
+    # The reference driver keeps the report's gain: p = 2 / (slope r_path) of the report's line.
     assert model["gain"] == pytest.approx(DriverConfig().gain, rel=0.05)
     assert (tmp_path / "turning.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_curve_sets_the_ratio_that_drives_a_curvature_on_the_real_floor():
+    """The tracking driver's steering, open loop: the ratio the recorded curve gives for a
+    curvature drives about that curvature in the simulation (within the fit's residuals)."""
+    cfg, robot, curve = SimConfig(), RobotConfig(), DriverConfig().turning
+    for wanted in (1.0, 2.5, 4.0, 6.0):
+        ratio = curve.ratio_for(wanted, DriverConfig().max_ratio)
+        assert 1.0 < ratio < 3.0
+        sample = walk(robot, cfg, 20.0, 20.0 * ratio, 10.0)
+        assert sample.curvature == pytest.approx(wanted, abs=0.6), (wanted, ratio)
+
+
+def test_the_turning_curve_inverts_and_clips_to_the_drivers_range():
+    curve = DriverConfig().turning
+    ratios = np.linspace(1.0, 3.0, 41)
+    k = [curve.curvature(r) for r in ratios]
+    assert k[0] == 0.0 and np.all(np.diff(k) > 0), "straight at equal speeds, then rising"
+    for r, kr in zip(ratios, k, strict=True):
+        assert curve.ratio_for(kr, 3.0) == pytest.approx(r, rel=1e-9)
+        assert curve.ratio_for(-kr, 3.0) == pytest.approx(r, rel=1e-9)  # either side
+    assert curve.ratio_for(math.inf, 3.0) == 3.0 and curve.ratio_for(50.0, 2.0) == 2.0
+    assert curve.min_turning_radius(3.0) == pytest.approx(1 / (0.75 * curve.curvature(3.0)))
+
+
+@pytest.mark.parametrize("true", [dict(kappa_sat=4.0, rate=2.0, lock=0.15, lock_ratio=3.1),
+                                  dict(kappa_sat=6.0, rate=0.7, lock=0.05, lock_ratio=3.5),
+                                  dict(kappa_sat=3.0, rate=5.0, lock=0.0, lock_ratio=5.0)])  # fmt: skip
+def test_the_fit_recovers_a_known_curve(true):
+    from roachplan.sim import TurningCurve, TurningSample, fit_turning_curve
+
+    curve = TurningCurve(**true)
+    ratios = [1.0 + 0.1 * i for i in range(21)]
+    samples = [TurningSample(ratio=r, distance=2.0, revolutions=curve.curvature(r) * 2.0
+                             / (2 * math.pi), duration=10.0) for r in ratios]  # fmt: skip
+    fit = fit_turning_curve(samples)
+    assert fit.r_squared > 0.9999 and fit.max_residual < 0.02
+    for r in ratios:
+        assert fit.curve.curvature(r) == pytest.approx(curve.curvature(r), abs=0.02)
+
+
+def test_a_curve_from_too_few_ratios_is_refused(tmp_path):
+    out = roachplan("calibrate-turning", "--out", str(tmp_path / "c"), "--ratios", "1,2,2,3")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "--ratios '1,2,2,3'" in out.stderr and "5 or more distinct" in out.stderr
 
 
 STRAIGHT = np.array([[0.0, y, 0.0] for y in np.linspace(0.0, 1.0, 21)])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -86,3 +87,89 @@ def test_unknown_scene_is_a_clear_error():
     assert out.returncode == 2
     assert "unknown scene 'no_such_scene'" in out.stderr and "double_bridge" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+# --reference and `reference: true` (issue 18): the report's raw paths and algorithms 1-2, and
+# every JSON output says which planner space, smoothing and driver it used.
+
+
+def test_reference_flag_gives_the_reports_raw_path_and_driver(trial_seed3, world):
+    from roachplan.experiments import plan
+    from roachplan.planning import PlannerConfig
+
+    ref = run_trial(3, "--reference")
+    assert (ref["driver"], ref["planner_space"], ref["smoothing"]) == ("reference", "se2", "none")
+    assert ref["turning_radius"] is None
+    d = trial_seed3  # the same seed without the flag: drivable plans and the tracking driver
+    assert (d["driver"], d["planner_space"], d["smoothing"]) == (
+        "tracking", "se2", "dubins_shortcuts")  # fmt: skip
+    assert d["turning_radius"] == PlannerConfig().turning_radius
+    # The raw path is the planner's own, as the library plans it with turning_radius None;
+    # the default one is another (arcs), from the same seed.
+    raw = plan(world, seed=3, planner=dataclasses.replace(world.scene.planner, turning_radius=None))
+    np.testing.assert_allclose(np.array(ref["path"]), raw.path_xyz, atol=1e-9)
+    drivable = np.array(d["path"])
+    assert drivable.shape != raw.path_xyz.shape or not np.allclose(drivable, raw.path_xyz)
+
+
+def test_plan_json_names_the_space_and_the_smoothing():
+    def plan_json(*extra: str) -> dict:
+        out = roachplan("plan", "--scene", "double_bridge", "--seed", "2", "--json", *extra)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout)
+
+    from roachplan.planning._drivable import max_curvature
+
+    ref, default = plan_json("--reference"), plan_json()
+    assert (ref["planner_space"], ref["smoothing"], ref["turning_radius"]) == ("se2", "none", None)
+    assert (default["planner_space"], default["smoothing"]) == ("se2", "dubins_shortcuts")
+    radius = default["turning_radius"]
+    assert radius > 0 and max_curvature(np.array(default["states"])) <= 1.05 / radius
+    # The raw path's corners are sharper than any arc of that radius.
+    assert max_curvature(np.array(ref["states"])) > 1.05 / radius
+
+
+def _spec(tmp_path, reference: bool):
+    path = tmp_path / f"spec_{reference}.yaml"
+    path.write_text(
+        "scene: double_bridge\n"
+        f"reference: {str(reference).lower()}\n"
+        "planner: {name: prm}\n"
+        "routes: [left_bridge, right_bridge]\n"
+        "trials_per_route: 1\n"
+        "best_path: {repeats: 0}\n"
+    )
+    return path
+
+
+def test_a_spec_with_reference_true_runs_and_records_the_reports_setting(tmp_path):
+    from roachplan.experiments import load_experiment
+
+    default = load_experiment(_spec(tmp_path, False))
+    assert default.driver.kind == "tracking" and default.planner.turning_radius is not None
+    spec = load_experiment(_spec(tmp_path, True))
+    assert spec.driver.kind == "reference" and spec.planner.turning_radius is None
+    # Everything else of the driver is the scene's, the report's gain included.
+    assert dataclasses.replace(spec.driver, kind="tracking") == default.driver
+    out = tmp_path / "results"
+    run = roachplan("experiment", str(_spec(tmp_path, True)), "--trials", "2", "--workers", "1",
+                    "--out", str(out), "--quiet")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    records = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    trials = [r for r in records if r["kind"] == "trial"]
+    assert len(trials) == 2
+    for r in trials:
+        assert (r["driver"], r["planner_space"], r["smoothing"], r["turning_radius"]) == (
+            "reference", "se2", "none", None)  # fmt: skip
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["spec"]["driver"]["kind"] == "reference"
+    assert manifest["spec"]["planner"]["turning_radius"] is None
+
+
+def test_a_spec_reference_that_is_not_a_boolean_is_a_clear_error(tmp_path):
+    path = tmp_path / "bad.yaml"
+    good = _spec(tmp_path, True).read_text()
+    path.write_text(good.replace("reference: true", "reference: yes please"))
+    out = roachplan("experiment", str(path), "--trials", "1", "--out", str(tmp_path / "r"))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "reference" in out.stderr and "expected true or false" in out.stderr

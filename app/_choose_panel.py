@@ -1,0 +1,283 @@
+"""The Choose path folder (issue 17 in the page): K candidate paths raced by simulation under
+the uncertainty model (experiments/_choose.py), drawn coloured by P(success) as their rollouts
+come in, a ranking table, the chosen path highlighted; Drive then takes the chosen one.
+
+The race runs in a child of the app's fork server (app/_jobs.py) with its own pool of rollout
+workers; the loop follows it with `app._follow` (progress bar, status, Cancel kills the child
+and its workers at once) like Plan and Drive. The candidates start at the scene's start and
+goal: the rollout workers rebuild the scene from its file, as `roachplan choose` does, so the
+page's choice is the command line's for the same seed and budget.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import time
+from dataclasses import dataclass
+from dataclasses import replace as dataclass_replace
+
+import numpy as np
+
+from roachplan.experiments._choose import ChooseConfig, ChooseError, plan_candidates, race
+from roachplan.experiments._trial import LabelledPlan
+from roachplan.planning import PlanResult
+from roachplan.planning._isolated import limit_child_memory
+
+from ._draw import segments
+from ._jobs import NAMES, Cmd, Job
+
+UNTRIED = (150, 150, 150)
+"""Colour of a candidate without rollouts yet."""
+LIFT = 0.006
+"""Candidates are drawn this far above the surface [m] (over the terrain, under the chosen)."""
+GRACE = 60.0
+"""How long past its budget the race's child may run before it is killed [s]: the race stops
+by itself before a round that would overrun the budget; this bounds a round gone slow."""
+
+
+@dataclass(frozen=True)
+class ChooseCmd(Cmd):
+    pass
+
+
+NAMES[ChooseCmd] = "Choose path"  # (how the page names it when it waits its turn)
+
+
+def p_colour(p: float) -> tuple[int, int, int]:
+    """Red (P(success) 0) through yellow to green (1); grey without rollouts (p nan)."""
+    if not math.isfinite(p):
+        return UNTRIED
+    p = min(max(p, 0.0), 1.0)
+    return (round(220 * min(1.0, 2 * (1 - p))), round(180 * min(1.0, 2 * p)), 40)
+
+
+def _f(v, digits: int = 2) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def ranking_markdown(ranking: list[dict], chosen: int | None, confidence: float) -> str:
+    """The ranking, best first (experiments/_choose.py summaries); the chosen row marked. Paths
+    are numbered from 1 as the page labels them (candidate k of `roachplan choose` is path
+    k + 1)."""
+    k = max(len(ranking), 1)
+    head = ("| | path | route | n | P(success) [interval] | energy [interval] | J/m | drive time [s] "
+            "| failures | race |\n|---|---|---|---|---|---|---|---|---|---|\n")  # fmt: skip
+    rows = []
+    for r in ranking:
+        fails = ", ".join(f"{what} {n}" for what, n in r["failures"].items()) or "-"
+        out = r["out"]
+        race_state = ("out: energy" if out.startswith("costs more") else
+                      "out: P" if out.startswith("less likely") else out[:24] or "in")  # fmt: skip
+        rows.append(
+            f"| {'**chosen**' if r['candidate'] == chosen else ''} | {r['candidate'] + 1} "
+            f"| {r['route'] or '-'} | {r['rollouts']} "
+            f"| {_f(r['p_success'])} [{_f(r['p_low'])}, {_f(r['p_high'])}] "
+            f"| {_f(r['relative_energy'])} [{_f(r['relative_energy_low'])}, "
+            f"{_f(r['relative_energy_high'])}] | {_f(r['energy_j_per_m'])} "
+            f"| {_f(r['drive_time_s'], 1)} | {fails} | {race_state} |"
+        )
+    note = (f"Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} jointly over "
+            f"{k}); energy is over successes, × a straight walk on the floor. Lines: red "
+            f"(P = 0) to green (P = 1), grey before their first rollouts; the chosen one thick.")  # fmt: skip
+    return "**Ranking**\n\n" + head + "\n".join(rows) + "\n\n" + note
+
+
+class ChoosePanel:
+    """The Choose path folder: K, the time budget, the button, the outcome and the ranking."""
+
+    def __init__(self, gui, put) -> None:
+        with gui.add_folder("Choose path"):
+            self.candidates = gui.add_number(
+                "Candidates (K)", 4, min=1, max=16, step=1,
+                hint="Distinct paths to race (a route each, in turn, where the scene names routes)",
+            )  # fmt: skip
+            self.budget = gui.add_number(
+                "Choose budget [s]", 60.0, min=5.0, max=3600.0, step=5.0,
+                hint="Wall time for planning the candidates and racing them",
+            )  # fmt: skip
+            self.confidence = gui.add_number("Confidence", 0.95, min=0.5, max=0.99, step=0.01)
+            self.button = gui.add_button(
+                "Choose path",
+                hint="Drive each candidate many times in worlds drawn from the uncertainty "
+                "model (start pose, friction, motors, mass), from the scene's start and goal; "
+                "Drive then takes the chosen path",
+            )  # fmt: skip
+            self.summary = gui.add_markdown("")
+            self.table = gui.add_markdown("")
+        self.button.on_click(lambda ev: put(ChooseCmd(ev.client_id)))
+        self.lines: dict[int, object] = {}
+        """Candidate index -> its line segments handle (recoloured as rollouts come in)."""
+
+    def clear(self) -> None:
+        """A new world: the last choice was on another."""
+        self.lines = {}
+        self.summary.content = self.table.content = ""
+
+
+def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
+    """Plan the candidates and race them, as experiments' choose() does, sending each step:
+    ("candidates", [(index, route, plan seed, path_xyz)]), ("round", (message, summaries))
+    after each round, then ("choice", {...}) or ("error", text). choose() says only a progress
+    line, and the page draws every candidate's P(success) as it comes in."""
+    from roachplan.experiments._runner import _make_pool
+    from roachplan.experiments._spec import ExperimentSpec
+
+    limit_child_memory()
+    # The job's child is a daemon (it dies with the server) and multiprocessing refuses a
+    # daemon children; the rollout workers die with this process (PR_SET_PDEATHSIG) and
+    # Cancel kills them with it (kill_tree), so none is left behind either way.
+    multiprocessing.current_process().daemon = False
+    try:
+        t0, scene = time.monotonic(), world.scene
+        if cfg.uncertainty is None:  # (the scene's `uncertainty:`, as choose() takes it)
+            cfg = dataclass_replace(cfg, uncertainty=scene.uncertainty)
+        candidates = plan_candidates(world, cfg, budget=cfg.budget_s)
+        if not candidates:
+            raise ChooseError(f"{scene.name}: the planner found no path to choose from")
+        conn.send(("candidates", [(c.index, c.route, c.seed, c.path_xyz) for c in candidates]))
+        conf = 1 - (1 - cfg.confidence) / len(candidates)  # (as race() has it)
+        mass = world.robot.mass
+        spec = ExperimentSpec(name=f"choose-{scene.name}", path=scene.path, scene=scene.path,
+                              planner=scene.planner, sim=scene.sim, driver=scene.driver,
+                              uncertainty=cfg.uncertainty)  # fmt: skip
+        pool = _make_pool(spec, workers, "local", None)
+        try:
+            left = max(cfg.budget_s - (time.monotonic() - t0), 0.0)
+            choice = race(
+                candidates, dataclass_replace(cfg, budget_s=left),
+                lambda calls: list(pool.run(("rollout", (*c, cfg.uncertainty)) for c in calls)),
+                mass=mass,
+                progress=lambda message, _: conn.send(
+                    ("round", (message, [c.summary(conf, mass) for c in candidates]))
+                ),
+            )  # fmt: skip
+        finally:
+            pool.close()
+        conn.send(("choice", {"chosen": choice.chosen, "ranking": choice.ranking,
+                              "stopped": choice.stopped, "rollouts": choice.rollouts,
+                              "wall_time": time.monotonic() - t0}))  # fmt: skip
+    except Exception as exc:  # reported to the user as a notification
+        conn.send(("error", f"{exc}"))
+    conn.close()
+
+
+def _at_scene_poses(app) -> None:
+    """ChooseError unless the markers are at the scene's start and goal (the rollouts start
+    there: their workers rebuild the scene from its file)."""
+    scene = app.world.scene
+    for which, pose in zip(("start", "goal"), app.markers.valid_poses(app.world), strict=True):
+        want = scene.start if which == "start" else scene.goal
+        turn = abs((pose[2] - want[2] + math.pi) % (2 * math.pi) - math.pi)
+        if math.dist(pose[:2], want[:2]) > 0.005 or turn > math.radians(0.6):
+            raise ChooseError(
+                f"Choose path races from the scene's start and goal; the {which} marker is at "
+                f"({pose[0]:.2f}, {pose[1]:.2f}, {math.degrees(pose[2]):.0f}°), the scene's "
+                f"{which} at ({want[0]:.2f}, {want[1]:.2f}, {math.degrees(want[2]):.0f}°): pick "
+                f"the scene again to put the markers back"
+            )
+
+
+def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
+    """Race K candidates in a child followed by the loop; then Drive takes the chosen one."""
+    _at_scene_poses(app)
+    scene = app.world.scene
+    cfg = ChooseConfig(candidates=int(panel.candidates.value), budget_s=float(panel.budget.value),
+                       confidence=float(panel.confidence.value), seed=app._next_seed)  # fmt: skip
+    app._next_seed += 1  # (a second click draws fresh candidates and rollouts)
+    workers = os.cpu_count() or 1
+    app._show_robot_at_start()
+    app.server.scene.remove_by_name("/plans")
+    app.plans, app.plan_endpoints = [], None
+    panel.lines, panel.table.content = {}, ""
+    panel.summary.content = f"Racing {cfg.candidates} candidates (seed {cfg.seed}) ..."
+    paths: dict[int, tuple[str, int, np.ndarray]] = {}
+    got: dict[str, object] = {"message": f"planning {cfg.candidates} candidate paths"}
+    job = Job(_choose_job, app.world, cfg, workers)
+
+    def step(messages) -> bool:
+        for kind, payload in messages:
+            if kind == "candidates":
+                for index, route, seed, xyz in payload:
+                    pts = np.asarray(xyz) + [0, 0, LIFT]
+                    paths[index] = (route, seed, np.asarray(xyz))
+                    panel.lines[index] = app.server.scene.add_line_segments(
+                        f"/plans/choose/{index}", segments(pts), colors=UNTRIED, thickness=3.0,
+                        thickness_units="screen",
+                    )  # fmt: skip
+                    app.server.scene.add_label(f"/plans/choose/{index}/label", str(index + 1),
+                                               position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]))  # fmt: skip
+                got["message"] = f"{len(payload)} candidates planned; racing them"
+            elif kind == "round":
+                got["message"], ranking = payload
+                _recolour(panel, ranking)
+                panel.table.content = ranking_markdown(
+                    sorted(ranking, key=lambda r: r["candidate"]), None, cfg.confidence
+                )
+            else:
+                got[kind] = payload
+        t = job.elapsed
+        app._progress(t / cfg.budget_s, f"Choose path: {got['message']}; {t:.1f} s of the "
+                      f"{cfg.budget_s:g} s budget ({workers} workers)")  # fmt: skip
+        return job.done
+
+    end = app._follow(job, "Choose path", step, hard_stop=time.monotonic() + cfg.budget_s + GRACE)
+    if "error" in got:
+        app.status.content = panel.summary.content = f"Choose path failed: {got['error']}"
+        app._notify(cmd.client_id, "Choose path failed", str(got["error"]), error=True)
+        return
+    if end != "done" or "choice" not in got:
+        how = "cancelled" if end == "cancelled" else "stopped (past its budget)"
+        app.status.content = panel.summary.content = (
+            f"Choose path {how} after {job.elapsed:.1f} s: nothing chosen; the candidates "
+            f"drawn are coloured by the rollouts done."
+        )
+        return
+    _show_choice(app, panel, cfg, got["choice"], paths, scene)
+
+
+def _recolour(panel: ChoosePanel, ranking: list[dict]) -> None:
+    for r in ranking:
+        handle = panel.lines.get(r["candidate"])
+        if handle is not None:
+            n = len(handle.points)
+            handle.colors = np.broadcast_to(np.uint8(p_colour(r["p_success"])), (n, 2, 3)).copy()
+
+
+def _show_choice(app, panel, cfg: ChooseConfig, choice: dict, paths: dict, scene) -> None:
+    ranking, chosen = choice["ranking"], choice["chosen"]
+    _recolour(panel, ranking)
+    panel.table.content = ranking_markdown(ranking, chosen, cfg.confidence)
+    again = (f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
+             f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}`")  # fmt: skip
+    ran = f"{choice['rollouts']} rollouts in {choice['wall_time']:.1f} s ({choice['stopped']})"
+    if chosen is None:
+        app.status.content = panel.summary.content = (
+            f"No candidate succeeded in any rollout: nothing to choose. {ran}. Same race: {again}"
+        )
+        return
+    row = next(r for r in ranking if r["candidate"] == chosen)
+    route = paths[chosen][0]
+    # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
+    # marked for Drive (thick, "Drive") and every one keeping its P(success) colour.
+    app.server.scene.remove_by_name("/plans/choose")
+    app.plan_endpoints = (scene.start, scene.goal)
+    app.set_plans([_labelled(scene, *paths[i]) for i in sorted(paths)])
+    app.select_path(chosen)
+    panel.lines = dict(enumerate(app.view.path_nodes))
+    _recolour(panel, ranking)
+    text = (f"Chosen: path {chosen + 1} ({route or 'no route'}), P(success) "
+            f"{_f(row['p_success'])} [{_f(row['p_low'])}, {_f(row['p_high'])}], energy "
+            f"{_f(row['relative_energy'])} × a straight walk; {ran}.")  # fmt: skip
+    app.status.content = text + " **Drive** drives it (*Drive path* picks another)."
+    panel.summary.content = f"{text}  \nSame race from the command line: {again}"
+
+
+def _labelled(scene, route: str, seed: int, xyz: np.ndarray) -> LabelledPlan:
+    """A candidate as the plan Drive takes (its path as planned with the scene's planner)."""
+    planner = scene.planner
+    return LabelledPlan(route=route, plan=PlanResult(
+        found=True, planner=planner.name, seed=seed, states=np.zeros((0, 3)), path_xyz=xyz,
+        plan_time=0.0, message="chosen by simulation", turning_radius=planner.turning_radius,
+    ))  # fmt: skip

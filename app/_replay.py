@@ -1,0 +1,391 @@
+"""Replays anyone can open (issue 19): a trial, a whole experiment or a choice as one HTML file
+that plays offline, or as a `.viser` recording.
+
+The HTML is viser's own client (its build is one self-contained index.html, the JS and CSS
+inlined) with the recording inlined as base64 (`StateSerializer.as_html`): it needs no server and
+no network, and opens from a file:// URL. The recording is made by a private, loopback-only viser
+server that no browser connects to: the scene is drawn with the app's own `SceneView` (terrain,
+robot, paths in black, trajectories in blue), then the robot is moved frame by frame with a
+recorded pause between frames, so the client's player plays it at real time (and loops).
+
+The robot's pose per frame is not in a results store (a trial keeps its body positions only), so
+the trial is re-driven: the stored path from the stored start on the recorded world, which drives
+exactly as it did (the simulation is deterministic); the re-drive is checked against the stored
+trajectory and any difference is shown in the page.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import html
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from roachplan.experiments import ExperimentError, drive, read_manifest, reference_energy
+from roachplan.scenes import World
+from roachplan.sim import Frame
+
+from ._draw import BLACK, BLUE, MARKER_COLOURS, SceneView, on_surface, wxyz_from_xyzw, yaw_wxyz
+from ._jobs import Cmd
+
+SUFFIXES = (".html", ".viser")
+"""What `replay -o` writes: a standalone page, or viser's recording."""
+HTML_MARK = "<!-- written by roachplan: a replay -->"
+"""Put in every replay page's head: `-o` may replace a page that carries it without --force."""
+ZSTD_MAGIC = bytes.fromhex("28b52ffd")
+"""A .viser recording is an 8-byte length, then one zstd frame (viser's StateSerializer)."""
+END_HOLD = 1.5
+"""Pause at the end of the recording before the player loops [s]."""
+MAX_TABLE_ROWS = 200
+"""Rows of the experiment's trial table the page lists (the rest are counted)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Replay:
+    """What a replay shows: a world, the trials drawn on it and the one that plays."""
+
+    title: str
+    """First line of the page, e.g. "bridge_rough: trial 3"."""
+    world: World
+    trials: tuple[dict, ...]
+    """Trial records as `TrialResult.to_json()` (path [x, y, z] and trajectory [t, x, y, z] in
+    the world frame [m], outcome and numbers), each with a "label" ("trial 3")."""
+    shown: int
+    """Index into `trials` of the one whose robot walks."""
+    frames: tuple[Frame, ...]
+    """The shown trial's robot per frame (empty: it stays at its start)."""
+    note: str = ""
+    """Anything the viewer should know (a re-drive that differs from the store)."""
+
+
+@dataclass(frozen=True)
+class ShareCmd(Cmd):
+    """The page's Share button: export the shown trial as a replay page for download."""
+
+
+# -- building a replay from a results folder -----------------------------------------------------
+
+
+def redrive(world: World, record: dict) -> tuple[tuple[Frame, ...], str]:
+    """Drive a trial record's path again from its start: (frames, note). The note is empty when
+    the re-drive matches the stored trajectory, else says by how much it differs [m]."""
+    if not record.get("path"):
+        return (), "no path was planned: nothing was driven"
+    frames: list[Frame] = []
+    driven = drive(world, np.asarray(record["path"], dtype=float), start=tuple(record["start"]),
+                   on_frame=frames.append)  # fmt: skip
+    stored = np.asarray(record.get("trajectory") or [], dtype=float).reshape(-1, 4)
+    again = np.asarray(driven.trajectory, dtype=float).reshape(-1, 4)
+    if len(stored) == 0:
+        return tuple(frames), ""
+    if len(stored) != len(again):
+        return tuple(frames), (f"the re-drive lasted {again[-1, 0]:.2f} s, the stored one "
+                               f"{stored[-1, 0]:.2f} s: the robot shown may not follow the blue "
+                               f"line")  # fmt: skip
+    gap = float(np.max(np.linalg.norm(stored[:, 1:] - again[:, 1:], axis=1)))
+    if gap > 0.0:
+        return tuple(frames), (f"the re-drive differs from the stored trajectory by up to "
+                               f"{gap * 1000:.2g} mm")  # fmt: skip
+    return tuple(frames), ""
+
+
+def load_replay(folder: str | Path, *, trial: int | None = None) -> Replay:
+    """The replay of an experiment's results folder (every trial, or only `trial`) or of a
+    choice's folder (its chosen path). ExperimentError naming the folder or --trial when it
+    holds neither, or not that trial."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ExperimentError(f"{folder}: not a folder; give an experiment's results folder "
+                              f"(`roachplan experiment --out`) or a choice's (`choose --out`)")  # fmt: skip
+    if (folder / "choice.json").is_file() and not (folder / "manifest.json").exists():
+        if trial is not None:
+            raise ExperimentError(f"--trial {trial}: {folder} holds a choice, which replays its "
+                                  f"chosen path; drop --trial")  # fmt: skip
+        return _choice_replay(folder)
+    return _experiment_replay(folder, trial)
+
+
+def _experiment_replay(folder: Path, trial: int | None) -> Replay:
+    from roachplan.experiments import ResultStore
+    from roachplan.experiments._manifest import MANIFEST, check_same_world, spec_from_manifest
+    from roachplan.scenes import build_world
+
+    try:
+        manifest = read_manifest(folder)
+    except ExperimentError as exc:
+        raise ExperimentError(f"{exc} (nor a choice's folder: no choice.json)") from None
+    records = sorted((r for r in ResultStore(folder / "trials.jsonl").records()
+                      if r["kind"] == "trial"), key=lambda r: r["index"])  # fmt: skip
+    if not records:
+        raise ExperimentError(f"{folder}: no trial is stored yet (trials.jsonl); nothing to replay")
+    if trial is not None:
+        chosen = [r for r in records if r["index"] == trial]
+        if not chosen:
+            have = ", ".join(str(r["index"]) for r in records[:20])
+            raise ExperimentError(f"--trial {trial}: {folder} has stored trials {have}"
+                                  + (" ..." if len(records) > 20 else ""))  # fmt: skip
+        records = chosen
+    spec = spec_from_manifest(manifest, folder / MANIFEST)
+    world = build_world(spec.scene_with_settings())
+    check_same_world(manifest, world, folder)
+    for r in records:
+        r["label"] = f"trial {r['index']}"
+    shown = 0 if trial is not None else _best(folder, records)
+    frames, note = redrive(world, records[shown])
+    what = records[0]["label"] if trial is not None else f"{len(records)} trials"
+    return Replay(title=f"{spec.name} ({world.scene.name}): {what}", world=world,
+                  trials=tuple(records), shown=shown, frames=frames, note=note)  # fmt: skip
+
+
+def _best(folder: Path, records: list[dict]) -> int:
+    """Which trial plays in a whole-experiment replay: the experiment's best path (best_path.json),
+    else the lowest-energy success, else the first trial with a path."""
+    index = None
+    try:
+        index = json.loads((folder / "best_path.json").read_text())["index"]
+    except (OSError, ValueError, KeyError, TypeError):
+        ok = [r for r in records if r["outcome"] == "success"]
+        if ok:
+            index = min(ok, key=lambda r: r["relative_energy"])["index"]
+    for k, r in enumerate(records):
+        if r["index"] == index:
+            return k
+    return next((k for k, r in enumerate(records) if r.get("path")), 0)
+
+
+def _choice_replay(folder: Path) -> Replay:
+    from roachplan.experiments._spec import reference_settings
+    from roachplan.scenes import build_world, load_scene
+
+    where = folder / "choice.json"
+    try:
+        choice = json.loads(where.read_text())
+        scene_name, chosen = choice["scene"], choice["chosen"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ExperimentError(f"{where}: not a choice that `roachplan choose` wrote ({exc})") from None
+    if chosen is None or not choice.get("chosen_path"):
+        raise ExperimentError(f"{where}: no candidate was chosen (none succeeded); nothing to replay")
+    scene = load_scene(scene_name)
+    if choice.get("driver") == "reference" and scene.driver.kind != "reference":
+        planner, driver = reference_settings(scene.planner, scene.driver)
+        scene = dataclasses.replace(scene, planner=planner, driver=driver)
+    world = build_world(scene)
+    row = next((r for r in choice.get("ranking", []) if r.get("candidate") == chosen), {})
+    path = np.asarray(choice["chosen_path"], dtype=float)
+    frames: list[Frame] = []
+    driven = drive(world, path, on_frame=frames.append)
+    record = {
+        "label": f"chosen candidate {chosen}", "scene": scene.name, "seed": choice.get("seed"),
+        "planner": scene.planner.name, "route": row.get("route", ""),
+        "outcome": driven.outcome, "reason": driven.reason, "drive_time": driven.drive_time,
+        "energy": driven.energy,
+        "relative_energy": driven.energy / reference_energy(world, scene.start, scene.goal),
+        "start": list(scene.start), "goal": list(scene.goal), "path": path.tolist(),
+        "trajectory": [list(p) for p in driven.trajectory],
+        "p_success": row.get("p_success"), "p_low": row.get("p_low"), "p_high": row.get("p_high"),
+        "rollouts": row.get("rollouts"),
+    }  # fmt: skip
+    return Replay(title=f"{scene.name}: the chosen path (candidate {chosen}, nominal drive)",
+                  world=world, trials=(record,), shown=0, frames=tuple(frames))  # fmt: skip
+
+
+# -- recording ---------------------------------------------------------------------------------
+
+
+def numbers(record: dict) -> list[tuple[str, str]]:
+    """(name, value) rows of a trial's numbers, as the page and the 3D label show them."""
+    rows = [
+        ("scene", str(record.get("scene", ""))),
+        ("seed", str(record.get("seed"))),
+        ("planner", str(record.get("planner", ""))),
+        ("route", record.get("route") or "-"),
+        ("outcome", f"{record['outcome']} ({record.get('reason', '')})"),
+        ("drive time", f"{record['drive_time']:.2f} s"),
+        ("energy", f"{record['energy']:.3f} J"),
+        ("relative energy", f"{record['relative_energy']:.3f}"),
+    ]
+    if record.get("plan_time") is not None:
+        rows.append(("plan time", f"{record['plan_time']:.2f} s"))
+    if record.get("p_success") is not None:
+        lo, hi = record.get("p_low"), record.get("p_high")
+        bounds = f" [{lo:.2f}, {hi:.2f}]" if lo is not None and hi is not None else ""
+        rows.append(("P(success)", f"{record['p_success']:.2f}{bounds} over "
+                                   f"{record.get('rollouts')} rollouts"))  # fmt: skip
+    return rows
+
+
+def _record(replay: Replay):
+    """A viser StateSerializer holding the replay (not yet serialized), from a private server."""
+    import viser
+
+    world, shown = replay.world, replay.trials[replay.shown]
+    # Loopback and an ephemeral port: nothing connects; the server only feeds the recorder.
+    # (Its banner would be noise on a command's output.)
+    with contextlib.redirect_stdout(io.StringIO()):
+        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        view = SceneView(server.scene)
+        view.show(world, on_marker=lambda event: None)
+        # The app's markers are draggable gizmos; a replay shows plain ones at the trial's poses.
+        server.scene.remove_by_name("/markers")
+        for which in ("start", "goal"):
+            pose = tuple(shown.get(which) or getattr(world.scene, which))
+            server.scene.add_icosphere(f"/markers/{which}", radius=0.03, color=MARKER_COLOURS[which],
+                                       position=on_surface(world, pose),
+                                       wxyz=yaw_wxyz(pose[2]))  # fmt: skip
+        for k, t in enumerate(replay.trials):
+            if t.get("path"):
+                view.draw(f"/plans/{k}", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
+            if t.get("trajectory"):
+                view.draw(f"/trajectories/{k}", [p[1:] for p in t["trajectory"]], BLUE)
+        lo, hi = np.asarray(world.mesh.bounds) if len(world.mesh.faces) else np.asarray(
+            [[*world.scene.bounds[0], 0.0], [*world.scene.bounds[1], 0.0]])  # fmt: skip
+        centre, span = (lo + hi) / 2, float(max(hi[0] - lo[0], hi[1] - lo[1], 0.5))
+        server.initial_camera.look_at = tuple(centre)
+        server.initial_camera.position = tuple(centre + np.array([-0.25, -0.6, 0.5]) * span)
+        label = " · ".join(v for _, v in numbers(shown)[3:8])
+        start = on_surface(world, tuple(shown.get("start") or world.scene.start))
+        server.scene.add_label("/replay/numbers", f"{shown['label']}: {label}",
+                               position=(start[0], start[1], start[2] + 0.15))  # fmt: skip
+        _pose(server, view, world, replay.frames[0] if replay.frames else None, shown)
+        serializer = server.get_scene_serializer()
+        for prev, f in zip(replay.frames, replay.frames[1:], strict=False):
+            serializer.insert_sleep(max(0.0, f.t - prev.t))
+            _pose(server, view, world, f, shown)
+        serializer.insert_sleep(END_HOLD)
+        return serializer
+    finally:
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+
+
+def _pose(server, view: SceneView, world: World, f: Frame | None, record: dict) -> None:
+    if f is not None:
+        view.show_robot(server, f.p_world_body, wxyz_from_xyzw(f.quat_world_body), f.leg_angles)
+        return
+    x, y, yaw = tuple(record.get("start") or world.scene.start)
+    _, _, z = on_surface(world, (x, y))
+    view.show_robot(server, (x, y, z + world.robot.standing_height), yaw_wxyz(yaw),
+                    (0.0,) * len(world.robot.hip_positions))  # fmt: skip
+
+
+def replay_viser(replay: Replay) -> bytes:
+    """The replay as viser's `.viser` recording (open it with viser's client, `?playbackPath=`)."""
+    return _record(replay).serialize()
+
+
+def replay_html(replay: Replay) -> str:
+    """The replay as one standalone HTML page: viser's client, the recording and the numbers."""
+    page = _record(replay).as_html()
+    head = page.index("<head>") + len("<head>")
+    page = page[:head] + HTML_MARK + page[head:]
+    body = page.rindex("</body>")
+    return page[:body] + _overlay(replay) + page[body:]
+
+
+def _overlay(replay: Replay) -> str:
+    """The trial's numbers in a box over the 3D view (top left, clear of viser's panels)."""
+    esc = html.escape
+    shown = replay.trials[replay.shown]
+    rows = "".join(f"<tr><td>{esc(k)}</td><td>{esc(v)}</td></tr>" for k, v in numbers(shown))
+    table = ""
+    if len(replay.trials) > 1:
+        head = "<tr><th>trial</th><th>seed</th><th>route</th><th>outcome</th><th>rel. energy</th></tr>"
+        lines = "".join(
+            f"<tr{' class=shown' if k == replay.shown else ''}><td>{esc(t['label'])}</td>"
+            f"<td>{esc(str(t['seed']))}</td><td>{esc(t['route'] or '-')}</td>"
+            f"<td>{esc(t['outcome'])}</td><td>{t['relative_energy']:.2f}</td></tr>"
+            for k, t in enumerate(replay.trials[:MAX_TABLE_ROWS])
+        )
+        more = len(replay.trials) - MAX_TABLE_ROWS
+        table = (f"<details><summary>all {len(replay.trials)} trials (black: planned, blue: "
+                 f"driven)</summary><table>{head}{lines}</table>"
+                 + (f"<div>... and {more} more</div>" if more > 0 else "") + "</details>")  # fmt: skip
+    note = f"<div class=note>{esc(replay.note)}</div>" if replay.note else ""
+    return (
+        "<style>#roachplan-replay{position:fixed;left:12px;top:12px;z-index:1000;max-width:420px;"
+        "max-height:80vh;overflow:auto;background:rgba(255,255,255,.9);color:#222;"
+        "font:12px/1.35 system-ui,sans-serif;padding:8px 10px;border-radius:6px;"
+        "box-shadow:0 1px 4px rgba(0,0,0,.3)}#roachplan-replay td,#roachplan-replay th{"
+        "padding:0 6px 0 0;text-align:left;vertical-align:top}#roachplan-replay .shown{"
+        "font-weight:bold}#roachplan-replay .note{color:#a33}</style>"
+        f"<div id=roachplan-replay><b>{esc(replay.title)}</b><div>{esc(shown['label'])} "
+        f"plays: planned path black, driven trajectory blue</div><table id=roachplan-numbers>"
+        f"{rows}</table>{note}{table}</div>"
+    )
+
+
+def write_replay(replay: Replay, out: Path) -> int:
+    """Write the replay to `out` (.html or .viser) atomically; its size [bytes]."""
+    from roachplan.experiments import atomic_write
+
+    data = replay_viser(replay) if out.suffix.lower() == ".viser" else replay_html(replay).encode()
+    atomic_write(out, data)
+    return len(data)
+
+
+def replay_written(head: bytes) -> bool:
+    """Whether an existing output is a replay roachplan wrote (a page with HTML_MARK, or a
+    .viser recording): `replay -o` replaces those without --force."""
+    return HTML_MARK.encode() in head or head[8:12] == ZSTD_MAGIC
+
+
+def replay_inputs(folder: str | Path) -> list[Path]:
+    """The files a replay of `folder` reads: never its output."""
+    folder = Path(folder)
+    return [folder / n for n in ("manifest.json", "trials.jsonl", "choice.json", "best_path.json")]
+
+
+# -- the page's Share button ----------------------------------------------------------------------
+
+
+def _share_job(conn, world: World, record: dict, title: str) -> None:
+    """In a child (a re-drive holds the GIL for seconds): the replay page of one trial."""
+    try:
+        frames, note = redrive(world, record)
+        replay = Replay(title=title, world=world, trials=(record,), shown=0, frames=frames,
+                        note=note)  # fmt: skip
+        conn.send(("html", replay_html(replay).encode()))
+    except Exception as exc:  # reported to the user as a notification
+        conn.send(("error", f"{exc}"))
+    conn.close()
+
+
+def share_trial(app, cmd: ShareCmd) -> None:
+    """Export the trial chosen in *Show trial* (else the last one) as a replay page, sent to the
+    browser that clicked as a download. Followed like a drive: progress, Cancel."""
+    from ._jobs import Job
+
+    trials = app.scene_trials
+    if not trials:
+        app._notify(cmd.client_id, "Nothing to share", "Drive or run trials first.", error=True)
+        return
+    k = len(trials) if app.show_trial.value == "-" else int(app.show_trial.value)
+    record = dict(trials[k - 1], label=f"trial {k} ({trials[k - 1].get('label') or 'drive'})")
+    name = app.world.scene.name
+    job, out, errors = Job(_share_job, app.world, record, f"{name}: trial {k}"), [], []
+
+    def step(messages) -> bool:
+        for kind, payload in messages:
+            (out if kind == "html" else errors).append(payload)
+        t, total = job.elapsed, max(record.get("drive_wall_time") or 1.0, 1.0) + 2.0
+        app._progress(min(t / total, 0.99), f"Share: re-driving trial {k} and recording it, "
+                                             f"{t:.1f} s")  # fmt: skip
+        return job.done
+
+    end = app._follow(job, "Share", step)
+    if errors or not out:
+        why = errors[0] if errors else f"the export was {end}"
+        app._notify(cmd.client_id, "Share failed", why, error=True)
+        app.status.content = f"Share failed: {why}"
+        return
+    client = app.server.get_clients().get(cmd.client_id)
+    if client is not None:
+        client.send_file_download(f"{name}-trial-{k}.html", out[0], save_immediately=True)
+    app.status.content = (f"Trial {k} exported as {name}-trial-{k}.html ({len(out[0]) / 1e6:.1f} "
+                          f"MB): it opens offline in any browser.")  # fmt: skip

@@ -1,0 +1,154 @@
+"""The Python API: a few typed functions over the same code the command line runs, for notebooks
+and scripts. Each call here is one `roachplan` command:
+
+    world = roachplan.load("double_bridge")          # `--scene`: a name, a scene file, a terrain
+    path = roachplan.plan(world, seed=3)              # `roachplan plan`
+    trial = roachplan.drive(world, path)              # `roachplan trial` = plan + drive
+    choice = roachplan.choose(world, candidates=4)    # `roachplan choose`
+    report = roachplan.experiment("bridge_rough", trials=10, out="results/")
+
+Frames and units are the library's: world frame z up, ground at z = 0, metres, poses
+(x [m], y [m], yaw [rad]). Every random choice comes from the seed given (or the scene's).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the heavy modules load on first use, not on `import roachplan`
+    from roachplan.experiments import ExperimentReport, TrialResult
+    from roachplan.experiments._choose import Choice
+    from roachplan.perception import Reconstruction
+    from roachplan.planning import PlannerConfig, PlanResult
+    from roachplan.scenes import World
+
+Pose = tuple[float, float, float]
+"""(x [m], y [m], yaw [rad]) in the world frame."""
+
+
+def load(scene: str | os.PathLike, *, scale: float | None = None) -> World:
+    """A world ready to plan and drive on: a library scene's name ("double_bridge"), a scene
+    .yaml, or any terrain file (a capture: .pcd .ply .xyz .npy, a 16-bit depth PNG, a ROS bag;
+    a mesh; a .scad). A terrain file's start and goal are picked where the robot can stand
+    (`world.notes` says how). scale: multiplies the terrain (0.001 for a model in millimetres)."""
+    from roachplan.scenes import build_world, load_scene, scaled_scene
+
+    loaded = load_scene(os.fspath(scene))
+    if scale is not None:
+        loaded = scaled_scene(loaded, scale)
+    return build_world(loaded)
+
+
+def plan(
+    world: World,
+    *,
+    seed: int | None = None,
+    planner: str | PlannerConfig | None = None,
+    time_limit: float | None = None,
+    start: Pose | None = None,
+    goal: Pose | None = None,
+) -> PlanResult:
+    """One OMPL plan from start to goal (default: the scene's) with the scene's planner, or the
+    one named ("prm", "rrtconnect", ...; roachplan.planning.PLANNER_NAMES) or configured.
+    `result.found`, `result.path_xyz` ((N, 3) world frame [m]), `result.plan_time` [s]."""
+    from roachplan.experiments import plan as plan_trial
+
+    scene = world.scene
+    return plan_trial(world, seed=scene.seed if seed is None else seed, start=start, goal=goal,
+                      planner=_planner(world, planner, time_limit))  # fmt: skip
+
+
+def drive(
+    world: World, planned: PlanResult, *, start: Pose | None = None, goal: Pose | None = None
+) -> TrialResult:
+    """Drive a plan in a fresh PyBullet world and record the trial: `outcome` ("success",
+    "fell", "flipped", "stuck", "timeout", "no_path"), `drive_time` [s], `energy` [J],
+    `relative_energy` (1.0 = walking straight on a floor), `trajectory` (world frame [m])."""
+    from roachplan.experiments import finish_trial
+
+    scene = world.scene
+    return finish_trial(world, planned, start=start or scene.start, goal=goal or scene.goal)
+
+
+def trial(
+    world: World, *, seed: int | None = None, planner: str | PlannerConfig | None = None
+) -> TrialResult:
+    """Plan, then drive: `roachplan trial` (the same seed gives the same trial)."""
+    from roachplan.experiments import run_trial
+
+    return run_trial(world, seed=world.scene.seed if seed is None else seed,
+                     planner=_planner(world, planner, None))  # fmt: skip
+
+
+def choose(
+    world: World,
+    *,
+    candidates: int = 8,
+    budget_s: float | None = 60.0,
+    rollouts: int | None = None,
+    confidence: float = 0.95,
+    min_success: float | None = None,
+    seed: int = 0,
+    workers: int = 1,
+) -> Choice:
+    """Which path should the robot take: K candidate paths raced by simulation under the
+    scene's uncertainty model (`roachplan choose`). `choice.ranking` (best first: P(success)
+    with its interval, energy, drive time, failures), `choice.chosen` (an index into
+    `choice.candidates`, None when nothing succeeded), `choice.stopped` (why the race ended)."""
+    from roachplan.experiments._choose import ChooseConfig
+    from roachplan.experiments._choose import choose as race_candidates
+
+    cfg = ChooseConfig(candidates=candidates, rollouts=rollouts, budget_s=budget_s,
+                       confidence=confidence, min_success=min_success, seed=seed)  # fmt: skip
+    choice, _ = race_candidates(world.scene, cfg, workers=workers)
+    return choice
+
+
+def experiment(
+    spec: str | os.PathLike,
+    *,
+    trials: int,
+    out: str | os.PathLike,
+    workers: int = 2,
+    resume: bool = False,
+    progress: bool = False,
+) -> ExperimentReport:
+    """A batch of trials in parallel with its tables and figures (`roachplan experiment`):
+    a library spec's name ("bridge_rough") or a spec .yaml; results in `out` (new, empty, or
+    an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`."""
+    from roachplan.experiments import load_experiment, run_experiment
+
+    return run_experiment(load_experiment(os.fspath(spec)), trials=trials, out=Path(out),
+                          workers=workers, resume=resume, progress=progress)  # fmt: skip
+
+
+def mesh(capture: str | os.PathLike, **settings) -> Reconstruction:
+    """A capture's terrain mesh (`roachplan mesh`): `settings` are the scene file's
+    `perception:` keys (voxel, method, up, camera_pose, crop, depth_range, intrinsics, ...).
+    `rec.mesh` (trimesh, world frame [m]), `rec.report()` (camera pose, ground, warnings)."""
+    from roachplan.perception import capture_settings, mesh_capture
+
+    path = Path(capture)
+    return mesh_capture(path, capture_settings(settings, resolve=lambda p: path.parent / p))
+
+
+def _planner(world: World, planner, time_limit: float | None):
+    """The scene's planner config, with another planner's name or a whole config, and a time
+    limit [s]."""
+    from roachplan.planning import PLANNER_NAMES, PlannerConfig, PlanningError
+
+    cfg = world.scene.planner
+    if isinstance(planner, PlannerConfig):
+        cfg = planner
+    elif planner is not None:
+        if planner not in PLANNER_NAMES:
+            raise PlanningError(f"planner {planner!r}: choose from {', '.join(PLANNER_NAMES)}")
+        cfg = dataclasses.replace(cfg, name=planner)
+    if time_limit is not None:
+        if not time_limit > 0:
+            raise PlanningError(f"time_limit {time_limit!r}: must be > 0 seconds")
+        cfg = dataclasses.replace(cfg, time_limit=time_limit)
+    return cfg

@@ -1,0 +1,81 @@
+"""The roach's turning curve: motor-speed ratio -> curvature on flat ground, and back (issue 18).
+
+The report models curvature as a line in ln(ratio) (figure 3.4). Our robot does not turn like
+that: a sweep of 23 ratios (`roachplan calibrate-turning`) rises about linearly in ln(ratio) up
+to a ratio of 1.5, flattens between 1.5 and 2.5 (the slow side's legs slip as the fast side
+drags the body round, as a differential drive with slip saturates), then climbs steeply to
+about 10 /m at a ratio of 3, where the fast tripods fall into step with every third stride of
+the slow ones (phase locking). The line fits that with R^2 0.74-0.78; the curve here, a
+saturating term plus a term that grows without bound towards a locking ratio, fits it with
+R^2 0.99 (README, "Drivable plans").
+
+Pure functions of plain numbers; no simulation here (the sweep is sim/_calibration.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+PLAN_HEADROOM = 0.75
+"""Part of the robot's tightest curvature a drivable plan may use [-]: the tracking driver keeps
+a quarter more to correct with (a third more than the plan needs), the margin the project chose
+with the log-linear model (radius 0.16 m from 8.2 /m) and kept for the fitted curve."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TurningCurve:
+    """curvature(r) = kappa_sat (1 - r^-rate) + lock ln(r) / (ln(lock_ratio) - ln(r)) [1/m], for
+    a motor-speed ratio r = fast side / slow side in [1, lock_ratio), on flat ground, slow side at
+    the driver's omega0. Body frame: positive curvature turns towards the slow side.
+
+    Both terms are 0 at r = 1 (equal speeds walk straight) and rise with r, so the curve is
+    invertible: `ratio_for` gives the ratio that drives a curvature."""
+
+    kappa_sat: float
+    """Curvature the saturating (slipping differential drive) term tends to [1/m]."""
+    rate: float
+    """How fast that term saturates: its part reached at ratio r is 1 - r^-rate [-]."""
+    lock: float
+    """Scale of the phase-locking term [1/m]."""
+    lock_ratio: float
+    """Ratio at which the phase-locking term's curvature grows without bound [-]; above the
+    calibrated range, so only ratios below it have a curvature."""
+
+    def curvature(self, ratio: float) -> float:
+        """Curvature driven at motor-speed ratio `ratio` (>= 1, < lock_ratio) [1/m]."""
+        x = math.log(ratio)
+        return self.kappa_sat * (1.0 - math.exp(-self.rate * x)) + self.lock * x / (
+            math.log(self.lock_ratio) - x
+        )
+
+    def ratio_for(self, curvature: float, max_ratio: float) -> float:
+        """The motor-speed ratio in [1, max_ratio] that drives `curvature` [1/m] (its absolute
+        value): the inverse of `curvature`, clipped to the driver's range. Bisection in ln(r):
+        the curve has no closed-form inverse, and 40 halvings of ln 3 are exact to 1e-12."""
+        k = abs(curvature)
+        hi = math.log(max_ratio)
+        if not k < self.curvature(max_ratio):  # also inf and nan: the tightest turn there is
+            return max_ratio
+        lo = 0.0
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if self.curvature(math.exp(mid)) < k:
+                lo = mid
+            else:
+                hi = mid
+        return math.exp(0.5 * (lo + hi))
+
+    def min_turning_radius(self, max_ratio: float, headroom: float = PLAN_HEADROOM) -> float:
+        """Radius of the tightest arc a plan may ask for [m]: 1 / (headroom * curvature at the
+        driver's largest ratio). headroom < 1 keeps part of the turning range for the driver's
+        corrections, on top of the arc it follows."""
+        return 1.0 / (headroom * self.curvature(max_ratio))
+
+
+CALIBRATED_TURNING = TurningCurve(kappa_sat=4.199, rate=2.147, lock=0.1506, lock_ratio=3.0772)
+"""The turning curve of the simulated roach, as `roachplan calibrate-turning` fits it (default
+sweep: 23 ratios from 1 to 3, 10 s each, slow side at 20 rad/s, flat floor, friction 0.9):
+R^2 0.989, residuals rms 0.21 /m, at most 0.49 /m (at ratio 1.5); 10.3 /m at ratio 3.
+tests/test_robot.py re-runs the calibration and checks these numbers."""

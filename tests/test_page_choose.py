@@ -1,0 +1,151 @@
+"""Choose path in the page (issue 17), in headless Chromium on the real planner, PyBullet and
+rollout workers: progress while it races, the candidates coloured by P(success) as the ranking
+says, the chosen one marked, then Drive drives it; Cancel stops the race and its workers; a
+moved marker is refused with why."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+from conftest import free_port
+from test_app import CHROMIUM, browser_pages, set_value
+
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+
+
+def _app(scene: str):
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
+
+    return RoachApp(build_world(load_scene(scene)), host="127.0.0.1", port=free_port())
+
+
+def _ranking_rows(page) -> list[list[str]]:
+    """The ranking table's body rows, as cell texts."""
+    table = page.locator("table").filter(has_text="P(success) [interval]")
+    rows = table.get_by_role("row").all()[1:]
+    return [[c.inner_text().strip() for c in r.get_by_role("cell").all()] for r in rows]
+
+
+def _race_processes() -> set[int]:
+    """The processes under the app's fork server: the race's child and its rollout workers
+    (the fork server itself stays for the next job)."""
+    import os
+
+    return {pid for server in _descendants(os.getpid()) if _is_forkserver(server)
+            for pid in _descendants(server)}  # fmt: skip
+
+
+def _running(pid: int) -> bool:
+    """pid exists and is not a zombie (a killed orphan waits there for init to reap it)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _descendants(pid: int) -> set[int]:
+    from roachplan.app._jobs import _children
+
+    children, out, todo = _children(), set(), [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        out.update(kids)
+        todo += kids
+    return out
+
+
+def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
+    from roachplan.app._choose_panel import p_colour
+
+    app = _app("double_bridge")
+    k = 2
+    try:
+        with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+            set_value(page, "Candidates (K)", str(k))
+            set_value(page, "Choose budget [s]", "10")
+            set_value(page, "Playback speed [x real time]", "10")
+            page.get_by_role("button", name="Choose path", exact=True).last.click()
+            page.get_by_text(re.compile(r"Choose path: .* of the 10 s budget")).wait_for(
+                timeout=30_000
+            )
+            assert page.get_by_role("progressbar").first.is_visible()
+            assert page.get_by_role("button", name="Cancel", exact=True).is_visible()
+            page.screenshot(path=artifacts / "choose-01-racing.png")
+
+            done = page.get_by_text(re.compile(r"^Chosen: path \d+ \(")).first
+            done.wait_for(timeout=150_000)
+            chosen = int(re.search(r"Chosen: path (\d+)", done.inner_text()).group(1))
+            rows = _ranking_rows(page)
+            assert len(rows) == k, rows
+            assert rows[0][0] == "chosen" and int(rows[0][1]) == chosen  # best first
+            assert sum(r[0] == "chosen" for r in rows) == 1
+            # Each path is drawn in the colour of its P(success) in the table; the chosen one
+            # is the one Drive takes, drawn thick.
+            nodes = app.view.path_nodes
+            assert len(nodes) == len(app.plans) == k
+            for r in rows:
+                path, p = int(r[1]), float(r[4].split()[0])
+                assert tuple(nodes[path - 1].colors[0, 0]) == p_colour(p), r
+                assert nodes[path - 1].thickness == (7.0 if path == chosen else 3.0)
+            assert app.drive_path == chosen - 1
+            assert "Same race from the command line: roachplan choose --scene double_bridge" in (
+                page.get_by_text(re.compile(r"Same race from the command line")).inner_text()
+            )
+            page.screenshot(path=artifacts / "choose-02-ranked.png")
+
+            page.get_by_role("button", name="Drive", exact=True).click()
+            page.get_by_text(re.compile(r"^Trial 1: ")).wait_for(timeout=120_000)
+            trial = app.scene_trials[0]
+            assert np.allclose(trial["path"], app.plans[chosen - 1].plan.path_xyz)
+            assert trial["route"] == rows[0][2]
+            trials = page.locator("table").filter(has_text="rel. energy").get_by_role("row")
+            assert trials.count() == 2  # the header and the chosen path's trial
+            page.screenshot(path=artifacts / "choose-03-driven.png")
+    finally:
+        app.stop()
+
+
+def test_cancel_stops_the_race_and_a_moved_marker_is_refused(artifacts):
+    app = _app("double_bridge")
+    try:
+        with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+            set_value(page, "Candidates (K)", "2")
+            page.get_by_role("button", name="Choose path", exact=True).last.click()
+            page.get_by_text(re.compile(r"Choose path: \d+ candidates planned")).wait_for(
+                timeout=60_000
+            )
+            deadline = time.monotonic() + 60
+            while len(race := _race_processes()) < 3:  # its child and two rollout workers
+                assert time.monotonic() < deadline, f"the race's processes: {race}"
+                time.sleep(0.2)
+            page.get_by_role("button", name="Cancel", exact=True).click()
+            page.get_by_text(re.compile(r"Choose path cancelled after")).first.wait_for(
+                timeout=10_000
+            )
+            deadline = time.monotonic() + 10
+            while alive := [pid for pid in race if _running(pid)]:
+                assert time.monotonic() < deadline, f"{alive} outlived Cancel"
+                time.sleep(0.2)
+            assert app.plans == [] and app.view.path_nodes == []
+            page.screenshot(path=artifacts / "choose-04-cancelled.png")
+
+            app.controls["start"].position = (0.2, -1.5, 0.0)
+            page.get_by_role("button", name="Choose path", exact=True).last.click()
+            page.get_by_text(re.compile(r"races from the scene's start and goal; the start "
+                                        r"marker is at \(0\.20, -1\.50")).first.wait_for(timeout=30_000)  # fmt: skip
+            assert app.running is None and app.plans == []
+    finally:
+        app.stop()
+
+
+def _is_forkserver(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return b"forkserver" in f.read()
+    except OSError:
+        return False

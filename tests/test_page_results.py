@@ -1,0 +1,149 @@
+"""Results, seeds and notifications in the page (issue 16), in headless Chromium: seeds continue
+per scene across a scene switch (no recorded seed runs again); the trials table shows every
+column within the panel (or by scrolling it); the CSV has the table's rounded numbers and
+labels; a bad upload's notification names no server path and no command-line flag, and says
+what to do in the page's terms."""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+
+import numpy as np
+import pytest
+from conftest import free_port
+from test_app import CHROMIUM, browser_pages, set_value, title, upload
+
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+
+HEADERS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "label")
+
+
+@pytest.fixture
+def app():
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
+
+    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
+    yield app
+    app.stop()
+
+
+def _plan_and_drive(page, trial: int) -> int:
+    """Plan, then Drive; returns the seed the page reports for the path."""
+    page.get_by_role("button", name="Plan").click()
+    found = page.get_by_text(re.compile(r"Path found in .*\(seed \d+\)"))
+    found.wait_for(timeout=60_000)
+    seed = int(re.search(r"\(seed (\d+)\)", found.inner_text()).group(1))
+    page.get_by_role("button", name="Drive").click()
+    page.get_by_text(re.compile(rf"Trial {trial}: ")).wait_for(timeout=180_000)
+    return seed
+
+
+def _switch(page, current: str, to: str) -> None:
+    page.locator(f"input[value='{current}']").first.click()
+    page.get_by_role("option", name=to, exact=True).click()
+    page.get_by_text(re.compile(rf"Loaded `?{to}`? ")).first.wait_for(timeout=120_000)
+    assert to in title(page)
+
+
+def _table_rows(page) -> list[list[str]]:
+    """The trials table's rows (the header first), as the page shows them."""
+    table = page.locator(".roachplan-trials table")
+    return [[c.inner_text().strip() for c in row.locator("th, td").all()]
+            for row in table.get_by_role("row").all()]  # fmt: skip
+
+
+def _visible(page, locator) -> bool:
+    """locator is scrolled into view (inside whatever scrolls) and is what the page shows at its
+    centre: not clipped by the panel, not off the window, not covered."""
+    locator.scroll_into_view_if_needed()
+    box = locator.bounding_box()
+    size = page.viewport_size
+    if box is None or box["x"] < 0 or box["x"] + box["width"] > size["width"] + 0.5:
+        return False
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    return locator.evaluate(
+        "(el, [x, y]) => { const hit = document.elementFromPoint(x, y); "
+        "return hit !== null && (el === hit || el.contains(hit)); }", [cx, cy],
+    )  # fmt: skip
+
+
+def test_seeds_continue_across_a_scene_switch_and_results_read_well(app, artifacts, tmp_path):
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        set_value(page, "Playback speed [x real time]", "10")
+        first = _plan_and_drive(page, 1)
+        _switch(page, "double_bridge", "flat")
+        _switch(page, "flat", "double_bridge")
+        # Back on double_bridge: its trial is still there, and the next plan takes a new seed.
+        assert len(_table_rows(page)) == 2
+        second = _plan_and_drive(page, 2)
+        assert second > first, f"seed {second} after seed {first}: seeds restarted"
+        seeds = [int(t["seed"]) for t in app.scene_trials]
+        assert seeds == [first, second]
+        rows = _table_rows(page)
+        assert [int(r[1]) for r in rows[1:]] == seeds, "no seed repeated in the trials"
+
+        # Every column of the trials table can be seen inside the panel.
+        assert tuple(rows[0]) == HEADERS
+        page.locator(".roachplan-trials").scroll_into_view_if_needed()
+        page.screenshot(path=artifacts / "results-01-table.png")
+        for k, header in enumerate(page.locator(".roachplan-trials table th").all()):
+            assert _visible(page, header), f"column {HEADERS[k]!r} cannot be seen"
+        page.screenshot(path=artifacts / "results-02-table-scrolled.png")
+        plot = page.locator("img").last
+        plot.scroll_into_view_if_needed()
+        box = plot.bounding_box()
+        assert box["width"] >= 280 and box["height"] >= 200, f"energy plot {box}"
+
+        # The CSV: the table's numbers (rounded to their precision) and its labels.
+        with page.expect_download() as dl:
+            page.get_by_role("button", name="Export CSV").click()
+        path = tmp_path / "trials.csv"
+        dl.value.save_as(path)
+        exported = list(csv.DictReader(io.StringIO(path.read_text())))
+    assert len(exported) == 2
+    for row, shown, trial in zip(exported, rows[1:], app.scene_trials, strict=True):
+        assert row["label"] == shown[7] == "drive"
+        assert row["seed"] == shown[1]
+        assert row["drive_time"] == shown[4] and re.fullmatch(r"\d+\.\d{2}", row["drive_time"])
+        assert abs(float(row["drive_time"]) - trial["drive_time"]) <= 0.005
+        assert row["energy"] == shown[5] and len(re.sub(r"^[0.]+|\.", "", row["energy"])) <= 4
+        assert np.isclose(float(row["energy"]), trial["energy"], rtol=1e-3)
+        assert row["relative_energy"] == shown[6]
+        assert np.isclose(float(row["relative_energy"]), trial["relative_energy"], rtol=1e-2)
+        assert re.fullmatch(r"\d+\.\d{3}", row["plan_time"])
+        assert re.fullmatch(r"\d+\.\d{3}", row["drive_wall_time"])
+
+
+def _cloud_in_millimetres(path, rng) -> None:
+    """An ASCII PCD of a floor 1.5 m in front of the sensor, written in millimetres."""
+    xy = rng.uniform(-1000.0, 1000.0, (600, 2))
+    pts = np.column_stack([xy, 1500.0 + rng.normal(0.0, 5.0, len(xy))])
+    head = (f"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {len(pts)}\n"
+            f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(pts)}\nDATA ascii\n")  # fmt: skip
+    path.write_text(head + "".join(f"{x:.2f} {y:.2f} {z:.2f}\n" for x, y, z in pts))
+
+
+def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
+    cloud = tmp_path / "cloud_mm.pcd"
+    _cloud_in_millimetres(cloud, np.random.default_rng(16))
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        upload(page, cloud)
+        note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
+        note.wait_for(timeout=120_000)
+        text = note.inner_text()
+        page.screenshot(path=artifacts / "results-03-bad-upload.png")
+        # What happened, with the file's own name, and what to do, in the page's terms.
+        assert "cloud_mm.pcd" in text and "millimetres" in text
+        assert "save this one in metres" in text
+        assert "--" not in text, f"a command-line flag: {text!r}"
+        for internal in (str(app.upload_dir), "/tmp", "upload-", ".yaml", "terrain[0]"):
+            assert internal not in text, f"{internal!r} in {text!r}"
+        # Not cut off: the whole message lies inside the notification, inside the window.
+        body = note.locator(".mantine-Notification-description")
+        assert body.evaluate("el => el.scrollWidth <= el.clientWidth + 1")
+        box, size = note.bounding_box(), page.viewport_size
+        assert box["x"] >= 0 and box["x"] + box["width"] <= size["width"]
+        assert "double_bridge" in title(page)

@@ -1,0 +1,178 @@
+"""What the page shows, in headless Chromium (issue 16): only the current plan's paths and
+trajectories; the roadmap and standability toggles acting at once; K paths told apart, the one
+Drive takes marked and chosen; the robot big enough to see when zoomed to or followed.
+In-process servers, to read what the server has drawn. Screenshots go to test-artifacts/."""
+
+from __future__ import annotations
+
+import io
+import re
+import time
+
+import numpy as np
+import pytest
+from conftest import free_port
+from test_app import CHROMIUM, browser_pages, set_value
+
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+
+
+@pytest.fixture
+def app():
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
+
+    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
+    yield app
+    app.stop()
+
+
+def nodes(app, prefix: str) -> list[str]:
+    """The names of the scene nodes the server holds (and so every browser draws) under prefix."""
+    return [n for n in app.server.scene._handle_from_node_name if n.startswith(prefix)]
+
+
+def wait_until(condition, timeout: float) -> float:
+    """Seconds until condition() held; fails after timeout [s]."""
+    t0 = time.monotonic()
+    while not condition():
+        assert time.monotonic() - t0 < timeout, "timed out"
+        time.sleep(0.02)
+    return time.monotonic() - t0
+
+
+def dropdown(page, label: str, option: str) -> None:
+    row = page.locator(f"xpath=//label[text()='{label}']/ancestor::div[.//input][1]")
+    row.locator("input:visible").first.click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
+def robot_pixels_by_camera(app) -> float:
+    """The robot body's length [px] on the one client's screen, from that client's camera
+    (vertical fov, position, image height) and the body's 10 cm at the robot's position."""
+    from roachplan.app._draw import projected_pixels
+
+    (client,) = app.server.get_clients().values()
+    cam = client.camera
+    distance = float(np.linalg.norm(cam.position - np.asarray(app.view.robot_node.position)))
+    return projected_pixels(app.world.robot.body_length, distance, cam.fov, cam.image_height)
+
+
+def robot_pixels_in_screenshot(page, path) -> float:
+    """The larger side [px] of the legs' bounding box in a screenshot, found by their orange
+    (200, 80, 40) under any lighting (green/red < 0.55, blue/red < 0.4, unlike the tan terrain
+    and every path colour) within 150 px of the 3D view's centre, where the camera looks when
+    following or zoomed (the markers' red arrows are further); 0 when no leg is seen."""
+    from PIL import Image
+
+    png = page.screenshot(path=path)
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    legs = (r > 90) & (g < 0.55 * r) & (b < 0.4 * r)
+    box = page.locator("canvas").first.bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    ys, xs = np.nonzero(legs)
+    near = (np.abs(xs - cx) <= 150) & (np.abs(ys - cy) <= 150)
+    if near.sum() < 10:
+        return 0.0
+    xs, ys = xs[near], ys[near]
+    return float(max(xs.max() - xs.min(), ys.max() - ys.min()) + 1)
+
+
+def test_a_new_plan_clears_the_old_and_the_toggles_act_at_once(app, artifacts):
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        # The first view is on start and goal (not the terrain's bounds).
+        (client,) = app.server.get_clients().values()
+        ends = np.array([app.world.scene.start[:2], app.world.scene.goal[:2]])
+        wait_until(lambda: np.allclose(client.camera.look_at[:2], ends.mean(axis=0), atol=0.05), 10)
+        set_value(page, "Playback speed [x real time]", "10")
+        page.get_by_role("button", name="Plan").click()
+        page.get_by_text(re.compile(r"Path found in")).wait_for(timeout=60_000)
+        page.get_by_role("button", name="Drive").click()
+        page.get_by_text(re.compile(r"Trial 1: ")).wait_for(timeout=180_000)
+        assert nodes(app, "/trajectories/"), "the drive's trajectory is drawn"
+        page.screenshot(path=artifacts / "view-01-driven.png")
+
+        page.get_by_role("button", name="Plan").click()
+        page.get_by_text(re.compile(r"Path found in")).wait_for(timeout=60_000)
+        assert nodes(app, "/trajectories/") == [], "no old trajectory after a new Plan"
+        assert sorted(nodes(app, "/plans/")) == ["/plans/0", "/plans/0/label"]
+        page.screenshot(path=artifacts / "view-02-replanned.png")
+
+        # The roadmap (kept by every plan) shows and goes at once, without a new Plan.
+        assert "/plans/roadmap" not in nodes(app, "/plans/")
+        page.get_by_text("Show roadmap").click()
+        shown = wait_until(lambda: "/plans/roadmap" in nodes(app, "/plans/"), 10)
+        roadmap = app.server.scene._handle_from_node_name["/plans/roadmap"]
+        assert len(roadmap.points) > 10
+        page.wait_for_timeout(1500)
+        page.screenshot(path=artifacts / "view-03-roadmap-on.png")
+        page.get_by_text("Show roadmap").click()
+        hidden = wait_until(lambda: "/plans/roadmap" not in nodes(app, "/plans/"), 10)
+        assert shown < 2.0 and hidden < 2.0, (shown, hidden)
+
+        # The standability overlay: the start's region green, other standable cells yellow.
+        page.get_by_text("Show where it can stand").click()
+        wait_until(lambda: "/standable/region" in nodes(app, "/standable/"), 30)
+        region = app.server.scene._handle_from_node_name["/standable/region"]
+        assert tuple(region.color) == (40, 200, 80)
+        # The start stands inside its region: in one of the region's draped squares.
+        x, y, _ = app.markers.pose("start")
+        squares = np.asarray(region.vertices).reshape(-1, 4, 3)[:, :, :2]
+        lo, hi = squares.min(axis=1), squares.max(axis=1)
+        assert np.any(np.all((lo - 0.01 <= [x, y]) & ([x, y] <= hi + 0.01), axis=1))
+        # The floor inside the bridges' frame is standable, but not from the start.
+        other = app.server.scene._handle_from_node_name["/standable/other"]
+        assert np.asarray(other.vertices)[:, 2].max() < np.asarray(region.vertices)[:, 2].max()
+        page.wait_for_timeout(1500)
+        page.screenshot(path=artifacts / "view-04-standable.png")
+        page.get_by_text("Show where it can stand").click()
+        overlay = app.server.scene._handle_from_node_name["/standable"]
+        wait_until(lambda: not overlay.visible, 5)
+
+
+def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts):
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        set_value(page, "Paths (K)", "3")
+        page.get_by_role("button", name="Plan").click()
+        page.get_by_text(re.compile(r"3 paths found")).wait_for(timeout=90_000)
+        handles = app.server.scene._handle_from_node_name
+        lines = [handles[f"/plans/{k}"] for k in range(3)]
+        colours = [tuple(np.asarray(h.colors).reshape(-1, 3)[0]) for h in lines]
+        assert len(set(colours)) == 3, colours
+        assert [h.thickness for h in lines] == [7.0, 3.0, 3.0], "path 1 is marked for Drive"
+
+        dropdown(page, "Drive path", "2")
+        wait_until(lambda: app.drive_path == 1, 10)
+        assert [h.thickness for h in lines] == [3.0, 7.0, 3.0]
+        page.screenshot(path=artifacts / "view-05-three-paths-second-marked.png")
+
+        # Follow the robot through the drive; look halfway.
+        page.get_by_text("Follow robot").click()
+        page.get_by_role("button", name="Drive").click()
+        page.get_by_text(re.compile(r"Drive: [3-9]\d % of the path")).wait_for(timeout=120_000)
+        page.wait_for_timeout(500)  # (the browser draws the camera's last move)
+        by_camera = robot_pixels_by_camera(app)
+        on_screen = robot_pixels_in_screenshot(page, artifacts / "view-06-drive-followed.png")
+        assert by_camera > 40 and on_screen > 40, (by_camera, on_screen)
+        page.get_by_text(re.compile(r"Trial 1: ")).wait_for(timeout=180_000)
+        driven = np.asarray(app.scene_trials[0]["path"])
+        chosen, first = app.plans[1].plan.path_xyz, app.plans[0].plan.path_xyz
+        assert driven.shape == chosen.shape and np.allclose(driven, chosen)
+        assert driven.shape != first.shape or not np.allclose(driven, first)
+
+        # Far away again, then Zoom to robot.
+        page.get_by_text("Follow robot").click()
+        (client,) = app.server.get_clients().values()
+        with client.atomic():
+            client.camera.look_at = (0.0, 0.0, 0.0)
+            client.camera.position = (6.0, -8.0, 6.0)
+        page.wait_for_timeout(1000)
+        far = robot_pixels_in_screenshot(page, artifacts / "view-07-far.png")
+        assert robot_pixels_by_camera(app) < 40 and far < 40, far
+        page.get_by_role("button", name="Zoom to robot").click()
+        wait_until(lambda: robot_pixels_by_camera(app) > 40, 10)
+        page.wait_for_timeout(1000)
+        by_camera = robot_pixels_by_camera(app)
+        on_screen = robot_pixels_in_screenshot(page, artifacts / "view-08-zoomed.png")
+        assert by_camera > 40 and on_screen > 40, (by_camera, on_screen)
