@@ -34,6 +34,7 @@ fuzz: $(STAMP)
 	ROACHPLAN_FUZZ=1 $(BIN)/python -m pytest -q tests/test_fuzz_*.py --hypothesis-seed=$(SEED)
 
 bench: setup
+	$(BIN)/python benchmarks/bench_cli.py
 	$(BIN)/python benchmarks/bench_trial.py
 	$(BIN)/python benchmarks/bench_planning.py
 	$(BIN)/python benchmarks/bench_experiment.py

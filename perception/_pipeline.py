@@ -14,6 +14,7 @@ is put at z = 0 and, when georeferenced (UTM), its centre at the origin.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -263,8 +264,17 @@ def _rotation_to_z(up: np.ndarray) -> np.ndarray:
     return np.eye(3) + vx + vx @ vx / (1 + c)
 
 
-def reconstruct(capture: Capture, cfg: MeshingConfig = MeshingConfig()) -> Reconstruction:
-    """The terrain mesh of a capture, world frame; CaptureError when a stage has nothing left."""
+STAGES: tuple[str, ...] = ("depth range", "voxel", "outliers", "ground", "mesh")
+"""The pipeline's stages after reading, in order (Reconstruction.times has one entry each)."""
+
+
+def reconstruct(
+    capture: Capture,
+    cfg: MeshingConfig = MeshingConfig(),
+    on_stage: Callable[[str], None] | None = None,
+) -> Reconstruction:
+    """The terrain mesh of a capture, world frame; CaptureError when a stage has nothing left.
+    on_stage(name) is called as each of STAGES ends (progress)."""
     times: dict[str, float] = {}
     counts: dict[str, int] = {"points": int(capture.valid.sum())}
     warnings: list[str] = []
@@ -276,6 +286,8 @@ def reconstruct(capture: Capture, cfg: MeshingConfig = MeshingConfig()) -> Recon
         now = time.perf_counter()
         times[name] = now - t
         t = now
+        if on_stage is not None:
+            on_stage(name)
         if n is not None:
             counts[name] = int(n)
             if n == 0:
@@ -641,10 +653,15 @@ def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
     )
 
 
-def mesh_capture(path, settings: CaptureSettings = CaptureSettings()) -> Reconstruction:
-    """Read a capture file and reconstruct its terrain."""
+def mesh_capture(
+    path, settings: CaptureSettings = CaptureSettings(), on_stage: Callable[[str], None] | None = None
+) -> Reconstruction:
+    """Read a capture file and reconstruct its terrain; on_stage("read") once it is read, then
+    as reconstruct calls it."""
     from ._capture import load_capture
 
     cap = load_capture(path, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
                        topic=settings.topic, units=settings.units)  # fmt: skip
-    return reconstruct(cap, settings.meshing)
+    if on_stage is not None:
+        on_stage("read")
+    return reconstruct(cap, settings.meshing, on_stage)

@@ -25,7 +25,9 @@ import subprocess
 import sys
 import tempfile
 import threading
-from collections.abc import Mapping
+import time
+from collections.abc import Callable, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +35,13 @@ from roachplan.perception import short_repr
 
 from . import _jail
 from ._errors import SceneError
+
+RENDER_PROGRESS: ContextVar[Callable[[str, float, float], None] | None] = ContextVar(
+    "RENDER_PROGRESS", default=None
+)
+"""Who hears of a render while it runs: called about twice a second with (the model's file
+name, seconds elapsed, the time limit [s]) and once more when it ends. The command line sets it
+for its progress bars; a render deep inside build_world needs no argument passed down for it."""
 
 ScadValue = float | int | bool | str
 
@@ -611,10 +620,13 @@ def _sandbox_available() -> bool:
     return probe.returncode == 0
 
 
-def _run(cmd: list[str], *, cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+def _run(
+    cmd: list[str], *, cwd: Path, timeout: float, name: str = ""
+) -> subprocess.CompletedProcess:
     """Run cmd in its own process group; kill the whole group past the time limit. Only the
     two ends of its error output are kept (OpenSCAD writes everything there): a model's echo()
-    in a loop prints gigabytes, which must not fill this process's memory."""
+    in a loop prints gigabytes, which must not fill this process's memory. RENDER_PROGRESS,
+    when set, hears of it (as `name`) while it runs."""
     proc = subprocess.Popen(
         cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE, start_new_session=True,
@@ -622,13 +634,28 @@ def _run(cmd: list[str], *, cwd: Path, timeout: float) -> subprocess.CompletedPr
     kept: list[str] = []
     reader = threading.Thread(target=_read_ends, args=(proc.stderr, kept), daemon=True)
     reader.start()
+    hear = RENDER_PROGRESS.get()
+    t0 = time.monotonic()
     try:
-        proc.wait(timeout=timeout)
+        if hear is None:
+            proc.wait(timeout=timeout)
+        else:
+            while proc.poll() is None:
+                elapsed = time.monotonic() - t0
+                if elapsed >= timeout:
+                    raise subprocess.TimeoutExpired(cmd, timeout)
+                hear(name, elapsed, timeout)
+                try:
+                    proc.wait(timeout=min(0.5, timeout - elapsed))
+                except subprocess.TimeoutExpired:
+                    pass
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         raise
     finally:
+        if hear is not None:
+            hear(name, time.monotonic() - t0, timeout)
         reader.join()
         proc.stderr.close()
     return subprocess.CompletedProcess(cmd, proc.returncode, "", kept[0] if kept else "")
@@ -770,7 +797,7 @@ def render_scad(
             [*openscad, scad_file.name], root, work, memory=memory, cpu=timeout, jail=jail
         )
         try:
-            proc = _run(cmd, cwd=root, timeout=timeout)
+            proc = _run(cmd, cwd=root, timeout=timeout, name=scad_file.name)
         except subprocess.TimeoutExpired:
             raise SceneError(
                 f"{scad_file}: OpenSCAD did not finish within its time limit of {timeout:g} s "

@@ -1,0 +1,62 @@
+"""Progress bars of the long command-line commands, in the experiment's style (tqdm on stderr):
+an OpenSCAD render (seconds of its time limit), meshing a capture (its stages), planning many
+paths (paths found), choosing (share of the race). Shown when stderr is a terminal, or with
+ROACHPLAN_PROGRESS=1 (what a log or a test sets); never on stdout, which `--json` owns."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+
+def wanted() -> bool:
+    """Whether to draw progress bars: on a terminal, or when asked for."""
+    return os.environ.get("ROACHPLAN_PROGRESS") == "1" or sys.stderr.isatty()
+
+
+def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = None, **kw):
+    """A tqdm bar on stderr in the experiment's style (experiments/_runner._bar)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=what, unit=unit, file=sys.stderr, mininterval=0.5,
+                smoothing=0.1, disable=not (wanted() if enabled is None else enabled), **kw)  # fmt: skip
+
+
+@contextmanager
+def render_progress(enabled: bool | None = None) -> Iterator[None]:
+    """While inside, every OpenSCAD render shows a bar: seconds elapsed of its time limit."""
+    from roachplan.scenes._openscad import RENDER_PROGRESS
+
+    if not (wanted() if enabled is None else enabled):
+        yield
+        return
+    bars: dict[str, object] = {}
+
+    def hear(name: str, elapsed: float, limit: float) -> None:
+        b = bars.get(name)
+        if b is None:
+            b = bars[name] = bar(round(limit), f"OpenSCAD {name}", unit="s", enabled=True,
+                                 bar_format="{desc}: {n:.0f} of {total} s limit |{bar}| {elapsed}")  # fmt: skip
+        b.n = min(elapsed, limit)
+        b.refresh()
+
+    token = RENDER_PROGRESS.set(hear)
+    try:
+        yield
+    finally:
+        RENDER_PROGRESS.reset(token)
+        for b in bars.values():
+            b.close()
+
+
+def stage_progress(stages: tuple[str, ...], what: str) -> tuple[object, Callable[[str], None]]:
+    """(bar, on_stage): a bar over a pipeline's named stages; on_stage(name) marks one done."""
+    b = bar(len(stages), what, unit=" stage")
+
+    def on_stage(name: str) -> None:
+        b.set_postfix_str(name, refresh=False)
+        b.update(1)
+
+    return b, on_stage
