@@ -19,14 +19,13 @@ from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
 
 import numpy as np
-
 from roachplan.experiments._choose import ChooseConfig, ChooseError, plan_candidates, race
 from roachplan.experiments._trial import LabelledPlan
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 
 from ._draw import segments
-from ._jobs import NAMES, Cmd, Job
+from ._jobs import NAMES, CancelCmd, Cmd, Job
 
 UNTRIED = (150, 150, 150)
 """Colour of a candidate without rollouts yet."""
@@ -62,24 +61,29 @@ def ranking_markdown(ranking: list[dict], chosen: int | None, confidence: float)
     are numbered from 1 as the page labels them (candidate k of `roachplan choose` is path
     k + 1)."""
     k = max(len(ranking), 1)
-    head = ("| | path | route | n | P(success) [interval] | energy [interval] | J/m | drive time [s] "
-            "| failures | race |\n|---|---|---|---|---|---|---|---|---|---|\n")  # fmt: skip
+    # Four columns: the panel is about 300 px wide, and a wider table hides its right part.
+    head = "| path | P(success) (n) | energy; time | failures |\n|---|---|---|---|\n"
     rows = []
     for r in ranking:
-        fails = ", ".join(f"{what} {n}" for what, n in r["failures"].items()) or "-"
+        fails = ", ".join(f"{what} {n}" for what, n in r["failures"].items())
+        if r["failed_at"]:  # where the first failed rollout ended [m]
+            fails += " (first at {:.2f}, {:.2f})".format(*r["failed_at"][0])
         out = r["out"]
-        race_state = ("out: energy" if out.startswith("costs more") else
-                      "out: P" if out.startswith("less likely") else out[:24] or "in")  # fmt: skip
+        if out:
+            fails += ("; out: " if fails else "out: ") + (
+                "costs more" if out.startswith("costs more") else
+                "less likely" if out.startswith("less likely") else out)  # fmt: skip
+        mark = " **chosen**" if r["candidate"] == chosen else ""
         rows.append(
-            f"| {'**chosen**' if r['candidate'] == chosen else ''} | {r['candidate'] + 1} "
-            f"| {r['route'] or '-'} | {r['rollouts']} "
-            f"| {_f(r['p_success'])} [{_f(r['p_low'])}, {_f(r['p_high'])}] "
+            f"| **{r['candidate'] + 1}** {r['route'] or '-'}{mark} "
+            f"| {_f(r['p_success'])} [{_f(r['p_low'])}, {_f(r['p_high'])}] ({r['rollouts']}) "
             f"| {_f(r['relative_energy'])} [{_f(r['relative_energy_low'])}, "
-            f"{_f(r['relative_energy_high'])}] | {_f(r['energy_j_per_m'])} "
-            f"| {_f(r['drive_time_s'], 1)} | {fails} | {race_state} |"
+            f"{_f(r['relative_energy_high'])}], {_f(r['energy_j_per_m'])} J/m; "
+            f"{_f(r['drive_time_s'], 1)} s | {fails or '-'} |"
         )
-    note = (f"Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} jointly over "
-            f"{k}); energy is over successes, × a straight walk on the floor. Lines: red "
+    note = (f"Best first. Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} "
+            f"jointly over {k}); n: rollouts; energy: mean over the successes, × a straight walk "
+            f"on the floor; time: their mean drive time; out: left the race, beaten. Lines: red "
             f"(P = 0) to green (P = 1), grey before their first rollouts; the chosen one thick.")  # fmt: skip
     return "**Ranking**\n\n" + head + "\n".join(rows) + "\n\n" + note
 
@@ -90,8 +94,9 @@ class ChoosePanel:
     def __init__(self, gui, put) -> None:
         with gui.add_folder("Choose path"):
             self.candidates = gui.add_number(
-                "Candidates (K)", 4, min=1, max=16, step=1,
-                hint="Distinct paths to race (a route each, in turn, where the scene names routes)",
+                "Candidates (K)", 4, min=2, max=16, step=1,
+                hint="Distinct paths to race (a route each, in turn, where the scene names "
+                "routes); at least 2: a race needs two",
             )  # fmt: skip
             self.budget = gui.add_number(
                 "Choose budget [s]", 60.0, min=5.0, max=3600.0, step=5.0,
@@ -104,9 +109,15 @@ class ChoosePanel:
                 "model (start pose, friction, motors, mass), from the scene's start and goal; "
                 "Drive then takes the chosen path",
             )  # fmt: skip
+            # The race's progress and Cancel here too, where the person who clicked is (the
+            # ones at the top of the panel may be scrolled out of view).
+            self.progress = gui.add_progress_bar(0.0, visible=False)
+            self.cancel = gui.add_button("Cancel choose", color="red", visible=False,
+                                         hint="Stop the race now; nothing is chosen")  # fmt: skip
             self.summary = gui.add_markdown("")
             self.table = gui.add_markdown("")
         self.button.on_click(lambda ev: put(ChooseCmd(ev.client_id)))
+        self.cancel.on_click(lambda ev: put(CancelCmd(ev.client_id, "job")))
         self.lines: dict[int, object] = {}
         """Candidate index -> its line segments handle (recoloured as rollouts come in)."""
 
@@ -182,18 +193,20 @@ def _at_scene_poses(app) -> None:
 def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
     """Race K candidates in a child followed by the loop; then Drive takes the chosen one."""
     _at_scene_poses(app)
-    scene = app.world.scene
     cfg = ChooseConfig(candidates=int(panel.candidates.value), budget_s=float(panel.budget.value),
                        confidence=float(panel.confidence.value), seed=app._next_seed)  # fmt: skip
     app._next_seed += 1  # (a second click draws fresh candidates and rollouts)
-    workers = os.cpu_count() or 1
+    workers = os.cpu_count() or 1  # (every core, as `roachplan choose` takes by default)
     app._show_robot_at_start()
-    app.server.scene.remove_by_name("/plans")
-    app.plans, app.plan_endpoints = [], None
+    # Only this race's candidates are shown, and Drive has nothing to take until it chooses.
+    app.plan_endpoints = None
+    app.set_plans([])
+    app.server.scene.remove_by_name("/trajectories")
     panel.lines, panel.table.content = {}, ""
-    panel.summary.content = f"Racing {cfg.candidates} candidates (seed {cfg.seed}) ..."
     paths: dict[int, tuple[str, int, np.ndarray]] = {}
-    got: dict[str, object] = {"message": f"planning {cfg.candidates} candidate paths"}
+    got: dict[str, object] = {
+        "message": f"planning {cfg.candidates} candidate paths (seed {cfg.seed})"
+    }
     job = Job(_choose_job, app.world, cfg, workers)
 
     def step(messages) -> bool:
@@ -218,11 +231,21 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
             else:
                 got[kind] = payload
         t = job.elapsed
-        app._progress(t / cfg.budget_s, f"Choose path: {got['message']}; {t:.1f} s of the "
-                      f"{cfg.budget_s:g} s budget ({workers} workers)")  # fmt: skip
+        text = f"Choose path: {got['message']}; {t:.1f} s of the {cfg.budget_s:g} s budget"
+        app._progress(t / cfg.budget_s, f"{text} ({workers} workers)")
+        value = round(100.0 * min(t / cfg.budget_s, 1.0), 1)
+        if panel.progress.value != value:
+            panel.progress.value = value
+        if panel.summary.content != text:
+            panel.summary.content = text
         return job.done
 
-    end = app._follow(job, "Choose path", step, hard_stop=time.monotonic() + cfg.budget_s + GRACE)
+    panel.progress.value, panel.progress.visible, panel.cancel.visible = 0.0, True, True
+    try:
+        end = app._follow(job, "Choose path", step,
+                          hard_stop=time.monotonic() + cfg.budget_s + GRACE)  # fmt: skip
+    finally:
+        panel.progress.visible = panel.cancel.visible = False
     if "error" in got:
         app.status.content = panel.summary.content = f"Choose path failed: {got['error']}"
         app._notify(cmd.client_id, "Choose path failed", str(got["error"]), error=True)
@@ -234,7 +257,7 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
             f"drawn are coloured by the rollouts done."
         )
         return
-    _show_choice(app, panel, cfg, got["choice"], paths, scene)
+    _show_choice(app, panel, cfg, got["choice"], paths)
 
 
 def _recolour(panel: ChoosePanel, ranking: list[dict]) -> None:
@@ -245,28 +268,32 @@ def _recolour(panel: ChoosePanel, ranking: list[dict]) -> None:
             handle.colors = np.broadcast_to(np.uint8(p_colour(r["p_success"])), (n, 2, 3)).copy()
 
 
-def _show_choice(app, panel, cfg: ChooseConfig, choice: dict, paths: dict, scene) -> None:
-    ranking, chosen = choice["ranking"], choice["chosen"]
-    _recolour(panel, ranking)
+def _show_choice(app, panel: ChoosePanel, cfg: ChooseConfig, choice: dict, paths: dict) -> None:
+    """The ranking; the candidates become the plan's paths, the chosen one marked for Drive."""
+    ranking, chosen, scene = choice["ranking"], choice["chosen"], app.world.scene
     panel.table.content = ranking_markdown(ranking, chosen, cfg.confidence)
     again = (f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
              f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}`")  # fmt: skip
     ran = f"{choice['rollouts']} rollouts in {choice['wall_time']:.1f} s ({choice['stopped']})"
-    if chosen is None:
-        app.status.content = panel.summary.content = (
-            f"No candidate succeeded in any rollout: nothing to choose. {ran}. Same race: {again}"
-        )
-        return
-    row = next(r for r in ranking if r["candidate"] == chosen)
-    route = paths[chosen][0]
     # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
     # marked for Drive (thick, "Drive") and every one keeping its P(success) colour.
     app.server.scene.remove_by_name("/plans/choose")
     app.plan_endpoints = (scene.start, scene.goal)
     app.set_plans([_labelled(scene, *paths[i]) for i in sorted(paths)])
-    app.select_path(chosen)
+    if chosen is not None:
+        app.select_path(chosen)
     panel.lines = dict(enumerate(app.view.path_nodes))
     _recolour(panel, ranking)
+    if chosen is None:
+        why = ("only one candidate path was found: there was nothing to race"
+               if choice["rollouts"] == 0 else "no candidate succeeded in any rollout")  # fmt: skip
+        app.status.content = panel.summary.content = (
+            f"Nothing chosen: {why}; {ran}. **Drive** drives path 1 (*Drive path* picks another). "
+            f"Same race: {again}"
+        )
+        return
+    row = next(r for r in ranking if r["candidate"] == chosen)
+    route = paths[chosen][0]
     text = (f"Chosen: path {chosen + 1} ({route or 'no route'}), P(success) "
             f"{_f(row['p_success'])} [{_f(row['p_low'])}, {_f(row['p_high'])}], energy "
             f"{_f(row['relative_energy'])} × a straight walk; {ran}.")  # fmt: skip

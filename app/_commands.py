@@ -55,6 +55,7 @@ def do_plan(app, cmd: Cmd) -> None:
     elapsed = job.elapsed
     app._next_seed = seed + len(tried) + (end != "done")
     if errors:
+        app.view.hide_paths()  # (Drive stays off: no half-plan is left drawn as current)
         app.status.content = f"Planning failed: {errors[0]}"
         app._notify(cmd.client_id, "Planning failed", errors[0], error=True)
         return

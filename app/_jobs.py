@@ -95,7 +95,6 @@ class CancelCmd(Cmd):
     what: str
 
 
-
 @dataclass(frozen=True)
 class ViewCmd(Cmd):
     """A change of what is seen, handled at once even while a command runs: "roadmap",
@@ -103,6 +102,7 @@ class ViewCmd(Cmd):
     clicking client's camera)."""
 
     what: str
+
 
 NAMES = {PlanCmd: "Plan", DriveCmd: "Drive", ResetCmd: "Reset", BestPathCmd: "Best path",
          PlaceCmd: "Click", MarkersCmd: "Marker check", RunTrialsCmd: "Run trials",
@@ -131,8 +131,6 @@ def _plan_job(conn, world: World, count: int, request: dict, deadline: float) ->
 
 
 def _drive_job(conn, world: World, planned, start, goal) -> None:
-    # (The load job is not limited here: the OpenSCAD it starts sets its own, possibly higher,
-    # limit, which an inherited hard limit would forbid.)
     limit_child_memory()
     try:
         result = finish_trial(
@@ -145,8 +143,16 @@ def _drive_job(conn, world: World, planned, start, goal) -> None:
 
 
 def _load_job(conn, ref: str, from_upload: bool) -> None:
+    # Only the soft limit: the OpenSCAD it may start sets its own, possibly higher, limit,
+    # which an inherited hard limit would forbid. A capture that needs more than this process
+    # may have ends in a notification, not by taking the machine (issue 15).
+    limit = limit_child_memory(hard=False)
     try:
         conn.send(("world", load_world(ref, from_upload=from_upload)))
+    except MemoryError:
+        conn.send(("error", f"loading this file needed more memory than the server allows a "
+                            f"load ({limit / 2**30:.1f} GiB): try a larger voxel size or a "
+                            f"crop box"))  # fmt: skip
     except Exception as exc:
         conn.send(("error", f"{exc}"))
     conn.close()

@@ -20,6 +20,9 @@ def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = Non
     """A tqdm bar on stderr in the experiment's style (experiments/_runner._bar)."""
     from tqdm import tqdm
 
+    # No monitor thread: a thread that fails to start under a child's memory limit leaves
+    # Thread.start() waiting forever (the bars refresh on update instead).
+    tqdm.monitor_interval = 0
     return tqdm(total=total, desc=what, unit=unit, file=sys.stderr, mininterval=0.5,
                 smoothing=0.1, disable=not (wanted() if enabled is None else enabled), **kw)  # fmt: skip
 

@@ -167,9 +167,13 @@ def _choice_replay(folder: Path) -> Replay:
         choice = json.loads(where.read_text())
         scene_name, chosen = choice["scene"], choice["chosen"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ExperimentError(f"{where}: not a choice that `roachplan choose` wrote ({exc})") from None
+        raise ExperimentError(
+            f"{where}: not a choice that `roachplan choose` wrote ({exc})"
+        ) from None
     if chosen is None or not choice.get("chosen_path"):
-        raise ExperimentError(f"{where}: no candidate was chosen (none succeeded); nothing to replay")
+        raise ExperimentError(
+            f"{where}: no candidate was chosen (none succeeded); nothing to replay"
+        )
     scene = load_scene(scene_name)
     if choice.get("driver") == "reference" and scene.driver.kind != "reference":
         planner, driver = reference_settings(scene.planner, scene.driver)
@@ -284,6 +288,8 @@ def replay_html(replay: Replay) -> str:
     page = _record(replay).as_html()
     head = page.index("<head>") + len("<head>")
     page = page[:head] + HTML_MARK + page[head:]
+    # The browser tab names the replay, not "Viser".
+    page = page.replace("<title>Viser</title>", f"<title>{html.escape(replay.title)}</title>", 1)
     body = page.rindex("</body>")
     return page[:body] + _overlay(replay) + page[body:]
 
@@ -295,7 +301,9 @@ def _overlay(replay: Replay) -> str:
     rows = "".join(f"<tr><td>{esc(k)}</td><td>{esc(v)}</td></tr>" for k, v in numbers(shown))
     table = ""
     if len(replay.trials) > 1:
-        head = "<tr><th>trial</th><th>seed</th><th>route</th><th>outcome</th><th>rel. energy</th></tr>"
+        head = (
+            "<tr><th>trial</th><th>seed</th><th>route</th><th>outcome</th><th>rel. energy</th></tr>"
+        )
         lines = "".join(
             f"<tr{' class=shown' if k == replay.shown else ''}><td>{esc(t['label'])}</td>"
             f"<td>{esc(str(t['seed']))}</td><td>{esc(t['route'] or '-')}</td>"

@@ -98,6 +98,8 @@ class RoachApp:
         self.plan_endpoints: tuple[tuple, tuple] | None = None
         self.drive_path = 0
         """Index in plans of the path Drive takes (select_path)."""
+        self.roadmap: np.ndarray | None = None
+        """The first plan's roadmap ((E, 2, 2) xy segments [m]), kept for Show roadmap."""
         self._standable = None
         """(StandableMap, the start's cell (i, j) it was made for) of this world, made when the
         overlay is first shown."""
@@ -118,6 +120,15 @@ class RoachApp:
         if path != (LIBRARY / f"{world.scene.name}.yaml").resolve():
             self.files[f"file: {path.name}"] = (str(path), False)
         self.view = SceneView(self.server.scene)
+        # Light the scene cheaply: in software WebGL (a browser without a GPU) viser's default
+        # image-based lighting took ~10 s to prepare in a new page (the first Plan click waited
+        # behind it: 11.6 s, then 1.0 s without it) and halved the frame rate of a drive, and
+        # shadow maps cost two thirds of each frame (bench_app.py). A sky/ground hemisphere
+        # light, z up, keeps the faces of the terrain apart instead.
+        self.server.scene.configure_default_lights(cast_shadow=False)
+        self.server.scene.configure_environment_map(hdri=None)
+        self.server.scene.add_light_hemisphere("/lights/sky", ground_color=(120, 110, 100),
+                                               intensity=1.5, position=(0.0, 0.0, 1.0))  # fmt: skip
         self._build_gui()
         self._show_world()
         self.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
@@ -183,7 +194,7 @@ class RoachApp:
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
             self.show_roadmap = gui.add_checkbox("Show roadmap", False)
             self.drive_path_picker = gui.add_dropdown(
-                "Drive path", ("-",), hint="The path Drive takes (the thick one, labelled Drive)"
+                "Drive path", ("none",), hint="The path Drive takes (the thick one, labelled Drive)"
             )
             self.plan_button = gui.add_button("Plan")
             self.drive_button = gui.add_button("Drive", disabled=True)
@@ -360,7 +371,7 @@ class RoachApp:
         for Drive; and the roadmap of the first, always kept (so Show roadmap acts at once)."""
         self.plans, self.drive_path = list(plans), 0
         self.roadmap = self.plans[0].plan.roadmap if self.plans else None
-        names = tuple(str(k + 1) for k in range(len(self.plans))) or ("-",)
+        names = tuple(str(k + 1) for k in range(len(self.plans))) or ("none",)
         self.drive_path_picker.options = names
         self.drive_path_picker.value = names[0]
         if self.plans:
@@ -400,7 +411,7 @@ class RoachApp:
             case "roadmap":
                 self._show_roadmap()
             case "drive_path":
-                if self.drive_path_picker.value != "-":
+                if self.drive_path_picker.value != "none":
                     self.select_path(int(self.drive_path_picker.value) - 1)
             case "standable":
                 if self.show_standable.value:

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 
 from roachplan.app._choose_cli import add_choose_parser
+from roachplan.app._progress import bar, render_progress, stage_progress
 from roachplan.experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
 from roachplan.perception import CaptureError
 from roachplan.planning import PLANNER_NAMES, PlanningError
@@ -203,7 +204,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scene = world.scene  # with the start and goal picked, if the scene file had none
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
-    plans = plan_many(world, args.count, seed=seed, start=start, goal=goal, planner=planner)
+    with bar(args.count, "paths", unit=" path", enabled=None if args.count > 1 else False) as b:
+        plans = plan_many(world, args.count, seed=seed, start=start, goal=goal, planner=planner,
+                          on_attempt=lambda _seed, new: b.update(new is not None))  # fmt: skip
     rows = [
         {
             "route": lp.route,
@@ -501,14 +504,32 @@ def _capture_settings(args: argparse.Namespace):
         raise CaptureError(f"--{str(exc).replace('_', '-')}") from None
 
 
-def _cmd_mesh(args: argparse.Namespace) -> int:
+def _mesh_with_progress(path: str, settings):
+    """mesh_capture with a bar over its stages (run in the meshing child)."""
     from roachplan.perception import mesh_capture
+    from roachplan.perception._pipeline import STAGES
 
+    meshing, on_stage = stage_progress(("read", *STAGES), "meshing")
+    with meshing:
+        return mesh_capture(path, settings, on_stage)
+
+
+def _cmd_mesh(args: argparse.Namespace) -> int:
     settings = _capture_settings(args)
     out = check_output_file(args.output, suffixes=(".stl", ".ply", ".obj"),
                             inputs=(args.input, args.intrinsics), kind=MESH_WRITTEN,
                             force=args.force)  # fmt: skip
-    rec = mesh_capture(args.input, settings)
+    import open3d  # noqa: F401 - mapped here, not under the child's address-space limit
+    import tqdm  # noqa: F401
+
+    import roachplan.perception._pipeline  # noqa: F401
+    from roachplan.planning._isolated import run_isolated
+
+    # In a child under the memory limit (issue 15): a capture that needs more ends in a clear
+    # error, not by taking the machine; its progress bar is drawn by the child, which inherits
+    # the libraries loaded above (loading them under the limit would fail first).
+    rec = run_isolated(_mesh_with_progress, args.input, settings, isolation="fork",
+                       task="meshing")  # fmt: skip
     _export_mesh(rec.mesh, out)
     report = {"input": args.input, "output": str(out), **rec.report()}
     if args.json:
@@ -1065,7 +1086,8 @@ def main(argv: list[str] | None = None) -> int:
     debug = getattr(args, "debug", False)
     try:
         check_flags(args)
-        return args.func(args)
+        with render_progress():  # a bar for every OpenSCAD render a command makes
+            return args.func(args)
     except KeyboardInterrupt:
         print("roachplan: interrupted", file=sys.stderr)
         return 130

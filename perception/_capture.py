@@ -144,7 +144,8 @@ def load_capture(
     except OSError as exc:  # unreadable (permissions, an I/O error): not a traceback
         raise CaptureError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except MemoryError:
-        raise CaptureError(f"{path}: too large to read into this machine's memory") from None
+        raise CaptureError(f"{path}: too large to read into the memory this process may use "
+                           f"(the machine's, or the limit set by ROACHPLAN_CHILD_MEMORY)") from None
     if units == "mm":
         cap = dataclasses.replace(
             cap, points=cap.points * 1e-3,

@@ -67,16 +67,18 @@ def _size_text(size: int) -> str:
     return f"{size / (1 << 30):.3g} GiB" if size >= 1 << 30 else f"{size / (1 << 20):.3g} MiB"
 
 
-def limit_child_memory(limit: int | None = None) -> int:
+def limit_child_memory(limit: int | None = None, *, hard: bool = True) -> int:
     """Lower this process's address-space limit to `limit` bytes (default:
     child_memory_limit(); 0: leave it). Call it first thing in a child process: it holds for
-    the rest of the process's life. Returns the limit set (0: none)."""
+    the rest of the process's life. hard=False lowers only the soft limit, so that a program
+    this process starts may set its own, higher one (OpenSCAD in its jail). Returns the limit
+    set (0: none)."""
     limit = child_memory_limit() if limit is None else limit
     if limit:
-        _, hard = resource.getrlimit(resource.RLIMIT_AS)
-        if hard != resource.RLIM_INFINITY:
-            limit = min(limit, hard)
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+        _, ceiling = resource.getrlimit(resource.RLIMIT_AS)
+        if ceiling != resource.RLIM_INFINITY:
+            limit = min(limit, ceiling)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit if hard else ceiling))
     return limit
 
 
@@ -90,19 +92,27 @@ def _memory_advice(limit: int) -> str:
 
 
 def run_isolated(
-    fn: Callable[..., T], /, *args, isolation: Method = "auto", preload: str = "", **kwargs
+    fn: Callable[..., T],
+    /,
+    *args,
+    isolation: Method = "auto",
+    preload: str = "",
+    task: str = "planning",
+    **kwargs,
 ) -> T:
-    """fn(*args, **kwargs) in a child process; its return value, or its exception re-raised.
+    """fn(*args, **kwargs) in a child process under the memory limit; its return value, or its
+    exception re-raised.
 
     isolation: "fork" forks this process; "forkserver" asks the fork server (fn and the
     arguments must pickle); "auto" forks unless other threads are running. preload: a module
-    the fork server imports once, so that children start warm.
+    the fork server imports once, so that children start warm. task: what the child does, for
+    the messages when it dies or runs out of memory ("the meshing process ...").
     """
     limit = child_memory_limit()
     if isolation == "auto":
         isolation = "fork" if threading.active_count() == 1 else "forkserver"
     if isolation == "forkserver":
-        return _via_forkserver(fn, args, kwargs, preload, limit)
+        return _via_forkserver(fn, args, kwargs, preload, limit, task)
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:  # child: never returns into the caller's stack
@@ -110,7 +120,7 @@ def run_isolated(
         try:
             os.close(read_fd)
             with os.fdopen(write_fd, "wb") as pipe:
-                pipe.write(_outcome(fn, args, kwargs, limit))
+                pipe.write(_outcome(fn, args, kwargs, limit, task))
             status = 0
         finally:
             os._exit(status)
@@ -125,22 +135,22 @@ def run_isolated(
         raise
     if not data:
         code = -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
-        raise _died(code, limit)
+        raise _died(code, limit, task)
     return _unwrap(data)
 
 
-def _died(code: int, limit: int) -> IsolationError:
+def _died(code: int, limit: int, task: str = "planning") -> IsolationError:
     """The error for a child that sent nothing back; code: its exit status, or -signal."""
     if code >= 0:
-        return IsolationError(f"the planning process died without an answer (exit status {code})")
+        return IsolationError(f"the {task} process died without an answer (exit status {code})")
     name = signal.Signals(-code).name if -code in signal.valid_signals() else f"signal {-code}"
-    why = f"the planning process died without an answer ({name})"
+    why = f"the {task} process died without an answer ({name})"
     if limit:  # a C++ allocation past the limit aborts or crashes rather than raising
         why += f"; if it needed more memory than allowed, {_memory_advice(limit)}"
     return IsolationError(why)
 
 
-def _outcome(fn: Callable, args: tuple, kwargs: dict, limit: int) -> bytes:
+def _outcome(fn: Callable, args: tuple, kwargs: dict, limit: int, task: str = "planning") -> bytes:
     """The pickled (ok, value-or-exception) of calling fn under the memory limit; every failure
     is sent back."""
     try:
@@ -148,7 +158,7 @@ def _outcome(fn: Callable, args: tuple, kwargs: dict, limit: int) -> bytes:
         outcome = (True, fn(*args, **kwargs))
     except MemoryError:
         outcome = (False, IsolationError(
-            f"the planning process ran out of memory and was stopped; {_memory_advice(limit)}"
+            f"the {task} process ran out of memory and was stopped; {_memory_advice(limit)}"
         ))  # fmt: skip
     except BaseException as exc:  # noqa: BLE001
         outcome = (False, exc)
@@ -165,17 +175,22 @@ def _unwrap(data: bytes):
     raise value
 
 
-def _forkserver_child(conn, fn: Callable, args: tuple, kwargs: dict, limit: int) -> None:
-    conn.send_bytes(_outcome(fn, args, kwargs, limit))
+def _forkserver_child(
+    conn, fn: Callable, args: tuple, kwargs: dict, limit: int, task: str = "planning"
+) -> None:
+    conn.send_bytes(_outcome(fn, args, kwargs, limit, task))
     conn.close()
 
 
-def _via_forkserver(fn: Callable, args: tuple, kwargs: dict, preload: str, limit: int):
+def _via_forkserver(
+    fn: Callable, args: tuple, kwargs: dict, preload: str, limit: int, task: str = "planning"
+):
     ctx = multiprocessing.get_context("forkserver")
     if preload:
         ctx.set_forkserver_preload([preload])  # takes effect when the server first starts
     recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_forkserver_child, args=(send, fn, args, kwargs, limit), daemon=True)
+    child = ctx.Process(target=_forkserver_child, args=(send, fn, args, kwargs, limit, task),
+                        daemon=True)  # fmt: skip
     child.start()
     send.close()
     try:
@@ -191,5 +206,5 @@ def _via_forkserver(fn: Callable, args: tuple, kwargs: dict, preload: str, limit
     finally:
         recv.close()
     if not data:
-        raise _died(child.exitcode, limit)
+        raise _died(child.exitcode, limit, task)
     return _unwrap(data)

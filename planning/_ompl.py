@@ -89,13 +89,14 @@ class PlannerConfig:
     budget instead of stopping at their first solution."""
     waypoint_spacing: float = 0.05
     """Spacing of the waypoints handed to the driver [m]."""
-    turning_radius: float | None = 0.16
+    turning_radius: float | None = 0.13
     """Drivable plans (issue 18): turn the planner's route into arcs of this radius [m] and
-    straight lines, every state checked (planning/_drivable.py). The roach's tightest turn,
-    at the driver's largest motor ratio of 3, has a radius of about 0.12 m on flat ground
-    (curvature 7.46 ln 3 = 8.2 /m, `roachplan calibrate-turning`); 0.16 m leaves the tracking
-    driver a third more to correct with, and rough ground. None: the planner's raw path, as
-    the report drove it (`reference: true`)."""
+    straight lines, every state checked (planning/_drivable.py). From the turning calibration
+    (`roachplan calibrate-turning`, sim/_turning.py): the roach turns at most 10.3 /m on flat
+    ground, at the driver's largest motor ratio of 3; plans use 3/4 of that (PLAN_HEADROOM),
+    1 / (0.75 * 10.3) = 0.129 m, so the tracking driver keeps a third more to correct with
+    (tests/test_robot.py re-derives it). None: the planner's raw path, as the report drove it
+    (`reference: true`)."""
     keep_roadmap: bool = False
     """Return the planner's graph (roadmap or tree) with the plan, for display."""
     validity: ValidityConfig = field(default_factory=ValidityConfig)

@@ -25,7 +25,7 @@ def _app(scene: str):
 
 def _ranking_rows(page) -> list[list[str]]:
     """The ranking table's body rows, as cell texts."""
-    table = page.locator("table").filter(has_text="P(success) [interval]")
+    table = page.locator("table").filter(has_text="P(success)")
     rows = table.get_by_role("row").all()[1:]
     return [[c.inner_text().strip() for c in r.get_by_role("cell").all()] for r in rows]
 
@@ -70,11 +70,15 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
             set_value(page, "Choose budget [s]", "10")
             set_value(page, "Playback speed [x real time]", "10")
             page.get_by_role("button", name="Choose path", exact=True).last.click()
-            page.get_by_text(re.compile(r"Choose path: .* of the 10 s budget")).wait_for(
-                timeout=30_000
-            )
-            assert page.get_by_role("progressbar").first.is_visible()
-            assert page.get_by_role("button", name="Cancel", exact=True).is_visible()
+            # In the panel: progress, Cancel, then the candidates drawn (grey until driven).
+            racing = page.get_by_text(re.compile(r"Choose path: \d candidates planned; racing"))
+            racing.last.wait_for(timeout=60_000)
+            # Two bars under way (the one at the top and the panel's); the others stand at 0.
+            bars = page.get_by_role("progressbar").all()
+            assert sum(float(b.get_attribute("aria-valuenow") or 0) > 0 for b in bars) == 2
+            assert page.get_by_role("button", name="Cancel choose").is_visible()
+            handles = app.server.scene._handle_from_node_name
+            assert {f"/plans/choose/{i}" for i in range(k)} <= set(handles)
             page.screenshot(path=artifacts / "choose-01-racing.png")
 
             done = page.get_by_text(re.compile(r"^Chosen: path \d+ \(")).first
@@ -82,14 +86,14 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
             chosen = int(re.search(r"Chosen: path (\d+)", done.inner_text()).group(1))
             rows = _ranking_rows(page)
             assert len(rows) == k, rows
-            assert rows[0][0] == "chosen" and int(rows[0][1]) == chosen  # best first
-            assert sum(r[0] == "chosen" for r in rows) == 1
+            assert re.fullmatch(rf"{chosen} \w+ chosen", rows[0][0])  # best first
+            assert sum("chosen" in r[0] for r in rows) == 1
             # Each path is drawn in the colour of its P(success) in the table; the chosen one
             # is the one Drive takes, drawn thick.
             nodes = app.view.path_nodes
             assert len(nodes) == len(app.plans) == k
             for r in rows:
-                path, p = int(r[1]), float(r[4].split()[0])
+                path, p = int(r[0].split()[0]), float(r[1].split()[0])
                 assert tuple(nodes[path - 1].colors[0, 0]) == p_colour(p), r
                 assert nodes[path - 1].thickness == (7.0 if path == chosen else 3.0)
             assert app.drive_path == chosen - 1
@@ -102,7 +106,7 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
             page.get_by_text(re.compile(r"^Trial 1: ")).wait_for(timeout=120_000)
             trial = app.scene_trials[0]
             assert np.allclose(trial["path"], app.plans[chosen - 1].plan.path_xyz)
-            assert trial["route"] == rows[0][2]
+            assert trial["route"] == rows[0][0].split()[1]
             trials = page.locator("table").filter(has_text="rel. energy").get_by_role("row")
             assert trials.count() == 2  # the header and the chosen path's trial
             page.screenshot(path=artifacts / "choose-03-driven.png")
@@ -116,14 +120,13 @@ def test_cancel_stops_the_race_and_a_moved_marker_is_refused(artifacts):
         with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
             set_value(page, "Candidates (K)", "2")
             page.get_by_role("button", name="Choose path", exact=True).last.click()
-            page.get_by_text(re.compile(r"Choose path: \d+ candidates planned")).wait_for(
-                timeout=60_000
-            )
+            racing = page.get_by_text(re.compile(r"Choose path: \d+ candidates planned"))
+            racing.last.wait_for(timeout=60_000)  # (at the top and in the panel)
             deadline = time.monotonic() + 60
             while len(race := _race_processes()) < 3:  # its child and two rollout workers
                 assert time.monotonic() < deadline, f"the race's processes: {race}"
                 time.sleep(0.2)
-            page.get_by_role("button", name="Cancel", exact=True).click()
+            page.get_by_role("button", name="Cancel choose").click()
             page.get_by_text(re.compile(r"Choose path cancelled after")).first.wait_for(
                 timeout=10_000
             )
@@ -149,3 +152,14 @@ def _is_forkserver(pid: int) -> bool:
             return b"forkserver" in f.read()
     except OSError:
         return False
+
+
+def test_colours_run_from_red_through_yellow_to_green_and_grey_before_rollouts():
+    from roachplan.app._choose_panel import UNTRIED, p_colour
+
+    assert p_colour(float("nan")) == UNTRIED
+    assert p_colour(0.0) == (220, 0, 40) and p_colour(1.0) == (0, 180, 40)
+    ps = np.linspace(0, 1, 21)
+    red, green = zip(*(p_colour(p)[:2] for p in ps), strict=True)
+    assert all(np.diff(red) <= 0) and all(np.diff(green) >= 0)  # redder to greener
+    assert p_colour(0.5) == (220, 180, 40)  # yellow halfway

@@ -1,7 +1,8 @@
 """`roachplan replay` (issue 19): a trial of a real (tiny) experiment exported as one HTML file,
 opened from a file:// URL in headless Chromium with every non-file request refused, shows the
-terrain, the path and the robot, and the robot walks. Also: the .viser recording, the whole
-experiment, and bad input. Screenshots go to test-artifacts/."""
+terrain, the path and the robot, and the robot walks. Also: the .viser recording of a whole
+experiment, a choice's replay, the page's Share button, and bad input. Screenshots go to
+test-artifacts/."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import numpy as np
 import pytest
 from conftest import roachplan
 from test_app import ARGS, CHROMIUM
+
+from roachplan.app._replay import END_HOLD, HTML_MARK
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
 
@@ -33,6 +36,33 @@ def _pixels(page) -> np.ndarray:
     from PIL import Image
 
     return np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB")).astype(int)
+
+
+def _check_pixels(a: np.ndarray, b: np.ndarray, box: dict) -> None:
+    """Two shots of the 3D view (the numbers box `box` masked out): only the robot moved, and
+    the planned path (black) and the trajectory (blue) are drawn."""
+    h, w, _ = a.shape
+    scene = np.ones((h, w), dtype=bool)
+    scene[h - 60 :] = False  # the playback bar (its clock and slider move)
+    scene[: int(box["y"] + box["height"]) + 4, : int(box["x"] + box["width"]) + 4] = False
+    moved = (np.abs(a - b).sum(axis=2) > 60) & scene
+    ys, xs = np.nonzero(moved)
+    assert len(ys) > 20, "nothing moved in the 3D view"
+    assert np.ptp(xs) < 200 and np.ptp(ys) < 200, (
+        f"changes span {np.ptp(xs)} x {np.ptp(ys)} px: more than the robot moved"
+    )
+    # In the changed region, one of the two shots shows the robot's orange legs.
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+
+    def orange(img):
+        r, g, bl = img[y0:y1, x0:x1].transpose(2, 0, 1)
+        return int(np.sum((r > 120) & (r - g > 60) & (bl < 90)))
+
+    assert orange(a) + orange(b) > 0, "the moving thing is not the robot (no leg colour)"
+    # The planned path (black) and the trajectory (blue) are drawn in the view.
+    r, g, bl = b.transpose(2, 0, 1)
+    assert np.sum(scene & (bl > 180) & (r < 90) & (g < 140)) > 400, "no blue trajectory"
+    assert np.sum(scene & (r < 40) & (g < 40) & (bl < 40)) > 400, "no black path"
 
 
 def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifacts):
@@ -66,6 +96,7 @@ def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifa
         page.goto(out.as_uri())
         page.locator("canvas").first.wait_for(timeout=60_000)
 
+        assert page.title().endswith(": trial 1")
         # The trial's numbers, as stored.
         numbers = page.locator("#roachplan-numbers").inner_text()
         assert f"{trial['energy']:.3f} J" in numbers and f"{trial['drive_time']:.2f} s" in numbers
@@ -97,28 +128,7 @@ def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifa
     assert not errors, f"page errors: {errors}"
     assert requested == [], f"the replay asked the network for {requested}"
 
-    h, w, _ = a.shape
-    scene = np.ones((h, w), dtype=bool)
-    scene[h - 60 :] = False  # the playback bar (its clock and slider move)
-    scene[: int(box["y"] + box["height"]) + 4, : int(box["x"] + box["width"]) + 4] = False  # numbers
-    moved = (np.abs(a - b).sum(axis=2) > 60) & scene
-    ys, xs = np.nonzero(moved)
-    assert len(ys) > 20, "nothing moved in the 3D view"
-    assert np.ptp(xs) < 200 and np.ptp(ys) < 200, (
-        f"changes span {np.ptp(xs)} x {np.ptp(ys)} px: more than the robot moved"
-    )
-    # In the changed region, one of the two shots shows the robot's orange legs.
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-
-    def orange(img):
-        r, g, bl = img[y0:y1, x0:x1].transpose(2, 0, 1)
-        return int(np.sum((r > 120) & (r - g > 60) & (bl < 90)))
-
-    assert orange(a) + orange(b) > 0, "the moving thing is not the robot (no leg colour)"
-    # The planned path (black) and the trajectory (blue) are drawn in the view.
-    r, g, bl = b.transpose(2, 0, 1)
-    assert np.sum(scene & (bl > 180) & (r < 90) & (g < 140)) > 50, "no blue trajectory"
-    assert np.sum(scene & (r < 40) & (g < 40) & (bl < 40)) > 50, "no black path"
+    _check_pixels(a, b, box)
 
 
 def test_whole_experiment_and_viser_recording(experiment, tmp_path):
@@ -140,7 +150,7 @@ def test_whole_experiment_and_viser_recording(experiment, tmp_path):
     trial = next(t for t in map(json.loads, (experiment / "trials.jsonl").read_text().splitlines())
                  if t["kind"] == "trial" and t["index"] == best)  # fmt: skip
     # Recorded at the drive's frame rate for as long as the trial's drive, then a pause.
-    assert header["durationSeconds"] == pytest.approx(trial["drive_time"] + 1.5, abs=0.05)
+    assert header["durationSeconds"] == pytest.approx(trial["drive_time"] + END_HOLD, abs=0.05)
     again = roachplan("replay", str(experiment), "-o", str(out))  # its own output: replaced
     assert again.returncode == 0, again.stderr
 
@@ -178,8 +188,6 @@ def _recording(page_html: str) -> dict:
 def test_share_on_the_page_downloads_the_shown_trial(server_url, tmp_path):
     from test_app import browser_pages, set_value
 
-    from roachplan.app._replay import HTML_MARK
-
     with browser_pages(server_url) as (page,):
         set_value(page, "Playback speed [x real time]", "10")
         page.get_by_role("button", name="Plan").click()
@@ -198,4 +206,25 @@ def test_share_on_the_page_downloads_the_shown_trial(server_url, tmp_path):
     header = _recording(text)
     names = {m[1].get("name") for m in header["messages"] if isinstance(m[1], dict)}
     assert {"/terrain/mesh", "/plans/0", "/trajectories/0", "/robot"} <= names
-    assert header["durationSeconds"] == pytest.approx(drive_time + 1.5, abs=0.05)
+    assert header["durationSeconds"] == pytest.approx(drive_time + END_HOLD, abs=0.05)
+
+
+def test_a_choice_replays_its_chosen_path(tmp_path):
+    folder = tmp_path / "choice"
+    done = roachplan("choose", "--candidates", "1", "--rollouts", "1", "--workers", "1",
+                     "--out", str(folder))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    choice = json.loads((folder / "choice.json").read_text())
+    row = next(r for r in choice["ranking"] if r["candidate"] == choice["chosen"])
+    out = tmp_path / "choice.html"
+    done = roachplan("replay", str(folder), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    text = out.read_text()
+    assert f"<td>P(success)</td><td>{row['p_success']:.2f} [" in text
+    assert f"<td>route</td><td>{row['route']}</td>" in text
+    header = _recording(text)
+    names = {m[1].get("name") for m in header["messages"] if isinstance(m[1], dict)}
+    assert {"/terrain/mesh", "/plans/0", "/trajectories/0", "/robot"} <= names
+    assert header["durationSeconds"] > END_HOLD + 1.0, "the robot walks for a while"
+    refused = roachplan("replay", str(folder), "--trial", "0", "-o", str(tmp_path / "t.html"))
+    assert refused.returncode == 2 and "holds a choice" in refused.stderr
