@@ -8,13 +8,13 @@ still hold a neck the robot cannot turn through).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
-
 from roachplan.planning import VALID, PlanningError, check_states, plan_path, standable_map
+from scipy import ndimage
 
 MAX_AUTO_DISTANCE = 4.0
 """Longest start-goal distance picked automatically [m]: on a room's floor the far wall is
@@ -139,7 +139,11 @@ def _valid_pose(world, xy: np.ndarray, heading: float) -> tuple[float, float, fl
     sc = world.scene
     # Checked as a scene file will hold it (x, y to 0.1 mm, yaw to 0.001 deg): on a rough
     # capture 0.1 mm can cross a height-field cell and make a checked pose invalid.
-    x, y = round(float(xy[0]), 4), round(float(xy[1]), 4)
+    # Rounded inward at the planning area's edge: a cell centre on the edge, rounded out by
+    # 0.05 mm, was refused by the planner as outside the planning area.
+    (xa, ya), (xb, yb) = sc.bounds
+    x = min(max(round(float(xy[0]), 4), math.ceil(xa * 1e4) / 1e4), math.floor(xb * 1e4) / 1e4)
+    y = min(max(round(float(xy[1]), 4), math.ceil(ya * 1e4) / 1e4), math.floor(yb * 1e4) / 1e4)
     yaws = heading + np.array([0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6, 7, -7, 8]) * np.pi / 8
     yaws = np.radians(np.round(np.degrees(np.arctan2(np.sin(yaws), np.cos(yaws))), 3))
     states = np.column_stack([np.full(len(yaws), x), np.full(len(yaws), y), yaws])
