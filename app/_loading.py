@@ -6,6 +6,7 @@ The Scene folder shows what is loading and for how long, with Cancel load.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,6 +101,10 @@ def report_failure(app, ld: Loading) -> None:
     """A load failed: the current scene stays; say why (a model in millimetres is offered
     Scale x0.001)."""
     message = public_message(ld.error, app.upload_dir)
+    uploaded = ld.label.removeprefix("upload: ")
+    if ld.label.startswith("upload: ") and Path(uploaded).suffix.lower() not in (".yaml", ".yml"):
+        # The scene file around an uploaded model is the app's: the message names the file.
+        message = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.\w+: ", f"{uploaded}: ", message)
     app.loading.show("")
     app.status.content = f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays."
     app.scene_picker.value = app._picker_label()

@@ -68,7 +68,9 @@ def trials_markdown(trials: list[dict]) -> str:
         for k, t in enumerate(trials)
     )
     table = head + (rows or "|" + " |" * len(COLUMNS) + "\n")
-    return f'**Trials**\n\n<div class="roachplan-trials" style="{TABLE_STYLE}">\n\n{table}\n</div>\n'
+    return (
+        f'**Trials**\n\n<div class="roachplan-trials" style="{TABLE_STYLE}">\n\n{table}\n</div>\n'
+    )
 
 
 def summary_markdown(trials: list[dict]) -> str:
@@ -78,10 +80,13 @@ def summary_markdown(trials: list[dict]) -> str:
         return ""
     table = format_markdown(summarize(driven))
     return (f"**Summary per route** (relative energy, successes only)\n\n"
-            f'<div class="roachplan-summary" style="{TABLE_STYLE}">\n\n{table}\n\n</div>\n')  # fmt: skip
+            f'<div class="roachplan-summary" style="{TABLE_STYLE}">\n\n{table}\n\n</div>\n'
+            )  # fmt: skip
 
 
-def energy_plot(trials: list[dict], width: int = 320, height: int = 240, scale: int = 2) -> np.ndarray:
+def energy_plot(
+    trials: list[dict], width: int = 320, height: int = 240, scale: int = 2
+) -> np.ndarray:
     """(H, W, 3) uint8 image: relative energy per trial, successes filled, failures hollow.
     width, height: its size on the page [CSS px] (the panel shows it at most as wide as
     itself, ~300 px); drawn at `scale` times that, so that it stays sharp when shown larger

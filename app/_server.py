@@ -71,6 +71,7 @@ from ._picking import ray_hit_heightfield
 from ._relevel import CaptureView
 from ._replay import ShareCmd, share_trial
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
+from ._voxel_panel import VoxelCmd, VoxelPanel
 
 AT_ONCE = (LoadSceneCmd, UploadCmd, PanelCmd, ExportCmd, CancelCmd, ViewCmd)
 """Commands handled even while a plan or drive runs: they start or stop background work."""
@@ -180,6 +181,7 @@ class RoachApp:
             )
             self.loading = BackgroundLoad(gui, put)
             self.load_panel = LoadPanel(gui, put)
+        self.voxel_panel = VoxelPanel(gui, put)  # (the loaded capture's table 3.1)
         self.markers = StartGoal(gui, put, self.view)
         self.click_mode = self.markers.click_mode
         self.start_yaw, self.goal_yaw = self.markers.start_yaw, self.markers.goal_yaw
@@ -227,6 +229,7 @@ class RoachApp:
         )
         self.click_mode.on_update(lambda ev: self._set_click_mode())
         self.load_panel.pick_ground.on_update(lambda ev: self._set_click_mode())
+        self.voxel_panel.pick_centre.on_update(lambda ev: self._set_click_mode())
         self.plan_button.on_click(lambda ev: put(PlanCmd(ev.client_id)))
         self.drive_button.on_click(lambda ev: put(DriveCmd(ev.client_id)))
         self.reset_button.on_click(lambda ev: put(ResetCmd(ev.client_id)))
@@ -246,7 +249,8 @@ class RoachApp:
         scene does not orbit on click)."""
         scene = self.server.scene
         scene.remove_click_callback()
-        if self.click_mode.value != "nothing" or self.load_panel.pick_ground.value:
+        if (self.click_mode.value != "nothing" or self.load_panel.pick_ground.value
+                or self.voxel_panel.pick_centre.value):
             scene.on_click()(
                 lambda ev: self.commands.put(
                     PlaceCmd(ev.client_id, ev.ray_origin, ev.ray_direction)
@@ -289,6 +293,7 @@ class RoachApp:
         self.plan_endpoints, self._standable = None, None
         self.set_plans([])
         self.choose_panel.clear()
+        self.voxel_panel.clear(self)
         self._check_markers()
         self._show_robot_at_start()
         if self.show_standable.value:
@@ -487,7 +492,8 @@ class RoachApp:
                 cmd = self.commands.get_nowait()
             except queue.Empty:
                 return
-            picking = isinstance(cmd, PlaceCmd) and self.load_panel.pick_ground.value
+            picking = isinstance(cmd, PlaceCmd) and (self.load_panel.pick_ground.value
+                                                     or self.voxel_panel.pick_centre.value)
             if isinstance(cmd, AT_ONCE) or picking:
                 self._safely(cmd)
             elif isinstance(cmd, MarkersCmd):  # a drag sends many: one re-check afterwards
@@ -565,6 +571,8 @@ class RoachApp:
                 self.load_panel.upload(self, cmd)
             case PanelCmd():
                 self.load_panel.handle(self, cmd)
+            case VoxelCmd():
+                self.voxel_panel.handle(self, cmd)
             case PlaceCmd():
                 self._do_place(cmd)
             case MarkersCmd():
@@ -610,11 +618,15 @@ class RoachApp:
 
     def _do_place(self, cmd: PlaceCmd) -> None:
         which, picking = self.click_mode.value, self.load_panel.pick_ground.value
-        if which == "nothing" and not picking:
+        square = self.voxel_panel.pick_centre.value
+        if which == "nothing" and not picking and not square:
             return
         hit = ray_hit_heightfield(self.world.heightfield, cmd.ray_origin, cmd.ray_direction)
         if hit is None:
             self._notify(cmd.client_id, "Missed", "That click does not hit the terrain.")
+            return
+        if square:  # the Voxel study's square, centred here
+            self.voxel_panel.set_centre(self, cmd, hit)
             return
         if picking:  # the load panel's "Pick ground": re-level the capture there
             self.load_panel.relevel_at_click(self, cmd, hit)

@@ -222,7 +222,8 @@ PAGE_ADVICE = (
      "Re-mesh loaded capture (or load the file again)"),
     (r"add `scale: 0\.001` to this terrain object \(or --scale 0\.001\)",
      "press Scale x0.001 (Scene folder) to load it in metres"),
-    (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), at most ([0-9.]+)",
+    (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
+     r"at most ([0-9.]+)",
      r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
     (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
      "tick Loaded capture → Pick ground and click the ground, or type the camera's height, "
@@ -230,7 +231,7 @@ PAGE_ADVICE = (
     (r"check the result, or give --up or the camera pose",
      "check the result; if it is wrong, tick Loaded capture → Pick ground and click the ground"),
     (r"; --topic, `topic:` in a scene\)", ")"),
-)
+)  # fmt: skip
 """Advice written for the command line (perception and scenes errors) -> the same advice in the
 page's own controls (folder → control)."""
 _PATH = re.compile(r"(?<![\w.~-])(?:/[^\s/:'\"`,;()\[\]]+)+/([^\s/:'\"`,;()\[\]]+)")
@@ -252,6 +253,7 @@ def public_message(message: str, root: Path) -> str:
     # it; the scene file around an upload is the app's.
     text = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.(?:capture|mesh|scad): (?=[\w.-]+: )", "",
                   text)  # fmt: skip
+    text = re.sub(r"^([\w.-]+: )\1+", r"\1", text)  # (a file named twice over, once)
     for pattern, page in PAGE_ADVICE:
         text = re.sub(pattern, page, text)
     # Anything else written for the command line: an aside naming only a flag goes, and a flag

@@ -2,7 +2,7 @@
 per scene across a scene switch (no recorded seed runs again); the trials table shows every
 column within the panel (or by scrolling it); the CSV has the table's rounded numbers and
 labels; a bad upload's notification names no server path and no command-line flag, and says
-what to do in the page's terms."""
+what to do in the page's terms (and that advice works)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import re
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 
@@ -129,9 +130,12 @@ def _cloud_in_millimetres(path, rng) -> None:
 def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
     cloud = tmp_path / "cloud_mm.pcd"
     _cloud_in_millimetres(cloud, np.random.default_rng(16))
+    step = tmp_path / "step_mm.stl"  # a 60 cm x 60 cm x 4 cm step, written in millimetres
+    trimesh.creation.box((600.0, 600.0, 40.0)).export(step)
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         upload(page, cloud)
         note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
+        note = note.filter(has_text="cloud_mm.pcd")
         note.wait_for(timeout=120_000)
         text = note.inner_text()
         page.screenshot(path=artifacts / "results-03-bad-upload.png")
@@ -147,3 +151,56 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
         box, size = note.bounding_box(), page.viewport_size
         assert box["x"] >= 0 and box["x"] + box["width"] <= size["width"]
         assert "double_bridge" in title(page)
+
+        # A model in millimetres: the advice names the page's button, once, and it works.
+        upload(page, step)
+        note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
+        note = note.filter(has_text="step_mm.stl")
+        note.wait_for(timeout=120_000)
+        text = note.inner_text()
+        page.screenshot(path=artifacts / "results-04-model-in-millimetres.png")
+        for internal in ("--", "/tmp", ".yaml", "terrain object", "terrain[0]"):
+            assert internal not in text, f"{internal!r} in {text!r}"
+        assert text.count("Scale x0.001") == 1, text
+        page.get_by_role("button", name="Scale x0.001").click()
+        page.get_by_text(re.compile(r"Loaded `?step_mm")).first.wait_for(timeout=120_000)
+        assert "step_mm" in title(page)
+
+
+def _floor_seen_by_a_tum_camera(path) -> None:
+    """A 16-bit depth PNG of a floor seen from 1.2 m up (kinect2-qhd intrinsics), in the TUM
+    RGB-D dataset's units: 5000 per metre (the page's default is 1000)."""
+    from PIL import Image
+    from roachplan.perception import PRESETS
+    from roachplan.perception._synthetic import NO_NOISE, look_at, render_depth
+
+    floor = trimesh.creation.box((8.0, 8.0, 0.02))
+    floor.apply_translation((0.0, 0.0, -0.01))
+    depth = render_depth(floor, PRESETS["kinect2-qhd"], look_at((0.0, -1.2, 1.2), (0, 0, 0)),
+                         NO_NOISE)  # fmt: skip
+    Image.fromarray(np.round(depth * 5000.0).astype(np.uint16)).save(path)
+
+
+def test_the_depth_scale_advice_names_the_box_and_following_it_loads(app, artifacts, tmp_path):
+    png = tmp_path / "floor_tum.png"
+    _floor_seen_by_a_tum_camera(png)
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        set_value(page, "Voxel [m]", "0.02")  # (a lighter mesh for software WebGL)
+        upload(page, png)
+        note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
+        note.wait_for(timeout=120_000)
+        text = note.inner_text()
+        page.wait_for_timeout(600)  # (the notification slides in: the screenshot shows it whole)
+        page.screenshot(path=artifacts / "results-05-depth-scale-advice.png")
+        assert "Depth scale [units/m] to 5000" in text, text
+        for internal in ("--", "/tmp", ".yaml", "floor_tum.png: floor_tum.png"):
+            assert internal not in text, f"{internal!r} in {text!r}"
+        # As the notification says (the label is "Depth scale [units/<wbr>m]": found by its
+        # words, its box by the label's `for`).
+        box_id = page.locator("label", has_text="Depth scale").get_attribute("for")
+        box = page.locator(f"input[id='{box_id}']")
+        box.fill("5000")
+        box.press("Enter")
+        upload(page, png)
+        page.get_by_text(re.compile(r"Loaded `?floor_tum")).first.wait_for(timeout=120_000)
+        assert "floor_tum" in title(page)
