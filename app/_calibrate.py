@@ -88,8 +88,11 @@ def calibrate_turning(
                 "duration_s": duration,
                 "lookahead_m": driver.r_path,
                 "gain": gain,
-                "gain_rule": "p = 2 / (slope * lookahead): ln(ratio) = p |theta| then drives the "
-                "pure-pursuit curvature 2 theta / lookahead onto the next waypoint",
+                "gain_rule": "reference driver (algorithm 2): p = 2 / (slope * lookahead): "
+                "ln(ratio) = p |theta| then drives the pure-pursuit curvature 2 theta / lookahead "
+                "onto the next waypoint",
+                "tracking_rule": "tracking driver: the ratio that drives curvature k is the "
+                "curve's inverse at k, capped at max_ratio",
             },
             indent=2,
         )
@@ -112,13 +115,14 @@ def _plot(path: Path, samples: list[TurningSample], model: TurningModel, fit: Tu
     ax.plot(x, k, "o", label="simulated roach")
     xs = np.linspace(0, x.max(), 50)
     c = fit.curve
+    on_report = " on its 7 ratios" if set(REPORT_RATIOS) <= {s.ratio for s in samples} else ""
     # Up to the largest swept ratio only: the curve is fitted there and has a pole above it.
     ax.plot(xs, [c.curvature(v) for v in np.exp(xs)], "-",
             label=f"curve: {c.kappa_sat:.2f}(1 - r^-{c.rate:.2f}) + {c.lock:.3f} ln r / "
                   f"(ln {c.lock_ratio:.3f} - ln r)  (R² {fit.r_squared:.3f})")  # fmt: skip
     ax.plot(xs, model.slope * xs + model.intercept, "--", color="0.5",
             label=f"report's line: {model.slope:.2f} ln(r) {model.intercept:+.2f}  "
-                  f"(R² {model.r_squared:.3f})")  # fmt: skip
+                  f"(R² {model.r_squared:.3f}{on_report})")  # fmt: skip
     ax.set_xlabel("ln(motor speed ratio)  [right / left]")
     ax.set_ylabel("curvature 2πn/d  [1/m]")
     ax.set_title("Turning at various motor ratios (cf. Tong 2018, fig. 3.4)")

@@ -82,7 +82,7 @@ class _DubinsMotions(ob.MotionValidator):
 
 def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, planner: str,
                           radius: float, seed: int, vcfg, time_limit: float,
-                          max_iterations: int, step: float) -> dict:  # fmt: skip
+                          max_iterations: int, step: float, shortcut: bool) -> dict:  # fmt: skip
     """In a child process (OMPL's seed): plan with `planner` in OMPL's DubinsStateSpace with
     the terrain sampler and validity checker the default planner uses."""
     t0 = time.perf_counter()
@@ -126,6 +126,11 @@ def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, pla
     pl.setup()
     pl.solve(_budget_ptc(max_iterations, t0 + time_limit))
     found = bool(pdef.hasExactSolution())
+    if found and shortcut:  # OMPL joins vertices directly where it can (motions checked)
+        simplifier = og.PathSimplifier(si)
+        path = pdef.getSolutionPath()
+        simplifier.reduceVertices(path)
+        simplifier.collapseCloseVertices(path)
     out = dict(found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace()))
     if found:
         poses = [(s.getX(), s.getY(), s.getYaw()) for s in pdef.getSolutionPath().getStates()]
@@ -136,7 +141,7 @@ def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, pla
     return out
 
 
-def dubins_space_plan(world, planner: str, radius: float, seed: int) -> dict:
+def dubins_space_plan(world, planner: str, radius: float, seed: int, shortcut: bool) -> dict:
     """One plan in OMPL's DubinsStateSpace between the scene's start and goal poses:
     found, plan_time [s], and when found length [m], states ((N, 3) every cm), all_valid."""
     sc, cfg, regions = world.scene, world.scene.planner, world.regions
@@ -148,6 +153,7 @@ def dubins_space_plan(world, planner: str, radius: float, seed: int) -> dict:
         world_bounds=sc.bounds, start=sc.start, goal=sc.goal, cells=cells, cell=regions.cell,
         planner=planner, radius=radius, seed=seed, vcfg=cfg.validity,
         time_limit=cfg.time_limit, max_iterations=cfg.max_iterations, step=cfg.check_resolution,
+        shortcut=shortcut,
     )  # fmt: skip
 
 
@@ -158,7 +164,7 @@ def compare_spaces(seeds: int) -> None:
     radius = world.scene.planner.turning_radius
     print(f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
           f"(curvature limit {1 / radius:.2f} /m)")  # fmt: skip
-    print(f"  {'method':<40} {'success':>8} {'time s':>7} {'length m':>9} {'max curv.':>9} "
+    print(f"  {'method':<44} {'success':>8} {'time s':>7} {'length m':>9} {'max curv.':>9} "
           f"{'all valid':>9}")  # fmt: skip
     rows = []
     for name in ("prm", "rrtconnect", "rrt", "kpiece1"):
@@ -171,16 +177,17 @@ def compare_spaces(seeds: int) -> None:
         rows.append((f"(x,y,yaw) {name} + Dubins shortcuts", res, ok, valid,
                      [float(np.sum(np.linalg.norm(np.diff(r.states[:, :2], axis=0), axis=1)))
                       for r in ok], [max_curvature(r.states) for r in ok]))  # fmt: skip
-    for name in ("RRT", "KPIECE1"):
-        res = [dubins_space_plan(world, name, radius, s) for s in range(seeds)]
+    for name, shortcut in (("RRT", False), ("RRT", True), ("KPIECE1", False), ("KPIECE1", True)):
+        res = [dubins_space_plan(world, name, radius, s, shortcut) for s in range(seeds)]
         ok = [r for r in res if r["found"]]
         assert not any(r["metric"] for r in res), "OMPL calls the Dubins space a metric"
-        rows.append((f"DubinsStateSpace {name}", [argparse.Namespace(**r) for r in res], ok,
+        label = f"DubinsStateSpace {name}" + (" + OMPL shortcuts" if shortcut else "")
+        rows.append((label, [argparse.Namespace(**r) for r in res], ok,
                      all(r["all_valid"] for r in ok), [r["length"] for r in ok],
                      [max_curvature(r["states"]) for r in ok]))  # fmt: skip
     for label, res, ok, valid, lengths, curv in rows:
         t = statistics.median(r.plan_time for r in res)
-        print(f"  {label:<40} {len(ok):>3}/{len(res):<4} {t:>7.3f} "
+        print(f"  {label:<44} {len(ok):>3}/{len(res):<4} {t:>7.3f} "
               f"{statistics.median(lengths) if lengths else float('nan'):>9.2f} "
               f"{max(curv) if curv else float('nan'):>9.2f} {str(valid):>9}", flush=True)  # fmt: skip
 
@@ -190,7 +197,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="a fifth of the trials")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--spaces-only", action="store_true",
-                    help="only the planner-space comparison on double_bridge")
+                    help="only the planner-space comparison on double_bridge")  # fmt: skip
     ap.add_argument("--space-seeds", type=int, default=10, help="seeds per planner there")
     args = ap.parse_args()
     if args.spaces_only:

@@ -41,12 +41,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._calibration import TurningFit as TurningFit
     from ._calibration import TurningModel as TurningModel
-    from ._calibration import fit_turning_curve as fit_turning_curve
-    from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING
-    from ._turning import PLAN_HEADROOM as PLAN_HEADROOM
-    from ._turning import TurningCurve as TurningCurve
     from ._calibration import TurningSample as TurningSample
     from ._calibration import fit_turning as fit_turning
+    from ._calibration import fit_turning_curve as fit_turning_curve
     from ._calibration import reference_energy_per_metre as reference_energy_per_metre
     from ._calibration import turning_sweep as turning_sweep
     from ._config import DriverConfig as DriverConfig
@@ -63,6 +60,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._robot import RobotConfig as RobotConfig
     from ._simulation import SimError as SimError
     from ._simulation import Simulation as Simulation
+    from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING
+    from ._turning import PLAN_HEADROOM as PLAN_HEADROOM
+    from ._turning import TurningCurve as TurningCurve
     from ._uncertainty import UNCERTAINTY_RANGES as UNCERTAINTY_RANGES
     from ._uncertainty import UncertaintyConfig as UncertaintyConfig
     from ._uncertainty import uncertainty_problem as uncertainty_problem

@@ -14,7 +14,7 @@ import numpy as np
 
 from ._config import SimConfig
 from ._robot import RobotConfig
-from ._simulation import Simulation, SimError
+from ._simulation import SimError, Simulation
 from ._turning import TurningCurve
 
 
@@ -39,7 +39,9 @@ class TurningSample:
 
 @dataclass(frozen=True, kw_only=True)
 class TurningModel:
-    """curvature = slope * ln(ratio) + intercept, fitted to a sweep (figure 3.4)."""
+    """curvature = slope * ln(ratio) + intercept, the report's model (figure 3.4), fitted to a
+    sweep. It fits our robot loosely (R^2 0.78; sim/_turning.py has the curve that fits); the
+    reference driver's gain comes from it, so tables 7.1-7.3 stay comparable."""
 
     slope: float
     """d curvature / d ln(ratio) [1/m]."""
