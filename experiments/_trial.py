@@ -179,8 +179,9 @@ def drive(
 ) -> DriveResult:
     """Drop the robot at start (default: the scene's) and drive it along path_xyz.
 
-    sim: a simulation of this world to reuse (a worker keeps one PyBullet client for all its
-    trials; `reset` makes a reused one drive exactly as a fresh one); default: a fresh one.
+    sim: a simulation of this world to drive in (it is reset first; the caller owns it);
+    default: a fresh one, which is what a reproducible trial needs: a reused client, reset,
+    can carry the solver's history of an earlier drive into this one (experiments/_workers.py).
     """
     scene = world.scene
     x, y, yaw = start or scene.start
