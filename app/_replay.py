@@ -31,7 +31,7 @@ from roachplan.scenes import World
 from roachplan.sim import Frame
 
 from ._draw import BLACK, BLUE, MARKER_COLOURS, SceneView, on_surface, wxyz_from_xyzw, yaw_wxyz
-from ._jobs import Cmd
+from ._jobs import NAMES, Cmd
 
 SUFFIXES = (".html", ".viser")
 """What `replay -o` writes: a standalone page, or viser's recording."""
@@ -66,6 +66,9 @@ class Replay:
 @dataclass(frozen=True)
 class ShareCmd(Cmd):
     """The page's Share button: export the shown trial as a replay page for download."""
+
+
+NAMES[ShareCmd] = "Share"  # (how the page names it when it waits its turn)
 
 
 # -- building a replay from a results folder -----------------------------------------------------

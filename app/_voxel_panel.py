@@ -28,7 +28,7 @@ from roachplan.perception._voxel_study import (
 )
 
 from ._draw import segments
-from ._jobs import Cmd, Job
+from ._jobs import NAMES, Cmd, Job
 
 MODES = ("Square", "Ground plane")
 """The region choices of the folder's dropdown."""
@@ -55,6 +55,9 @@ class VoxelCmd(Cmd):
     last table)."""
 
     action: str
+
+
+NAMES[VoxelCmd] = "Voxel study"  # (how the page names it when it waits its turn)
 
 
 @dataclass(frozen=True, kw_only=True)
