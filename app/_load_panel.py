@@ -17,7 +17,7 @@ from pathlib import Path
 import yaml
 
 from roachplan.perception import METHODS, PRESETS, CaptureError, MeshingConfig, load_calibration, load_yaml
-from roachplan.scenes import DEFAULT_TIMEOUT, MAX_TIMEOUT
+from roachplan.scenes import BACKENDS, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
 from ._relevel import (
     CaptureView,
@@ -90,6 +90,12 @@ class LoadPanel:
         self.scad_timeout = gui.add_number(
             "OpenSCAD limit [s]", DEFAULT_TIMEOUT, min=1.0, max=MAX_TIMEOUT, step=10.0,
             hint="An uploaded .scad (or .zip) render is stopped after this long",
+        )  # fmt: skip
+        self.scad_backend = gui.add_dropdown(
+            "OpenSCAD backend", BACKENDS, initial_value="cgal",
+            hint="cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
+            "several times faster on CSG-heavy models; refuses text(), surface() and other "
+            "constructs it renders differently",
         )  # fmt: skip
         with gui.add_folder("Meshing (captures)"):
             self.mesh_method = gui.add_dropdown("Capture meshing", METHODS,
@@ -273,10 +279,12 @@ class LoadPanel:
             return
         path = scene_from_upload(cmd.name, cmd.data, app.upload_dir, self.capture_settings(cmd.name),
                                  calibration=self.calibration_for(cmd.name),
-                                 scad_timeout=float(self.scad_timeout.value))  # fmt: skip
+                                 scad_timeout=float(self.scad_timeout.value),
+                                 scad_backend=self.scad_backend.value)  # fmt: skip
         label, what = f"upload: {cmd.name}", None
         if Path(cmd.name).suffix.lower() in (".scad", ".zip"):
-            what = (f"Rendering {cmd.name} with OpenSCAD (limit "
+            who = "OpenSCAD" if self.scad_backend.value == "cgal" else "Manifold"
+            what = (f"Rendering {cmd.name} with {who} (limit "
                     f"{float(self.scad_timeout.value):g} s)")  # fmt: skip
         app._load(cmd, str(path), from_upload=True, label=label, what=what)
 

@@ -44,12 +44,13 @@ def safe_name(name: str) -> str:
 
 def scene_from_upload(
     name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None,
-    scad_timeout: float = SCAD_TIMEOUT,
+    scad_timeout: float = SCAD_TIMEOUT, scad_backend: str = "cgal",
 ) -> Path:  # fmt: skip
     """Write an uploaded file into a fresh folder under root and return the scene .yaml that
     uses it. capture: perception settings for captures (method, voxel, intrinsics, ...).
     calibration: a calibration file uploaded before a depth image (copied beside it and used as
-    its intrinsics). scad_timeout: the OpenSCAD time limit of a .scad or .zip [s].
+    its intrinsics). scad_timeout: the OpenSCAD time limit of a .scad or .zip [s];
+    scad_backend: who renders it (a scad object's `backend:`, written only when not cgal).
 
     A .yaml is the scene itself; a .scad or mesh becomes a terrain object on a ground plane; a
     .zip holds a .scad (at its top level) with its includes and data files; a capture becomes a
@@ -80,6 +81,7 @@ def scene_from_upload(
         from ._archive import extract_scad_zip
 
         obj = {"scad": extract_scad_zip(name, data, folder), "timeout": scad_timeout}
+        obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
     elif suffix == ".ply" and _ply_has_faces(data):
         obj = {"mesh": fname}
     elif suffix in CAPTURE_SUFFIXES:
@@ -93,6 +95,7 @@ def scene_from_upload(
         obj = {"capture": fname, **({"perception": capture} if capture else {})}
     elif suffix == ".scad":
         obj = {"scad": fname, "timeout": scad_timeout}
+        obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
     else:
         obj = {"mesh": fname}
     is_capture = "capture" in obj
@@ -225,6 +228,8 @@ PAGE_ADVICE = (
     (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
      r"at most ([0-9.]+)",
      r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
+    (r"render this model with `backend: cgal` \(--scad-backend cgal\), the openscad binary",
+     "set Scene → OpenSCAD backend to cgal and load it again"),
     (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
      "tick Loaded capture → Pick ground and click the ground, or type the camera's height, "
      "pitch and roll there"),

@@ -326,13 +326,16 @@ def _cmd_scene_list(args: argparse.Namespace) -> int:
 
 
 def _scene_options(scene, args: argparse.Namespace):
-    """The scene with the command line's --scale and --scad-timeout applied, where given."""
-    from roachplan.scenes import scaled_scene, with_scad_timeout
+    """The scene with the command line's --scale, --scad-timeout and --scad-backend applied,
+    where given."""
+    from roachplan.scenes import scaled_scene, with_scad_backend, with_scad_timeout
 
     if getattr(args, "scale", None) is not None:
         scene = scaled_scene(scene, args.scale)
     if getattr(args, "scad_timeout", None) is not None:
         scene = with_scad_timeout(scene, args.scad_timeout)
+    if getattr(args, "scad_backend", None) is not None:
+        scene = with_scad_backend(scene, args.scad_backend)
     if getattr(args, "reference", False):
         scene = _as_reference(scene)
     return scene
@@ -952,6 +955,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("files", nargs="+", metavar="FILE", help="scene .yaml files or library names")
     q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
                    help="time limit of each OpenSCAD render (default: the scene's, else 600)")
+    q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
+                   help="who renders each OpenSCAD model: cgal (the openscad binary) or manifold "
+                        "(openscad-evaluator, faster on CSG-heavy models; refuses text() and "
+                        "surface()) (default: the scene's, else cgal)")  # fmt: skip
     q.set_defaults(func=_cmd_scene_check)
     q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
     q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
@@ -963,6 +970,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scale every terrain model by S before placing it (0.001: millimetres)")
     q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
                    help="time limit of each OpenSCAD render (default: the scene's, else 600)")
+    q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
+                   help="who renders each OpenSCAD model: cgal (the openscad binary) or manifold "
+                        "(openscad-evaluator, faster on CSG-heavy models; refuses text() and "
+                        "surface()) (default: the scene's, else cgal)")  # fmt: skip
     q.add_argument("--force", action="store_true", help=FORCE_HELP)
     q.set_defaults(func=_cmd_scene_build)
     # --debug after the command too (`roachplan plan --debug`); SUPPRESS keeps the top level's

@@ -6,40 +6,49 @@ Models: every .scad object of the library scenes, with its scene's params, and t
 models in benchmarks/scad/ (millimetres, `text()`, `include`/`use`, hull, minkowski, a
 honeycomb of difference()s: the shape of a typical Thingiverse model).
 
-Backends, each run once as a separate process, as roachplan would run it (wall time, process
-start included):
+Backends, each run once through roachplan's own render_scad (jail, limits, an empty cache;
+wall time, process start included):
 - cgal: the `openscad` binary (Debian 2021.01 has no --backend=manifold), params as `-D`.
-- manifold: `openscad_evaluator` (PyPI `openscad-evaluator`, Manifold CSG via `manifold3d`), if
-  installed; params by a wrapper that includes the model and then assigns them, which is what
-  `-D` does (an assignment after the model's own; the last one wins).
+- manifold: `openscad-evaluator` (PyPI; Manifold CSG via `manifold3d`) through
+  scenes/_manifold_main.py, which draws seeded rands() as OpenSCAD 2021.01 does; params by a
+  wrapper that includes the model and then assigns them, which is what `-D` does. Models using
+  a construct it renders differently are REFUSED (text(), surface(); polyhedron() when the
+  result is not a closed solid), as `backend: manifold` refuses them.
 
 Agreement of the two meshes: bounds, volume (both closed) and a symmetric surface distance
-(20,000 points sampled on each surface, their distance to the other surface; the max is a
-Hausdorff estimate), relative to the bounding-box diagonal.
+(20,000 points sampled on each surface, their distance to the other surface, exact in float64
+where Open3D's fast query says more than 1e-5 of the diagonal; the max is a Hausdorff
+estimate), relative to the bounding-box diagonal.
 
-Measured (2 cores, openscad_evaluator 1.8.1 + manifold3d 3.5.4 against Debian 2021.01):
-    double_bridge          cgal  0.07 s  manifold 0.95 s    agree (1.6e-6)
-    double_bridge_rough    cgal  5.33 s  manifold 1.67 s    agree (Hausdorff 3.4e-3)
-    heightmap              cgal  0.13 s  manifold 1.27 s    DIFFER: surface()'s base at 0,
-                                                            not 1 below the lowest value
-    plywood_bridge         cgal  0.24 s  manifold 0.95 s    DIFFER: a polyhedron wound the
-                                                            other way stays an open mesh, not
-                                                            unioned (interior walls)
-    voxel_wall             cgal  0.05 s  manifold 0.94 s    agree
-    public nameplate       cgal 46.86 s  manifold 5.93 s    DIFFER: text placed up to 1.6 mm apart
-    public vented_box      cgal  9.64 s  manifold 0.91 s    DIFFER: text up to 0.7 mm apart
-So Manifold is 8-11x faster on CSG-heavy public models, but it renders 2 of 4 library models
-differently from OpenSCAD, and text too: it is not a drop-in backend, and roachplan keeps the
-Debian binary. Debian 12 has no OpenSCAD newer than 2021.01 (no --backend=manifold).
+Measured (2 shared cores, openscad-evaluator 1.8.1 + manifold3d 3.5.4 against Debian 2021.01):
+    double_bridge          cgal  0.16 s  manifold 0.99 s   AGREE (Hausdorff 1.6e-6)
+    double_bridge_rough    cgal  1.84 s  manifold 0.65 s   AGREE (1.0e-5; seeded rands() drawn
+                                                           as OpenSCAD does: 3.4e-3 before)
+    heightmap              cgal  0.08 s  REFUSED: surface() (base at 0, not 1 below the lowest
+                                         value)
+    plywood_bridge         cgal  0.13 s  REFUSED: polyhedron() (wound the other way: an open
+                                         shell, not a solid)
+    voxel_wall             cgal  0.14 s  manifold 0.44 s   AGREE (9.9e-6)
+    public fan_shroud      cgal  3.40 s  manifold 0.65 s   AGREE (9.9e-6), 5.2x
+    public vented_box      cgal  3.80 s  REFUSED: text() (placed up to 0.7 mm apart)
+    public nameplate       cgal 46.86 s  REFUSED: text() (earlier run, evaluator alone: 5.93 s,
+                                         placed up to 1.6 mm apart)
+So Manifold is 3-5x faster on the CSG-heavy models it renders here (hull, minkowski,
+honeycombs of difference()s, 1,600 seeded bumps; 8-11x on the text() models, which it refuses)
+and agrees with the binary within 1e-5 of the diagonal wherever it is not refused; on simple
+models the Python start (~0.4 s, and ~0.7 s once per process to list the jail's libraries)
+makes it slower. Hence `backend: manifold` is opt-in per terrain object (or --scad-backend),
+and cgal, the reference, stays the default. Debian 12 has no OpenSCAD newer than 2021.01.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
+import re
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -48,8 +57,8 @@ import numpy as np
 import open3d as o3d
 import trimesh
 
-from roachplan.scenes import LIBRARY, list_scenes, load_scene
-from roachplan.scenes._openscad import _scad_literal, scad_dependencies
+from roachplan.scenes import LIBRARY, SceneError, list_scenes, load_scene, render_scad
+from roachplan.scenes._openscad import scad_dependencies
 
 HERE = Path(__file__).resolve().parent
 AGREE_BOUNDS = 1e-3
@@ -75,48 +84,38 @@ def cases() -> list[tuple[str, Path, dict]]:
     return out
 
 
-def run(cmd: list[str], cwd: Path, timeout: float) -> tuple[float, str]:
-    """Wall time [s] of cmd (inf past timeout) and its error text if it failed."""
+def render(model: Path, params: dict, backend: str, out: Path, timeout: float
+           ) -> tuple[float, str]:  # fmt: skip
+    """Wall time [s] of roachplan's render of model by backend (jail, limits and the
+    evaluator's entry point included; an empty cache, so it really runs), the mesh copied to
+    out; and the refusal or error text if it failed."""
+    os.environ["ROACHPLAN_CACHE"] = tempfile.mkdtemp(dir=out.parent)
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
-                              check=False)  # fmt: skip
-    except subprocess.TimeoutExpired:
-        return float("inf"), f"timed out after {timeout:g} s"
-    wall = time.perf_counter() - t0
-    return wall, "" if proc.returncode == 0 else (proc.stderr.strip().splitlines() or ["?"])[-1]
-
-
-def render_cgal(model: Path, params: dict, out: Path, timeout: float) -> tuple[float, str]:
-    defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={_scad_literal(v)}")]
-    cmd = ["openscad", "--export-format", "binstl", "-o", str(out), *defines, model.name]
-    return run(cmd, model.parent, timeout)
-
-
-def render_manifold(model: Path, params: dict, out: Path, timeout: float) -> tuple[float, str]:
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        for f in (model, *scad_dependencies(model)):
-            target = folder / f.relative_to(model.parent)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy(f, target)
-        wrapper = folder / "__params__.scad"
-        wrapper.write_text(
-            f"include <{model.name}>\n"
-            + "".join(f"{k} = {_scad_literal(v)};\n" for k, v in sorted(params.items()))
-        )
-        cmd = [sys.executable, "-m", "openscad_evaluator.cli", wrapper.name, "-o", str(out)]
-        return run(cmd, folder, timeout)
+        shutil.copy(render_scad(model, params, timeout=timeout, backend=backend), out)
+    except SceneError as exc:
+        text = str(exc)
+        refused = re.search(r"line (\d+): (\w+)\(\)", text) if "backend: cgal" in text else None
+        if refused:  # the backend's own refusal of a construct it renders differently
+            return time.perf_counter() - t0, f"REFUSED: {refused[2]}() at line {refused[1]}"
+        return time.perf_counter() - t0, text.splitlines()[-1][-160:]
+    return time.perf_counter() - t0, ""
 
 
 def surface_distances(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20_000) -> np.ndarray:
-    """Distances [model units] of n points sampled on a's surface to b's surface."""
+    """Distances [model units] of n points sampled on a's surface to b's surface: Open3D's fast
+    query, and, where it says more than 1e-5 of the diagonal, an exact float64 one against every
+    triangle (Open3D reported 5 mm for points lying on voxel_wall's long slim faces)."""
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor(b.vertices.astype(np.float32)), o3d.core.Tensor(b.faces.astype(np.uint32))
     )
     points, _ = trimesh.sample.sample_surface(a, n, seed=0)
-    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+    d = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
+    for i in np.flatnonzero(d > 1e-5 * np.linalg.norm(a.extents)):
+        nearest = trimesh.triangles.closest_point(b.triangles, np.tile(points[i], (len(b.faces), 1)))
+        d[i] = np.linalg.norm(nearest - points[i], axis=1).min()
+    return d
 
 
 def compare(cgal: Path, manifold: Path) -> dict:
@@ -150,11 +149,15 @@ def main() -> None:
             if args.only and not any(o in name for o in args.only):
                 continue
             a, b = Path(tmp) / "cgal.stl", Path(tmp) / "manifold.stl"
-            t_cgal, err_cgal = render_cgal(model, params, a, args.timeout)
+            t_cgal, err_cgal = render(model, params, "cgal", a, args.timeout)
             if not has_manifold:
                 print(f"{name:44s} {t_cgal:9.2f}  {err_cgal}", flush=True)
                 continue
-            t_mf, err_mf = render_manifold(model, params, b, args.timeout)
+            t_mf, err_mf = render(model, params, "manifold", b, args.timeout)
+            if err_mf.startswith("REFUSED") and not err_cgal:
+                verdict = err_mf  # refused, not timed: no ratio
+                print(f"{name:44s} {t_cgal:9.2f} {'-':>12s} {'-':>6s}  {verdict}", flush=True)
+                continue
             if err_cgal or err_mf:
                 verdict = f"cgal: {err_cgal or 'ok'}; manifold: {err_mf or 'ok'}"
             else:

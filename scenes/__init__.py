@@ -10,8 +10,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
     {
         "scaled_scene": "._adjust",
         "with_scad_timeout": "._adjust",
+        "with_scad_backend": "._adjust",
         "SceneError": "._errors",
         "looks_like_millimetres": "._mesh",
+        "BACKENDS": "._openscad",
         "DEFAULT_TIMEOUT": "._openscad",
         "MAX_TIMEOUT": "._openscad",
         "render_scad": "._openscad",
@@ -41,8 +43,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._adjust import scaled_scene as scaled_scene
     from ._adjust import with_scad_timeout as with_scad_timeout
+    from ._adjust import with_scad_backend as with_scad_backend
     from ._errors import SceneError as SceneError
     from ._mesh import looks_like_millimetres as looks_like_millimetres
+    from ._openscad import BACKENDS as BACKENDS
     from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
     from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
     from ._openscad import render_scad as render_scad

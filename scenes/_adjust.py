@@ -1,4 +1,5 @@
-"""Scene-wide changes a command line asks for: scale every model, give renders more time."""
+"""Scene-wide changes a command line asks for: scale every model, give renders more time, pick
+who renders them."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import dataclasses
 import math
 
 from ._errors import SceneError
-from ._openscad import timeout_problem
+from ._openscad import backend_problem, timeout_problem
 from ._scene import Scene
 
 
@@ -40,6 +41,20 @@ def with_scad_timeout(scene: Scene, timeout: float) -> Scene:
         scene,
         terrain=tuple(
             dataclasses.replace(o, timeout=float(timeout)) if o.kind == "scad" else o
+            for o in scene.terrain
+        ),
+    )
+
+
+def with_scad_backend(scene: Scene, backend: str) -> Scene:
+    """The scene with every OpenSCAD object rendered by backend ("cgal" or "manifold")."""
+    problem = backend_problem(backend)
+    if problem:
+        raise SceneError(f"--scad-backend: {problem}")
+    return dataclasses.replace(
+        scene,
+        terrain=tuple(
+            dataclasses.replace(o, backend=backend) if o.kind == "scad" else o
             for o in scene.terrain
         ),
     )

@@ -30,6 +30,7 @@ from collections.abc import Callable, Mapping
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from roachplan.perception import short_repr
 
@@ -49,6 +50,26 @@ DEFAULT_TIMEOUT = 600.0
 """Wall-time limit of one OpenSCAD render [s] unless a scene sets its own: ordinary public
 models (text(), includes, a few hundred CSG operations) take 2-4 minutes in OpenSCAD 2021.01's
 CGAL, so a minute stopped most of them."""
+Backend = Literal["cgal", "manifold"]
+BACKENDS: tuple[Backend, ...] = ("cgal", "manifold")
+"""Who renders a model: "cgal", the real `openscad` binary (Debian's 2021.01, CGAL: the
+reference, and the default); "manifold", the Python evaluator `openscad-evaluator` on the
+Manifold library, 8-11x faster on CSG-heavy models (benchmarks/bench_openscad.py) but refused
+on the constructs where its mesh differs (MANIFOLD_DIFFERS)."""
+MANIFOLD_DIFFERS = {
+    "text": "its glyphs are placed up to 1.6 mm apart from OpenSCAD's",
+    "surface": "its base is at z = 0, not 1 below the lowest height as in OpenSCAD",
+}
+"""Constructs whose mesh under backend manifold differs from the reference binary's, measured
+by benchmarks/bench_openscad.py (construct -> how): a model calling one is refused."""
+MANIFOLD_CHECKED = {
+    "polyhedron": "a polyhedron with its faces wound the other way (counter-clockwise seen "
+    "from outside) stays an open shell there, where OpenSCAD makes a solid of it",
+}
+"""Constructs that differ only sometimes: allowed, but a model calling one must come out
+closed and outward (a polyhedron wound as OpenSCAD asks agrees; one wound the other way does
+not). Found by the scan, not evaluated: a model whose polyhedra are all solid but that also
+makes open geometry (touching solids) is refused too, and renders with backend cgal."""
 MAX_TIMEOUT = 24 * 3600.0
 """Largest render time limit accepted [s]; past it the OS timer overflows, and no render that
 long is meant."""
@@ -575,13 +596,16 @@ def _jail_layout(program: str) -> tuple[dict[str, str], dict[str, str]]:
 def confined(
     argv: list[str], model_dir: Path, work_dir: Path, *, memory: int | None = None,
     cpu: float = MAX_TIMEOUT, jail: bool = True,
+    layout: tuple[dict[str, str], dict[str, str]] | None = None,
 ) -> list[str]:  # fmt: skip
     """The command that runs argv under the render limits (memory [bytes], default
     memory_limit(); cpu: processor time [s]) and, with jail, in a jail where model_dir is
     JAIL_MODEL (read-only; the working directory) and work_dir/out is JAIL_OUT (writable), and
     nothing else is but argv[0] with its libraries and OpenSCAD's run-time data. Without jail,
     argv runs here in model_dir. If the jail or the limits cannot be made, the command exits
-    with _jail.SETUP_FAILED and a line starting with _jail.SETUP_TAG on stderr."""
+    with _jail.SETUP_FAILED and a line starting with _jail.SETUP_TAG on stderr. layout: the
+    jail's (read-only binds, symlinks) when argv[0] needs more than its libraries (the Python
+    evaluator of backend manifold: _manifold_layout)."""
     program = shutil.which(argv[0]) or argv[0]
     spec: dict = {
         "argv": [program, *argv[1:]],
@@ -591,7 +615,7 @@ def confined(
         "jail": None,
     }
     if jail:
-        ro, links = _jail_layout(program)
+        ro, links = layout or _jail_layout(program)
         root = work_dir / "root"
         root.mkdir(exist_ok=True)
         (work_dir / "out").mkdir(exist_ok=True)
@@ -744,12 +768,229 @@ def _bounded(lines: list[str], count: int = 20, width: int = 300) -> str:
     return "\n".join(shown)
 
 
+# -- backend manifold: openscad-evaluator on Manifold, in the same jail ----------------------------
+
+MANIFOLD_PACKAGES = ("openscad-evaluator", "manifold3d")
+"""The distributions backend manifold runs (with what they require)."""
+_MANIFOLD_MAIN = Path(__file__).with_name("_manifold_main.py")
+"""The evaluator's entry point in the jail (standard library only until it imports it)."""
+
+
+def backend_problem(backend: object) -> str:
+    """Why backend is not a render backend, or "" if it is."""
+    if backend not in BACKENDS:
+        return (
+            f"expected one of {', '.join(BACKENDS)} (cgal: the openscad binary, the reference; "
+            f"manifold: openscad-evaluator, faster on CSG-heavy models), got {short_repr(backend)}"
+        )
+    return ""
+
+
+def _first_call(scad_file: Path, names) -> tuple[Path, int, str] | None:
+    """(file, line, name) of the first call of one of names in the model or a file it includes
+    or uses (the dependency scan's files; strings blanked, so echo("text(") is no call)."""
+    scad_file = Path(scad_file).resolve()
+    sources = [scad_file, *(d for d in scad_dependencies(scad_file) if d.suffix == ".scad")]
+    pattern = re.compile(r"\b(" + "|".join(names) + r")\s*\(")
+    for path in sources:
+        src = ScadSource.read(path)
+        m = pattern.search(_STRING.sub(lambda s: " " * len(s.group(0)), src.code))
+        if m:
+            return path, src.line_of(m.start()), m.group(1)
+    return None
+
+
+def manifold_problem(scad_file: Path) -> str:
+    """Why backend manifold must not render this model, or "" if it may: the model, or a file
+    it includes or uses, calls a construct of MANIFOLD_DIFFERS."""
+    found = _first_call(scad_file, MANIFOLD_DIFFERS)
+    if found is None:
+        return ""
+    path, line, name = found
+    return (
+        f"{path}, line {line}: {name}() is not rendered alike by backend manifold "
+        f"({MANIFOLD_DIFFERS[name]}); render this model with `backend: cgal` "
+        f"(--scad-backend cgal), the openscad binary"
+    )
+
+
+def _manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
+    """Why the evaluator's mesh of a model calling a MANIFOLD_CHECKED construct cannot stand
+    for the binary's, or "" if it can: a polyhedron the binary turns into a solid must come out
+    closed and outward. Other models are not checked: the binary's own mesh of touching solids
+    is open too (voxel_wall), so openness alone is no disagreement."""
+    found = _first_call(scad_file, MANIFOLD_CHECKED)
+    if found is None:
+        return ""
+    import trimesh
+
+    m = trimesh.load(mesh, force="mesh")
+    if m.is_watertight and m.is_winding_consistent and m.volume > 0:
+        return ""
+    path, line, name = found
+    return (
+        f"{path}, line {line}: {name}(): backend manifold made an open or inside-out mesh "
+        f"({MANIFOLD_CHECKED[name]}), unlike OpenSCAD; render this model with `backend: cgal` "
+        f"(--scad-backend cgal), the openscad binary"
+    )
+
+
+def _manifold_distributions() -> list:
+    """The installed distributions of MANIFOLD_PACKAGES and everything they require."""
+    from importlib import metadata
+
+    found, todo, seen = [], list(MANIFOLD_PACKAGES), set()
+    while todo:
+        name = todo.pop()
+        key = re.sub(r"[-_.]+", "-", name).lower()
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            dist = metadata.distribution(name)
+        except metadata.PackageNotFoundError:
+            raise SceneError(
+                f"backend manifold needs the Python package {name!r}, which is not installed "
+                f"(pip install openscad-evaluator manifold3d, or reinstall roachplan); or use "
+                f"`backend: cgal`, the openscad binary"
+            ) from None
+        found.append(dist)
+        for req in dist.requires or []:
+            if "extra ==" not in req:
+                todo.append(re.match(r"[A-Za-z0-9._-]+", req).group())
+    return found
+
+
+@functools.cache
+def manifold_version() -> str:
+    """The versions of the evaluator and of Manifold, for the cache key and messages."""
+    dists = {re.sub(r"[-_.]+", "-", d.metadata["Name"]).lower(): d.version
+             for d in _manifold_distributions()}  # fmt: skip
+    return f"openscad-evaluator {dists['openscad-evaluator']}, manifold3d {dists['manifold3d']}"
+
+
+@functools.cache
+def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
+    """(interpreter, its sys.path in the jail, read-only binds, symlinks) that run the
+    evaluator in the jail: the base Python program (not the venv's link to it) with its
+    libraries and standard library, and, of site-packages, only the files of the evaluator's
+    distributions (each package folder or module, read-only) and the system libraries their
+    compiled modules load."""
+    python = os.path.realpath(getattr(sys, "_base_executable", sys.executable))
+    # The base interpreter's standard library (its lib-dynload inside), not a venv's folders.
+    stdlib = os.path.realpath(os.path.dirname(os.__file__))
+    shown: set[str] = set()
+    for dist in _manifold_distributions():
+        for f in dist.files or []:
+            # Top-level entries of site-packages; `..` leads to scripts in bin/, not needed.
+            if f.parts[0] not in ("..", "__pycache__"):
+                shown.add(os.path.normpath(str(dist.locate_file(f.parts[0]))))
+    paths = sorted({os.path.dirname(p) for p in shown})
+    compiled = [
+        os.path.join(root, f) for top in shown if os.path.isdir(top)
+        for root, _, files in os.walk(top) for f in files if ".so" in f
+    ] + [p for p in shown if p.endswith(".so")]  # fmt: skip
+    libraries = set(_program_libraries(python))
+    for start in range(0, len(compiled), 64):  # one ldd for many files
+        try:
+            out = subprocess.run(["ldd", *compiled[start : start + 64]], capture_output=True,
+                                 text=True, timeout=60, check=False).stdout  # fmt: skip
+        except (OSError, subprocess.TimeoutExpired):
+            out = ""
+        # A module that ldd cannot read (not dynamic) only makes it exit 1; the rest is listed.
+        libraries |= set(re.findall(r"(?:=>\s*|^\s*)(/\S+)\s+\(0x", out, re.M))
+    ro: dict[str, str] = {}
+    links: dict[str, str] = {}
+    for path in [python, *sorted(libraries), stdlib, *sorted(shown), str(_MANIFOLD_MAIN),
+                 "/dev/null", "/etc/ld.so.cache"]:  # fmt: skip
+        _show(path, ro, links)
+    folders = [p for p in ro if os.path.isdir(p)]
+
+    def covered(path: str) -> bool:
+        return any(path != f and path.startswith(f.rstrip("/") + "/") for f in folders)
+
+    return (
+        python, paths,
+        {p: src for p, src in ro.items() if not covered(p)},
+        {p: t for p, t in links.items() if not covered(p)},
+    )  # fmt: skip
+
+
+def _manifold_argv(model: str, target: str) -> tuple[list[str], tuple[dict, dict]]:
+    """The evaluator's command line rendering model (a path as the jail shows it) to the binary
+    STL target, and the jail layout it needs."""
+    python, paths, ro, links = _manifold_layout()
+    # -I -S: no site, no .pth files, no user packages; only `paths` come on sys.path, and the
+    # jail shows only the evaluator's own packages there.
+    return [python, "-I", "-S", "-B", str(_MANIFOLD_MAIN), json.dumps(paths), model, "-o",
+            target, "--export-format", "binstl"], (ro, links)  # fmt: skip
+
+
+def _check_backend(scad_file: Path, backend: str, mesh: Path | None = None) -> None:
+    """Raise SceneError if backend is no backend, or if backend manifold must not render this
+    model (manifold_problem) or, given its mesh, made one unlike the binary's
+    (_manifold_mesh_problem)."""
+    if backend_problem(backend):
+        raise SceneError(f"{scad_file}: backend: {backend_problem(backend)}")
+    if backend == "manifold":
+        problem = manifold_problem(scad_file) if mesh is None else _manifold_mesh_problem(
+            scad_file, mesh
+        )
+        if problem:
+            raise SceneError(problem)
+
+
+def _backend_key(backend: str, defines: list[str]) -> bytes:
+    """The cache key's part that names who renders, with which overrides."""
+    if backend == "cgal":  # the key as before backends existed: cached renders stay valid
+        return json.dumps([defines, openscad_version()]).encode()
+    return json.dumps([defines, manifold_version(), backend]).encode()
+
+
+def _render_argv(
+    backend: str, scad_file: Path, params: Mapping[str, ScadValue], work: Path, jail: bool
+) -> tuple[list[str], tuple[dict, dict] | None]:
+    """The render's command line (writing work/out/mesh.stl, as the jail shows it when jail)
+    and its jail layout (None: the program's own, _jail_layout)."""
+    target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
+    if backend == "manifold":
+        return _manifold_argv(_manifold_input(scad_file, params, work, jail), target)
+    defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={_scad_literal(v)}")]
+    return [openscad_binary(), "--export-format", "binstl", "-o", target, *defines,
+            scad_file.name], None  # fmt: skip
+
+
+def _named(why: str, backend: str) -> str:
+    """A failure's text naming the program that failed."""
+    if backend == "cgal":
+        return why
+    return why.replace("OpenSCAD failed", f"backend manifold ({manifold_version()}) failed", 1)
+
+
+def _manifold_input(scad_file: Path, params: Mapping[str, ScadValue], work: Path,
+                    jail: bool) -> str:  # fmt: skip
+    """The file the evaluator is given, as its process sees it: the model itself, or, with
+    params, a wrapper in the output folder that includes the model and then assigns them. That
+    is what `-D` does (the evaluator has no -D): an assignment after the model's own, the last
+    one winning. The model's own relative paths still resolve from its folder."""
+    model = f"{JAIL_MODEL}/{scad_file.name}" if jail else str(scad_file)
+    if not params:
+        return model
+    wrapper = work / "out" / "_params.scad"
+    wrapper.write_text(
+        f"include <{model}>\n"
+        + "".join(f"{k} = {_scad_literal(v)};\n" for k, v in sorted(params.items()))
+    )
+    return f"{JAIL_OUT}/{wrapper.name}" if jail else str(wrapper)
+
+
 def render_scad(
     scad_file: Path,
     params: Mapping[str, ScadValue] | None = None,
     *,
     timeout: float = DEFAULT_TIMEOUT,
     memory: int | None = None,
+    backend: Backend = "cgal",
 ) -> Path:
     """Render scad_file with `-D name=value` overrides to an STL and return its cached path.
 
@@ -759,6 +1000,10 @@ def render_scad(
     past `memory` bytes of memory (default: memory_limit()), is stopped with a SceneError
     that says how to allow more. OpenSCAD's own error text is passed through when the model
     is wrong.
+
+    backend (BACKENDS): "cgal" runs the openscad binary; "manifold" runs openscad-evaluator in
+    the same jail, under the same limits and cache (the backend and its versions in the key),
+    and refuses a model that uses a construct it renders differently (manifold_problem).
     """
     scad_file = Path(scad_file).resolve()
     if not scad_file.is_file():
@@ -774,13 +1019,15 @@ def render_scad(
         if problem:
             raise SceneError(f"{scad_file}: parameter {problem}")
     deps = scad_dependencies(scad_file)
+    _check_backend(scad_file, backend)
     root = scad_file.parent
     defines = [f"{k}={_scad_literal(v)}" for k, v in sorted(params.items())]
     digest = hashlib.sha256()
     for f in (scad_file, *deps):
         digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
-    digest.update(json.dumps([defines, openscad_version()]).encode())
-    out = cache_dir() / f"{scad_file.stem}-{digest.hexdigest()[:32]}.stl"
+    digest.update(_backend_key(backend, defines))
+    tag = "" if backend == "cgal" else f"-{backend}"
+    out = cache_dir() / f"{scad_file.stem}{tag}-{digest.hexdigest()[:32]}.stl"
     if out.is_file():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -790,12 +1037,8 @@ def render_scad(
     try:
         (work / "out").mkdir()
         jail = _jail_wanted()
-        target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
-        openscad = [openscad_binary(), "--export-format", "binstl", "-o", target]
-        openscad += [a for d in defines for a in ("-D", d)]
-        cmd = confined(
-            [*openscad, scad_file.name], root, work, memory=memory, cpu=timeout, jail=jail
-        )
+        argv, layout = _render_argv(backend, scad_file, params, work, jail)
+        cmd = confined(argv, root, work, memory=memory, cpu=timeout, jail=jail, layout=layout)
         try:
             proc = _run(cmd, cwd=root, timeout=timeout, name=scad_file.name)
         except subprocess.TimeoutExpired:
@@ -807,7 +1050,8 @@ def render_scad(
         mesh = work / "out" / "mesh.stl"
         if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
             why = _failure(scad_file, proc, memory=memory, timeout=timeout, jail=jail)
-            raise SceneError(f"{scad_file}: {why}")
+            raise SceneError(f"{scad_file}: {_named(why, backend)}")
+        _check_backend(scad_file, backend, mesh)
         mesh.replace(out)
     finally:
         shutil.rmtree(work, ignore_errors=True)

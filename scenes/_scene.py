@@ -29,7 +29,14 @@ from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig, uncertaint
 
 from ._errors import SceneError
 from ._library import LIBRARY, MAX_SEED, library_names
-from ._openscad import DEFAULT_TIMEOUT, param_problem, scad_variables, timeout_problem
+from ._openscad import (
+    DEFAULT_TIMEOUT,
+    Backend,
+    backend_problem,
+    param_problem,
+    scad_variables,
+    timeout_problem,
+)
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
 TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
@@ -58,6 +65,9 @@ class TerrainObject:
     turns a model in millimetres into metres)."""
     timeout: float = DEFAULT_TIMEOUT
     """Time limit of the OpenSCAD render [s] (scad only)."""
+    backend: Backend = "cgal"
+    """Who renders the model (scad only): "cgal", the openscad binary (the reference), or
+    "manifold", openscad-evaluator (faster on CSG-heavy models; see _openscad.BACKENDS)."""
     key: str = "terrain[0]"
     """Where the object sits in its scene file, for error messages."""
     capture: CaptureSettings | None = None
@@ -363,8 +373,8 @@ def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
 def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     data = ctx.mapping(
         value, key,
-        ("scad", "mesh", "capture", "params", "timeout", "perception", "scale", "position",
-         "orientation"),
+        ("scad", "mesh", "capture", "params", "timeout", "backend", "perception", "scale",
+         "position", "orientation"),
     )  # fmt: skip
     kinds = [k for k in ("scad", "mesh", "capture") if k in data]
     if len(kinds) != 1:
@@ -384,10 +394,9 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     if kind != "capture" and "perception" in data:
         raise ctx.fail(f"{key}.perception", "only a capture object takes this")
     params = data.get("params") or {}
-    if kind != "scad" and ("params" in data or "timeout" in data):
-        raise ctx.fail(
-            f"{key}.{'params' if 'params' in data else 'timeout'}", "only a scad object takes this"
-        )
+    scad_only = [k for k in ("params", "timeout", "backend") if k in data]
+    if kind != "scad" and scad_only:
+        raise ctx.fail(f"{key}.{scad_only[0]}", "only a scad object takes this")
     if not isinstance(params, dict):
         raise ctx.fail(
             f"{key}.params",
@@ -405,6 +414,9 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     timeout = data.get("timeout", DEFAULT_TIMEOUT)
     if timeout_problem(timeout):
         raise ctx.fail(f"{key}.timeout", timeout_problem(timeout))
+    backend = data.get("backend", "cgal")
+    if backend_problem(backend):
+        raise ctx.fail(f"{key}.backend", backend_problem(backend))
     scale = _scale(ctx, data.get("scale", 1.0), f"{key}.scale")
     position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
@@ -423,6 +435,7 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
         scale=scale,
         timeout=float(timeout),
+        backend=backend,
         key=key,
         capture=capture,
     )

@@ -106,7 +106,8 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
     source = obj.source
     if obj.kind == "scad":
         try:
-            source = render_scad(source, dict(obj.params), timeout=obj.timeout)
+            source = render_scad(source, dict(obj.params), timeout=obj.timeout,
+                                 backend=obj.backend)  # fmt: skip
         except SceneError as exc:
             raise SceneError(f"{label}: {exc}") from None
     if obj.kind == "capture":
