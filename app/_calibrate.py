@@ -9,7 +9,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
 from roachplan.experiments import atomic_path, atomic_write
 from roachplan.sim import (
     PLAN_HEADROOM,

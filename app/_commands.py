@@ -9,7 +9,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
 from roachplan.experiments import TrialResult
 from roachplan.planning import PlanResult
 

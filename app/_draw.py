@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from roachplan.scenes import World
 
 BLACK, BLUE = (0, 0, 0), (30, 90, 255)

@@ -15,8 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
-
-from roachplan.perception import METHODS, PRESETS, CaptureError, MeshingConfig, load_calibration, load_yaml
+from roachplan.perception import (
+    METHODS,
+    PRESETS,
+    CaptureError,
+    MeshingConfig,
+    load_calibration,
+    load_yaml,
+)
 from roachplan.scenes import BACKENDS, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
 from ._relevel import (

@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from roachplan.planning import PlanningError
 from roachplan.scenes import World, pose_problem
 

@@ -7,7 +7,6 @@ import io
 import math
 
 import numpy as np
-
 from roachplan.experiments import summarize
 from roachplan.experiments._summary import format_markdown
 

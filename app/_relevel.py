@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
 from roachplan.perception import load_yaml
 
 _LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])

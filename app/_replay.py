@@ -25,7 +25,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
 from roachplan.experiments import ExperimentError, drive, read_manifest, reference_energy
 from roachplan.scenes import World
 from roachplan.sim import Frame

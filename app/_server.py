@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 import viser
-
 from roachplan.experiments import ExperimentSpec
 from roachplan.planning import PLANNER_NAMES, PlanningError, standable_map
 from roachplan.scenes import LIBRARY, World, list_scenes

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
 from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
 from roachplan.scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 

@@ -10,7 +10,6 @@ import os
 import sys
 
 import numpy as np
-
 from roachplan.app._choose_cli import add_choose_parser
 from roachplan.app._progress import bar, render_progress, stage_progress
 from roachplan.experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
@@ -523,9 +522,8 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
                             inputs=(args.input, args.intrinsics), kind=MESH_WRITTEN,
                             force=args.force)  # fmt: skip
     import open3d  # noqa: F401 - mapped here, not under the child's address-space limit
-    import tqdm  # noqa: F401
-
     import roachplan.perception._pipeline  # noqa: F401
+    import tqdm  # noqa: F401
     from roachplan.planning._isolated import run_isolated
 
     # In a child under the memory limit (issue 15): a capture that needs more ends in a clear
@@ -624,8 +622,14 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
 def _cmd_synth_capture(args: argparse.Namespace) -> int:
     import numpy as np
     import trimesh
-
-    from roachplan.perception import NO_NOISE, NoiseModel, load_intrinsics, look_at, render_depth, save_depth
+    from roachplan.perception import (
+        NO_NOISE,
+        NoiseModel,
+        load_intrinsics,
+        look_at,
+        render_depth,
+        save_depth,
+    )
     from roachplan.scenes import build_terrain_mesh, load_scene
 
     scene = load_scene(args.scene)
@@ -750,9 +754,7 @@ CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json")
 def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
     from roachplan.experiments import is_partial, prepare_output_folder
 
-    from ._calibrate import calibrate_turning
-
-    from ._calibrate import DEFAULT_RATIOS
+    from ._calibrate import DEFAULT_RATIOS, calibrate_turning
 
     ratios = _numbers(args.ratios, "--ratios", tuple(range(2, 33)), SimError) or DEFAULT_RATIOS
     if any(r < 1.0 for r in ratios):

@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from roachplan.experiments import load_experiment, plan, run_experiment
 from roachplan.experiments._spec import reference_settings
 from roachplan.planning import check_states

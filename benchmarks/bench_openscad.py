@@ -56,8 +56,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import trimesh
-
-from roachplan.scenes import LIBRARY, SceneError, list_scenes, load_scene, render_scad
+from roachplan.scenes import SceneError, list_scenes, load_scene, render_scad
 from roachplan.scenes._openscad import scad_dependencies
 
 HERE = Path(__file__).resolve().parent

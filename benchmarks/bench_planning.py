@@ -18,7 +18,6 @@ import dataclasses
 import time
 
 import numpy as np
-
 from roachplan.experiments import plan
 from roachplan.planning import PLANNER_NAMES, check_states
 from roachplan.scenes import build_world, load_scene

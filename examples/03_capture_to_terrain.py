@@ -6,8 +6,9 @@ ground's support), then use the capture file directly as a scene: start and goal
 where the robot can stand, and a trial runs on it.
 """
 
-import roachplan
 from roachplan.scenes import LIBRARY
+
+import roachplan
 
 
 def main() -> None:

@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import get_args
 
 import numpy as np
-
 from roachplan.planning import PlannerConfig, PlanResult
 from roachplan.scenes import World
 

@@ -10,7 +10,6 @@ import matplotlib
 matplotlib.use("Agg")  # files only; never a window
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-
 from roachplan.planning import HeightField  # noqa: E402
 
 from ._summary import route_key  # noqa: E402

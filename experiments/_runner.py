@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-
 from roachplan.scenes import build_world
 
 from ._errors import ExperimentError, OutputError

@@ -27,7 +27,6 @@ from roachplan.scenes import (
 from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig
 
 from ._errors import ExperimentError
-
 from ._library import LIBRARY
 
 

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-
 from roachplan.planning import PlannerConfig, PlanResult, plan_path
 from roachplan.scenes import World
 from roachplan.sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre

@@ -20,7 +20,6 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
 import numpy as np
-
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 from roachplan.scenes import build_world

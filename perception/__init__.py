@@ -58,12 +58,12 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._capture import depth_scale_advice as depth_scale_advice
     from ._capture import depth_to_points as depth_to_points
     from ._capture import load_capture as load_capture
+    from ._choices import FRAMES as FRAMES
+    from ._choices import METHODS as METHODS
     from ._errors import CaptureError as CaptureError
     from ._ground import GroundChoice as GroundChoice
     from ._ground import GroundConfig as GroundConfig
     from ._ground import choose_ground as choose_ground
-    from ._choices import FRAMES as FRAMES
-    from ._choices import METHODS as METHODS
     from ._pipeline import CaptureSettings as CaptureSettings
     from ._pipeline import MeshingConfig as MeshingConfig
     from ._pipeline import Reconstruction as Reconstruction

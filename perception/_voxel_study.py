@@ -25,7 +25,6 @@ import numpy as np
 from ._errors import CaptureError
 from ._pipeline import voxel_downsample
 
-
 MAX_ERROR_MM = 20.0
 """A flat surface's error above this [mm] (and above MAX_ERROR_OF_RANGE) is not sensor noise."""
 MAX_ERROR_OF_RANGE = 0.02

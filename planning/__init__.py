@@ -40,9 +40,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._heightfield import HeightField as HeightField
     from ._heightfield import heightfield_from_mesh as heightfield_from_mesh
     from ._names import PLANNER_NAMES as PLANNER_NAMES
-    from ._ompl import PlannerConfig as PlannerConfig
     from ._names import PlannerName as PlannerName
     from ._names import PlanningError as PlanningError
+    from ._ompl import PlannerConfig as PlannerConfig
     from ._ompl import PlanResult as PlanResult
     from ._ompl import plan_path as plan_path
     from ._ompl import waypoints_on_surface as waypoints_on_surface

@@ -42,28 +42,28 @@ __getattr__, __dir__, __all__ = lazy_exports(
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._adjust import scaled_scene as scaled_scene
-    from ._adjust import with_scad_timeout as with_scad_timeout
     from ._adjust import with_scad_backend as with_scad_backend
+    from ._adjust import with_scad_timeout as with_scad_timeout
     from ._errors import SceneError as SceneError
+    from ._library import LIBRARY as LIBRARY
+    from ._library import MAX_SEED as MAX_SEED
+    from ._library import library_names as library_names
+    from ._library import list_scenes as list_scenes
     from ._mesh import looks_like_millimetres as looks_like_millimetres
     from ._openscad import BACKENDS as BACKENDS
     from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
     from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
     from ._openscad import render_scad as render_scad
-    from ._library import LIBRARY as LIBRARY
-    from ._library import MAX_SEED as MAX_SEED
     from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
     from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
-    from ._scene import terrain_file_scene as terrain_file_scene
     from ._scene import Scene as Scene
     from ._scene import TerrainObject as TerrainObject
     from ._scene import YamlFields as YamlFields
-    from ._library import library_names as library_names
-    from ._library import list_scenes as list_scenes
     from ._scene import load_scene as load_scene
     from ._scene import read_yaml as read_yaml
     from ._scene import resolve_in_library as resolve_in_library
     from ._scene import resolve_scene as resolve_scene
+    from ._scene import terrain_file_scene as terrain_file_scene
     from ._world import World as World
     from ._world import build_terrain_mesh as build_terrain_mesh
     from ._world import build_world as build_world

@@ -8,13 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-
 from roachplan.perception import CaptureError, mesh_capture
 from roachplan.planning import (
     VALID,
-    PlanningError,
     Footprint,
     HeightField,
+    PlanningError,
     StandableMap,
     check_states,
     describe_state,

@@ -14,12 +14,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from test_perception import REAL  # noqa: E402
-
 from roachplan.experiments import run_trial  # noqa: E402
 from roachplan.perception import CaptureSettings, capture_settings, mesh_capture  # noqa: E402
 from roachplan.scenes import SceneError, build_world, load_scene  # noqa: E402
 from roachplan.scenes._scene import terrain_file_scene  # noqa: E402
+from test_perception import REAL  # noqa: E402
 
 FILES = {
     "tutorials_region_growing_rgb_tutorial.pcd": {},

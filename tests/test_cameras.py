@@ -17,8 +17,6 @@ import pytest
 import yaml
 from conftest import roachplan
 from PIL import Image
-from test_perception import REAL
-
 from roachplan.perception import (
     PRESETS,
     CaptureError,
@@ -28,6 +26,7 @@ from roachplan.perception import (
     load_capture,
     load_intrinsics,
 )
+from test_perception import REAL
 
 RTAB_PNG = REAL / "rtabmap" / "depth_154.png"
 RTAB_YAML = REAL / "rtabmap" / "calib_154.yaml"

@@ -9,13 +9,12 @@ import math
 
 import numpy as np
 import pytest
-from test_planning import independent_check
-
 from roachplan.experiments import plan
 from roachplan.experiments._trial import drive
 from roachplan.planning._drivable import max_curvature
 from roachplan.planning._dubins import dubins_path
 from roachplan.scenes import build_world, load_scene
+from test_planning import independent_check
 
 
 def test_dubins_curves_end_on_the_goal_and_are_as_long_as_ompls():

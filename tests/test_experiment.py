@@ -188,7 +188,6 @@ def test_best_path_is_the_lowest_energy_success_re_driven(run_one_worker):
 def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_worker, tmp_path):
     """Against the same figure drawn without trials: the paths add dark and blue pixels."""
     import matplotlib.image
-
     from roachplan.experiments import load_experiment
     from roachplan.experiments._figures import paths_figure
     from roachplan.scenes import build_world

@@ -14,8 +14,6 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from test_perception import REAL
-
 from roachplan.perception import CaptureError, load_capture
 from roachplan.perception._camera import MAX_IMAGE_SIDE, parse_calibration
 from roachplan.perception._headers import (
@@ -28,6 +26,7 @@ from roachplan.perception._headers import (
     parse_ply_header,
     parse_png_header,
 )
+from test_perception import REAL
 
 HOSTILE_TOKENS = ["0", "-1", "1", "3", "4", "8", "12", "1000000000", "99999999999999", "4294967295",
                   "nan", "inf", "-inf", "1e309", "abc", "", "x", "y", "z", "_", "F", "U", "I", "Q",

@@ -11,7 +11,6 @@ import trimesh
 import yaml
 from hypothesis import given
 from hypothesis import strategies as st
-
 from roachplan.perception import MAX_YAML_BYTES, load_yaml, short_repr
 from roachplan.scenes import Scene, SceneError, load_scene
 

@@ -6,8 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-
-from roachplan.planning import COLLISION, FOOT, OFF_MAP, VALID, ValidityConfig, check_states, describe_state
+from roachplan.planning import (
+    COLLISION,
+    FOOT,
+    OFF_MAP,
+    VALID,
+    ValidityConfig,
+    check_states,
+    describe_state,
+)
 from roachplan.scenes import load_scene, render_scad
 
 

@@ -23,9 +23,14 @@ import pytest
 import trimesh
 from conftest import roachplan
 from hostile import Case, run_case
+from roachplan.experiments import (
+    WRITTEN_BY,
+    OutputError,
+    atomic_path,
+    atomic_write,
+    prepare_output_folder,
+)
 from test_perception import FRAME_PCD
-
-from roachplan.experiments import WRITTEN_BY, OutputError, atomic_path, atomic_write, prepare_output_folder
 
 SEED_20 = "12345678901234567890"
 

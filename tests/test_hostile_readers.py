@@ -392,11 +392,10 @@ def test_a_bag_chunk_that_unpacks_past_its_declared_size_is_refused(
     """rosbags unpacks a whole chunk with no limit; a chunk header may lie about its size.
     Here the limit is lowered (a real bomb of 1 GiB takes long to build) and the header says
     100 bytes for a chunk of some 25 kB."""
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
     import roachplan.perception._capture as capture
     from roachplan.perception import CaptureError, load_capture
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
     msg = _cloud_msg(ts.types, 40, 50)

@@ -27,7 +27,6 @@ import trimesh
 import yaml
 from conftest import ROOT
 from hostile import Case, run_case
-
 from roachplan.planning._isolated import IsolationError, child_memory_limit, run_isolated
 from roachplan.scenes._openscad import JAIL_OUT, _sandbox_available, confined
 

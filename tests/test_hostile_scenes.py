@@ -12,7 +12,6 @@ import pytest
 import trimesh
 from hostile import Case, run_case
 from PIL import Image
-
 from roachplan.perception import MAX_YAML_BYTES
 
 # A model with top-level variables (one an expression of another), a module with a parameter,

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
-
 from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
 from roachplan.scenes._openscad import _sandbox_available, confined, scad_variables
 

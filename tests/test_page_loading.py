@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 import yaml
 from conftest import free_port
-from test_perception import REAL
-
 from roachplan.app._jobs import load_world
 from roachplan.app._relevel import adopt_capture_scene, rewrite_capture_settings
 from roachplan.app._uploads import prepare_upload_scene, scene_from_upload
 from roachplan.scenes import LIBRARY, build_world, load_scene
+from test_perception import REAL
 
 RTAB = REAL / "rtabmap"
 

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 import trimesh
 from conftest import ROOT, roachplan
-
 from roachplan.perception import (
     NO_NOISE,
     PRESETS,

@@ -14,7 +14,6 @@ import math
 import numpy as np
 import pytest
 from conftest import roachplan
-
 from roachplan.experiments import plan, plan_many
 from roachplan.planning import PLANNER_NAMES, homology_signature
 

@@ -13,9 +13,8 @@ import time
 import numpy as np
 import pytest
 from conftest import roachplan
-from test_app import ARGS, CHROMIUM
-
 from roachplan.app._replay import END_HOLD, HTML_MARK
+from test_app import ARGS, CHROMIUM
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
 

@@ -9,7 +9,6 @@ import math
 import numpy as np
 import pytest
 from conftest import roachplan
-
 from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
 from roachplan.sim._calibration import walk
 

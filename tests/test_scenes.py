@@ -11,7 +11,6 @@ import pytest
 import trimesh
 import yaml
 from conftest import roachplan
-
 from roachplan.scenes import (
     LIBRARY,
     SceneError,

@@ -9,11 +9,10 @@ import zipfile
 
 import pytest
 import yaml
-from test_perception import REAL
-
 from roachplan.app._uploads import prepare_upload_scene, public_message, scene_from_upload
 from roachplan.scenes import SceneError
 from roachplan.scenes._autopose import MAX_AUTO_EXTENT
+from test_perception import REAL
 
 
 def _zip(files: dict[str, bytes], links: tuple[str, ...] = ()) -> bytes:

@@ -7,7 +7,6 @@ import pytest
 import trimesh
 import yaml
 from conftest import ROOT
-
 from roachplan.app._uploads import prepare_upload_scene, safe_name, scene_from_upload
 from roachplan.scenes import LIBRARY, SceneError
 

@@ -10,8 +10,6 @@ import json
 import numpy as np
 import pytest
 from conftest import roachplan
-from test_perception import REAL
-
 from roachplan.perception import CaptureError
 from roachplan.perception._voxel_study import (
     MIN_KEPT,
@@ -22,6 +20,7 @@ from roachplan.perception._voxel_study import (
     square_region,
     voxel_study,
 )
+from test_perception import REAL
 
 ROOM = REAL / "tutorials_pairwise_capture0002.pcd"  # staircase, shelves; back wall 25 %, floor 8 %
 
