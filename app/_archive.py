@@ -1,4 +1,5 @@
-"""An uploaded .zip of an OpenSCAD model with its includes and data files, unpacked safely.
+"""An uploaded .zip, unpacked safely: an OpenSCAD model with its includes and data files, or a
+capture with its camera calibration (a depth image and its intrinsics, loaded together).
 
 Refused: members with absolute paths, drive letters or '..' parts, symbolic links, more than
 MAX_MEMBERS members, or more than MAX_UNPACKED_BYTES unpacked (counted as they are read, not as
@@ -42,8 +43,8 @@ def _member_path(label: str, info: zipfile.ZipInfo) -> PurePosixPath | None:
     return path
 
 
-def extract_scad_zip(label: str, data: bytes, folder: Path) -> str:
-    """Unpack the archive `data` (an upload named `label`) into folder; return the model's path
+def extract_zip(label: str, data: bytes, folder: Path) -> list[PurePosixPath]:
+    """Unpack the archive `data` (an upload named `label`) into folder; its files' paths
     relative to folder."""
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
@@ -68,7 +69,12 @@ def extract_scad_zip(label: str, data: bytes, folder: Path) -> str:
                         f"{label}: unpacks to more than {MAX_UNPACKED_BYTES >> 20} MB; refused"
                     )
                 dst.write(chunk)
-    paths = [rel for _, rel in members]
+    return [rel for _, rel in members]
+
+
+def scad_model(label: str, paths: list[PurePosixPath], folder: Path) -> str:
+    """The model among an unpacked archive's files (paths relative to folder): the .scad at its
+    top level, or at the top of its only folder, that no other file includes or uses."""
     tops = {rel.parts[0] for rel in paths}
     base = PurePosixPath(next(iter(tops))) if len(tops) == 1 and len(paths[0].parts) > 1 else None
     models = [
@@ -91,3 +97,25 @@ def extract_scad_zip(label: str, data: bytes, folder: Path) -> str:
             f"and data in sub-folders); found {found}"
         )
     return str(models[0])
+
+
+CALIBRATION_SUFFIXES = (".json", ".xml", ".yaml", ".yml")
+"""Files an archive may hold beside a capture: its camera calibration."""
+
+
+def capture_in_zip(
+    label: str, paths: list[PurePosixPath], capture_suffixes: tuple[str, ...]
+) -> tuple[str, str | None] | None:
+    """(capture, calibration or None), paths relative to the unpacked folder, for an archive of
+    one capture (a cloud, a depth image, a bag) and at most one calibration file; None when it
+    holds no capture (it may be a model); SceneError when it holds several."""
+    captures = [p for p in paths if p.suffix.lower() in capture_suffixes]
+    if not captures:
+        return None
+    calibrations = [p for p in paths if p.suffix.lower() in CALIBRATION_SUFFIXES]
+    if len(captures) > 1 or len(calibrations) > 1:
+        raise SceneError(
+            f"{label}: an archive of a capture holds one capture and at most one calibration "
+            f"file; found {', '.join(str(p) for p in captures + calibrations)}"
+        )
+    return str(captures[0]), (str(calibrations[0]) if calibrations else None)

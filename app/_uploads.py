@@ -52,7 +52,8 @@ def scene_from_upload(
     scad_backend: who renders it (a scad object's `backend:`, written only when not cgal).
 
     A .yaml is the scene itself; a .scad or mesh becomes a terrain object on a ground plane; a
-    .zip holds a .scad (at its top level) with its includes and data files; a capture becomes a
+    .zip holds a .scad (at its top level) with its includes and data files, or a capture with
+    its calibration file (loaded together); a capture becomes a
     capture object without a ground (the captured floor is the ground). Start, goal and bounds
     are left out: `prepare_upload_scene` picks them.
     """
@@ -77,10 +78,20 @@ def scene_from_upload(
     if suffix != ".zip":
         (folder / fname).write_bytes(data)
     if suffix == ".zip":
-        from ._archive import extract_scad_zip
+        from ._archive import capture_in_zip, extract_zip, scad_model
 
-        obj = {"scad": extract_scad_zip(name, data, folder), "timeout": scad_timeout}
-        obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
+        paths = extract_zip(name, data, folder)
+        has_scad = any(p.suffix.lower() == ".scad" for p in paths)
+        found = None if has_scad else capture_in_zip(name, paths, CAPTURE_SUFFIXES)
+        if found is not None:  # a capture with its calibration, loaded together
+            fname, calib = found
+            capture = dict(capture)
+            if calib is not None:
+                capture["intrinsics"] = calib
+            obj = {"capture": fname, **({"perception": capture} if capture else {})}
+        else:
+            obj = {"scad": scad_model(name, paths, folder), "timeout": scad_timeout}
+            obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
     elif suffix == ".ply" and _ply_has_faces(data):
         obj = {"mesh": fname}
     elif suffix in CAPTURE_SUFFIXES:

@@ -54,6 +54,23 @@ def test_depth_png_with_its_calibration_uploaded_first(app, artifacts):
         assert str(app.upload_dir) not in page.content()
 
 
+def test_a_depth_png_and_its_calibration_in_one_zip_load_together(app, artifacts, tmp_path):
+    import zipfile
+
+    rtab = REAL / "rtabmap"
+    bundle = tmp_path / "depth_154_and_calibration.zip"
+    with zipfile.ZipFile(bundle, "w") as z:
+        z.write(rtab / "depth_154.png", "depth_154.png")
+        z.write(rtab / "calib_154.yaml", "calib_154.yaml")
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        upload(page, bundle)
+        page.get_by_text(re.compile(r"Loaded `?depth_154")).wait_for(timeout=120_000)
+        page.screenshot(path=artifacts / "load-01b-rtabmap-zip-with-calibration.png")
+        assert _scene_of(app)["terrain"][0]["perception"]["intrinsics"] == "calib_154.yaml"
+        shown = page.get_by_text(re.compile(r"Camera \d+\.\d\d m above the ground")).inner_text()
+        assert 0.35 < float(re.search(r"Camera (\d+\.\d\d) m", shown).group(1)) < 0.5, shown
+
+
 def test_click_the_floor_to_relevel_then_plan_and_drive(app, artifacts):
     pcd = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
