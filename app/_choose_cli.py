@@ -9,7 +9,6 @@ import csv
 import io
 import json
 import math
-import sys
 
 
 def add_choose_parser(sub, terrain_help: str) -> None:
@@ -151,9 +150,14 @@ def cmd_choose(args: argparse.Namespace) -> int:
         seed=scene.seed if args.seed is None else args.seed, uncertainty=scene.uncertainty,
     )  # fmt: skip
 
+    from ._progress import bar
+
+    shown = bar(100, "choose", unit="%",
+                bar_format="{desc}: {percentage:3.0f}% |{bar}| {elapsed} {postfix}")  # fmt: skip
+
     def progress(message: str, fraction: float) -> None:
-        bar = "#" * round(20 * fraction)
-        print(f"\rchoose [{bar:<20}] {message}   ", end="", file=sys.stderr, flush=True)
+        shown.n = round(100 * min(max(fraction, 0.0), 1.0))
+        shown.set_postfix_str(message)
 
     # Ray with a cluster address: one worker per CPU of the cluster unless told (as `experiment`).
     cluster = args.backend == "ray" and args.address is not None
@@ -162,7 +166,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
         scene, cfg, workers=workers, backend=args.backend, address=args.address,
         validate_repeats=args.validate, progress=progress,
     )  # fmt: skip
-    print(file=sys.stderr)
+    shown.close()
     result = _jsonable({
         "scene": scene.name, "chosen": choice.chosen, "stopped": choice.stopped,
         "rollouts": choice.rollouts, "wall_time_s": round(choice.wall_time, 2),

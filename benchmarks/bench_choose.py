@@ -1,7 +1,8 @@
 """Choose by simulation (issue 17), measured side by side in one run.
 
     make bench        (or: .venv/bin/python benchmarks/bench_choose.py [--quick] [--parts 1,3]
-                       [--bank N] [--races N] [--fresh N]: fewer counts on a busy machine)
+                       [--bank N] [--races N] [--fresh N] [--scenes A,B]: fewer counts on a
+                       busy machine)
 
 1. Decision time: `double_bridge_rough`, K = 8, 95 % confidence, 60 s budget, 2 workers; the wall
    time as a ratio to the report's minute per trial and to the robot's own traverse time.
@@ -117,7 +118,7 @@ def racing_vs_bank(quick: bool, args) -> None:
 
 def chosen_vs_first(quick: bool, args) -> None:
     fresh = args.fresh or (20 if quick else 100)
-    for name in ("double_bridge_rough", "kinect_bridge"):
+    for name in args.scenes.split(","):
         scene = load_scene(name)
         cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=scene.seed,
                            uncertainty=scene.uncertainty)  # fmt: skip
@@ -160,7 +161,9 @@ def scaling(quick: bool, args) -> None:
     for workers in (1, 2):
         pool = _pool(scene, workers)
         try:
-            _drive_all(pool, cfg, candidates[:1], 1, stream=3)  # warm the workers
+            # Warm every worker: the pool spawns its processes on demand, and a worker's first
+            # call pays for its imports and world (seconds), which is not the rollouts' time.
+            _drive_all(pool, cfg, candidates[:1], 2 * workers, stream=5)
             t0 = time.perf_counter()
             _drive_all(pool, cfg, candidates, n, stream=3)
             walls[workers] = time.perf_counter() - t0
@@ -177,6 +180,7 @@ def main() -> None:
     ap.add_argument("--bank", type=int, default=None, help="part 2: rollouts per candidate (40)")
     ap.add_argument("--races", type=int, default=None, help="part 2: races replayed (20)")
     ap.add_argument("--fresh", type=int, default=None, help="part 3: fresh rollouts each (100)")
+    ap.add_argument("--scenes", default="double_bridge_rough,kinect_bridge", help="part 3's scenes")
     args = ap.parse_args()
     parts = {int(p) for p in args.parts.split(",")}
     for number, part in enumerate((decision_time, racing_vs_bank, chosen_vs_first, scaling), 1):

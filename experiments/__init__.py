@@ -78,8 +78,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._trial import TrialResult as TrialResult
     from ._trial import drive as drive
     from ._trial import finish_trial as finish_trial
-    from ._trial import plan as plan
     from ._trial import path_settings as path_settings
+    from ._trial import plan as plan
     from ._trial import plan_many as plan_many
     from ._trial import reference_energy as reference_energy
     from ._trial import run_trial as run_trial

@@ -312,7 +312,9 @@ def race(
     last_round = 0.0  # expected wall time of the next round [s]
     while True:
         alive = [c for c in candidates if not c.out]
-        if len(alive) <= 1:
+        # A lone candidate from the start is not a decision: it races on (alone) until the
+        # budget or cap, so that its P(success) is measured, not left at "unknown".
+        if len(alive) <= 1 and len(candidates) > 1:
             stopped = f"separated at {cfg.confidence:.0%} confidence"
             break
         if cfg.min_success is not None:
@@ -331,6 +333,9 @@ def race(
             stopped = f"time budget of {cfg.budget_s:.1f} s spent"
             break
         room = None if cfg.rollouts is None else cfg.rollouts - used
+        if not alive:  # only when no candidate was planned
+            stopped = "no candidate to race"
+            break
         if room is not None and room < len(alive):
             stopped = f"rollout cap of {cfg.rollouts} reached"
             break

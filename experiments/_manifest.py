@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import hashlib
 import importlib.metadata
@@ -167,6 +168,10 @@ def check_same_world(manifest: dict, world: World, where: Path) -> None:
 def check_same_spec(manifest: dict, spec: ExperimentSpec, trials: int, where: Path) -> None:
     """--resume must continue the same experiment: same settings, same number of trials."""
     recorded = {k: v for k, v in manifest["spec"].items() if k != "path"}
+    # Manifests from before `uncertainty:` (or before one of its fields) ran with the defaults.
+    recorded["uncertainty"] = dataclasses.asdict(
+        uncertainty_from_json(recorded.get("uncertainty", {}), f"{where}: spec")
+    )
     now = {k: v for k, v in json.loads(json.dumps(spec.to_json())).items() if k != "path"}
     for key in sorted(set(recorded) | set(now)):
         if recorded.get(key) != now.get(key):

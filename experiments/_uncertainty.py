@@ -25,8 +25,8 @@ Defaults, and why:
 
 A scene file (or an experiment spec, over its scene's) sets any of these under `uncertainty:`
 (start_xy [m], start_yaw [deg], friction, motor_speed, motor_mismatch, body_mass [-],
-terrain_height [m]); the
-ranges accepted are sim.UNCERTAINTY_RANGES, checked where the YAML is read.
+terrain_height [m]); the ranges accepted are sim.UNCERTAINTY_RANGES, checked where the YAML
+is read.
 """
 
 from __future__ import annotations

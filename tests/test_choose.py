@@ -159,12 +159,13 @@ def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
     proc = roachplan("choose", "--scene", str(path), "--candidates", "1", "--rollouts", "4",
                      "--workers", "1", "--seed", "1", "--json", "--out", str(out),
                      timeout=600)  # fmt: skip
-    assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     result = json.loads(proc.stdout)
+    assert result["rollouts"] == 4, "a lone candidate still gets its rollouts"
     assert result["uncertainty"]["friction"] == 0.0 and result["uncertainty"]["start_xy"] == 0.05
     worlds = [json.loads(line)["world"] for line in (out / "rollouts.jsonl").read_text().splitlines()]
     assert len(worlds) == 4 and all(w["friction_scale"] == 1.0 for w in worlds)
-    assert [w["seed"] for w in worlds] == [rollout_seed(1, 0, k) for k in range(4)]
+    assert sorted(w["seed"] for w in worlds) == sorted(rollout_seed(1, 0, k) for k in range(4))
     for w in worlds:  # each the pure draw of its recorded seed; no capture, no terrain noise
         assert w == {**draw(cfg, w["seed"]).to_json(), "terrain_height": 0.0}
 
@@ -221,6 +222,7 @@ def test_address_is_for_the_ray_backend():
 def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path):
     """A Ray instance started by another process (as a cluster would be), reached with
     --address: the same seed and cap give the same ranking as local workers."""
+    import os
     import subprocess
     import sys
 
@@ -230,13 +232,16 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path):
             "--seed", "3", "--json")  # fmt: skip
     local = roachplan(*args, "--workers", "2", timeout=600)
     assert local.returncode in (0, 1), local.stderr[-2000:]
-    # The holder starts Ray and, when its stdin closes, shuts down what it started.
+    # The holder starts Ray and, when its stdin closes, shuts down what it started. Ray >= 2.59
+    # turns token authentication on for a local cluster by default, and a client connecting by
+    # address does not send the token (ray-project/ray#64755): off for this loopback test.
     holder = subprocess.Popen(
         [sys.executable, "-c",
          "import sys, ray; ray.init(num_cpus=2, include_dashboard=False, "
          "logging_level='ERROR'); print(ray.get_runtime_context().gcs_address, flush=True); "
          "sys.stdin.read(); ray.shutdown()"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "RAY_AUTH_MODE": "disabled"},
     )  # fmt: skip
     try:
         address = holder.stdout.readline().strip()
@@ -291,3 +296,21 @@ def test_a_capture_s_terrain_height_noise_reaches_the_physics_and_reruns_exactly
         assert (a["energy"], a["end"]) != (b["energy"], b["end"])
     finally:
         worker.close()
+
+
+def test_a_manifest_from_before_uncertainty_still_resumes_and_a_changed_one_is_refused(tmp_path):
+    import dataclasses
+    from pathlib import Path
+
+    from roachplan.experiments import ExperimentError, load_experiment
+    from roachplan.experiments._manifest import check_same_spec, spec_from_manifest
+
+    spec = load_experiment("bridge_rough")
+    recorded = json.loads(json.dumps(spec.to_json()))
+    del recorded["uncertainty"]  # as written before the key existed
+    old = {"spec": recorded, "trials_total": 4}
+    check_same_spec(old, spec, 4, Path("old"))
+    assert spec_from_manifest(old, Path("old")).uncertainty == UncertaintyConfig()
+    changed = dataclasses.replace(spec, uncertainty=UncertaintyConfig(friction=0.5))
+    with pytest.raises(ExperimentError, match="was started with uncertainty"):
+        check_same_spec(old, changed, 4, Path("old"))
