@@ -201,7 +201,7 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
     # Only this race's candidates are shown, and Drive has nothing to take until it chooses.
     app.plan_endpoints = None
     app.set_plans([])
-    app.server.scene.remove_by_name("/trajectories")
+    app.view.clear("/trajectories")
     panel.lines, panel.table.content = {}, ""
     paths: dict[int, tuple[str, int, np.ndarray]] = {}
     got: dict[str, object] = {

@@ -29,7 +29,7 @@ def do_plan(app, cmd: Cmd) -> None:
     app._show_robot_at_start()
     # Only what this plan finds is shown: no earlier paths, roadmap or trajectories.
     app.set_plans([])
-    app.server.scene.remove_by_name("/trajectories")
+    app.view.clear("/trajectories")
     tried, plans, errors = [], [], []
     deadline = time.monotonic() + budget
     request = dict(seed=seed, start=start, goal=goal, planner=planner)
@@ -103,7 +103,7 @@ def do_drive(app, cmd: Cmd) -> None:
 def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialResult | None:
     """Drive in a child and play its frames back at `speed` x real time as they come
     (every frame the browser can take: at most 60 per second)."""
-    app.server.scene.remove_by_name("/trajectories")
+    app.view.clear("/trajectories")
     job = Job(_drive_job, app.world, planned, start, goal)
     frames, results, errors = [], [], []
     path_xy = np.asarray(planned.path_xyz)[:, :2]
@@ -185,7 +185,7 @@ def show_trial(app) -> None:
         return
     t = app.scene_trials[int(app.show_trial.value) - 1]
     app.view.hide_paths()
-    app.server.scene.remove_by_name("/trajectories")
+    app.view.clear("/trajectories")
     app._draw("/plans/shown", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
     app._draw("/trajectories/shown", [p[1:] for p in t["trajectory"]], BLUE)
     app.status.content = f"Trial {app.show_trial.value}: {t['outcome']} ({t['reason']})."

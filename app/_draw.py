@@ -73,12 +73,30 @@ class SceneView:
         self.path_nodes: list = []
         """Path k's line segments (index k of the app's plans), while the paths are shown."""
         self.standable_node = None
+        self.shown = {"/plans": True, "/trajectories": True}
+        """Whether each group is shown (the page's Show paths / Show trajectories)."""
+        self._roots: dict = {}
+
+    def clear(self, root: str) -> None:
+        """Remove what is drawn under root ("/plans" or "/trajectories"), keeping the group's
+        shown or hidden state for what is drawn there next (a hidden parent hides it)."""
+        self.scene.remove_by_name(root)
+        self._roots[root] = self.scene.add_frame(root, show_axes=False,
+                                                 visible=self.shown[root])  # fmt: skip
+
+    def set_shown(self, root: str, shown: bool) -> None:
+        """Show or hide a group at once, and what is drawn in it later."""
+        self.shown[root] = bool(shown)
+        if root in self._roots:
+            self._roots[root].visible = bool(shown)
 
     def show(self, world: World, on_marker) -> None:
         """Replace everything drawn by this world, with the markers at its start and goal."""
         s, scene, r = self.scene, world.scene, world.robot
-        for name in ("/terrain", "/plans", "/trajectories", "/robot", "/markers", "/standable"):
+        for name in ("/terrain", "/robot", "/markers", "/standable"):
             s.remove_by_name(name)
+        for root in self.shown:
+            self.clear(root)
         s.set_up_direction("+z")
         if len(world.mesh.faces):
             s.add_mesh_simple("/terrain/mesh", world.mesh.vertices, world.mesh.faces,
@@ -165,7 +183,7 @@ class SceneView:
 
     def hide_paths(self) -> None:
         """Remove every path, the roadmap and a shown trial's path."""
-        self.scene.remove_by_name("/plans")
+        self.clear("/plans")
         self.path_nodes = []
 
     def show_standable(self, world: World, sm) -> None:

@@ -206,6 +206,8 @@ class RoachApp:
             self.follow = gui.add_checkbox("Follow robot", False,
                                            hint="Every browser's camera follows the robot")  # fmt: skip
             self.zoom_button = gui.add_button("Zoom to robot")
+            self.show_paths = gui.add_checkbox("Show paths", True)
+            self.show_trajectories = gui.add_checkbox("Show trajectories", True)
             self.show_standable = gui.add_checkbox(
                 "Show where it can stand", False,
                 hint="Green: the region the start is in; yellow: other places it can stand",
@@ -242,6 +244,8 @@ class RoachApp:
         self.follow.on_update(lambda ev: put(ViewCmd(ev.client_id, "follow")))
         self.zoom_button.on_click(lambda ev: put(ViewCmd(ev.client_id, "zoom")))
         self.show_standable.on_update(lambda ev: put(ViewCmd(ev.client_id, "standable")))
+        self.show_paths.on_update(lambda ev: put(ViewCmd(ev.client_id, "paths")))
+        self.show_trajectories.on_update(lambda ev: put(ViewCmd(ev.client_id, "trajectories")))
 
     def _set_click_mode(self) -> None:
         """Listen for clicks on the scene only while a marker is to be placed (a listening
@@ -417,6 +421,10 @@ class RoachApp:
             case "drive_path":
                 if self.drive_path_picker.value != "none":
                     self.select_path(int(self.drive_path_picker.value) - 1)
+            case "paths":
+                self.view.set_shown("/plans", self.show_paths.value)
+            case "trajectories":
+                self.view.set_shown("/trajectories", self.show_trajectories.value)
             case "standable":
                 if self.show_standable.value:
                     self._show_standable()
@@ -546,7 +554,7 @@ class RoachApp:
                 do_drive(self, cmd)
             case ResetCmd():
                 self._show_robot_at_start()
-                self.server.scene.remove_by_name("/trajectories")
+                self.view.clear("/trajectories")
                 self.status.content = "Robot back at the start."
             case BestPathCmd():
                 do_best_path(self, cmd)

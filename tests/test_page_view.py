@@ -79,6 +79,17 @@ def robot_pixels_in_screenshot(page, path) -> float:
     return float(max(xs.max() - xs.min(), ys.max() - ys.min()) + 1)
 
 
+def blue_pixels(page, path) -> int:
+    """Pixels of the trajectory's blue (0, 90, 255 under any lighting: blue well above red and
+    green) in a screenshot."""
+    from PIL import Image
+
+    png = page.screenshot(path=path)
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return int(np.sum((b > 120) & (r < 0.35 * b) & (g < 0.6 * b)))
+
+
 def test_a_framed_view_holds_its_points_and_the_robot_distance_gives_its_size():
     from roachplan.app._draw import framing, projected_pixels, robot_distance
 
@@ -166,6 +177,24 @@ def test_a_new_plan_clears_the_old_and_the_toggles_act_at_once(app, artifacts):
         assert nodes(app, "/plans/") == ["/plans/best"]
         assert nodes(app, "/trajectories/") == ["/trajectories/current"]
         page.screenshot(path=artifacts / "view-05-best-path.png")
+
+        # Show trajectories / Show paths hide and show at once, and hold for what comes next.
+        blue_before = blue_pixels(page, artifacts / "view-05b-trajectory-shown.png")
+        page.get_by_text("Show trajectories").click()
+        wait_until(lambda: not app.view._roots["/trajectories"].visible, 10)
+        page.wait_for_timeout(1000)
+        blue_after = blue_pixels(page, artifacts / "view-05c-trajectory-hidden.png")
+        # (the goal marker is blue too: what goes is the trajectory's line)
+        assert blue_before - blue_after > 150, (blue_before, blue_after)
+        page.get_by_text("Show paths").click()
+        wait_until(lambda: not app.view._roots["/plans"].visible, 10)
+        page.get_by_role("button", name="Plan").click()  # a new plan, drawn hidden
+        page.get_by_text(re.compile(r"Path found in")).wait_for(timeout=60_000)
+        assert nodes(app, "/plans/") and not app.view._roots["/plans"].visible
+        page.get_by_text("Show paths").click()
+        page.get_by_text("Show trajectories").click()
+        wait_until(lambda: app.view._roots["/plans"].visible
+                   and app.view._roots["/trajectories"].visible, 10)  # fmt: skip
 
 
 def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts):
