@@ -308,7 +308,11 @@ def reconstruct(
         inside = np.ones(len(pts), dtype=bool)
     advice = depth_scale_advice(capture, cfg.depth_range or CAMERA_DEPTH_RANGE)
     if advice is not None and inside.mean() < 0.5:
-        raise CaptureError(f"{capture.source}: {advice}")
+        if cfg.depth_range is None:  # the default range: most likely a wrong scale
+            raise CaptureError(f"{capture.source}: {advice}")
+        # A range the user chose keeps what it keeps; the scale may still be wrong.
+        warnings.append(f"{100 * (1 - inside.mean()):.0f} % of the points are outside the depth "
+                        f"range given; if that is not meant: {advice}")  # fmt: skip
     pts = pts[inside]
     stage("depth range", len(pts))
     pts = voxel_downsample(pts, cfg.voxel)

@@ -252,3 +252,45 @@ def test_a_bags_imu_gives_up_and_the_floor_not_the_wall_is_the_ground(tmp_path, 
     else:  # the frame's z is 75 degrees off the true up: the floor is not the ground found
         assert report["up_source"] != "the IMU"
         assert ground.get("support_points", 0) < 9000, report
+
+
+def test_a_capture_is_a_scene_for_plan_and_for_an_experiment_spec(tmp_path):
+    """Wherever a scene is taken, a capture file works directly: `plan --scene CAPTURE` plans
+    between the picked start and goal, and an experiment spec whose scene is the capture runs
+    trials on it (start and goal picked the same way in every worker)."""
+    capture = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
+    planned = roachplan("plan", "--scene", str(capture), "--json", timeout=600)
+    assert planned.returncode == 0, planned.stderr
+    r = json.loads(planned.stdout)
+    assert len(r["path"]) >= 2 and "picked automatically" in planned.stderr
+    spec = tmp_path / "room.yaml"
+    spec.write_text(yaml.safe_dump({"scene": str(capture), "trials_per_route": 2, "seed": 0}))
+    out = tmp_path / "results"
+    done = roachplan("experiment", str(spec), "--trials", "2", "--workers", "1", "--out",
+                     str(out), "--repeats", "0", "--quiet", timeout=900)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    records = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    trials = [t for t in records if t.get("kind") == "trial"]
+    assert len(trials) == 2 and all(t["path_found"] for t in trials)
+    for t in trials:  # the same pick as `plan` made (plan --json rounds to 0.01 mm)
+        assert np.allclose(t["start"], r["states"][0], atol=1e-5)
+
+
+def test_a_world_frame_cloud_given_as_such_and_a_depth_range(tmp_path):
+    """--frame world takes a cloud as z up already (no camera, no gravity guess); --depth-range
+    keeps only the points at those distances from the sensor."""
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-2.0, 2.0, (30000, 2))
+    floor = np.column_stack([xy, 0.003 * rng.standard_normal(30000)])
+    cloud = tmp_path / "floor_world.xyz"
+    np.savetxt(cloud, floor, fmt="%.4f")
+    r = _mesh_json(tmp_path, str(cloud), "--frame", "world", "--voxel", "0.05")
+    assert r["frame"] == "world" and r["camera_pose"] is None
+    (x0, y0, z0), (x1, y1, z1) = r["bounds"]
+    assert x1 - x0 > 3.5 and y1 - y0 > 3.5 and z1 - z0 < 0.05  # flat, as given
+    depth = RTAB / "depth_154.png"
+    calib = ("--intrinsics", str(RTAB / "calib_154.yaml"))
+    full = _mesh_json(tmp_path, "rtabmap/depth_154.png", *calib)
+    near = _mesh_json(tmp_path, str(depth), *calib, "--depth-range", "0.3,2.0")
+    assert near["counts"]["depth range"] < full["counts"]["depth range"]
+    assert near["bounds"][1][1] - near["bounds"][0][1] < full["bounds"][1][1] - full["bounds"][0][1]
