@@ -98,6 +98,11 @@ def _enter(jail: dict) -> None:
     def inside(path: str) -> str:
         return os.path.join(root, path.lstrip("/"))
 
+    # The empty writable folders first, then links and binds: one inside them (a project or
+    # its venv under /tmp) stays visible instead of being covered by them.
+    for path in jail["tmpfs"]:
+        os.makedirs(inside(path), exist_ok=True)
+        _mount("none", inside(path), "tmpfs", _MS_NOSUID | _MS_NODEV, "size=16m,mode=1777")
     for path, target in sorted(jail["links"].items()):
         os.makedirs(os.path.dirname(inside(path)), exist_ok=True)
         os.symlink(target, inside(path))
@@ -111,9 +116,6 @@ def _enter(jail: dict) -> None:
             os.makedirs(os.path.dirname(at), exist_ok=True)
             open(at, "a").close()
         _bind(src, at, writable=writable)
-    for path in jail["tmpfs"]:
-        os.makedirs(inside(path), exist_ok=True)
-        _mount("none", inside(path), "tmpfs", _MS_NOSUID | _MS_NODEV, "size=16m,mode=1777")
     os.chdir(root)
     number = _PIVOT_ROOT.get(os.uname().machine)
     if number is not None and _libc.syscall(number, b".", b".") == 0:
