@@ -200,6 +200,10 @@ class RayPool:
     None). Every node must have roachplan installed and the scene's files at the same path."""
 
     def __init__(self, spec: ExperimentSpec, workers: int | None, address: str | None) -> None:
+        if address is None and "ray" not in sys.modules:
+            # A local instance on loopback, not on this machine's network address (Ray's
+            # single-machine mode; it must be set before Ray is imported).
+            os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
         import ray
         from ray.util import ActorPool
 

@@ -11,7 +11,15 @@ import pytest
 import trimesh
 from conftest import roachplan
 
-from roachplan.experiments._choose import Candidate, ChooseConfig, rank, wilson
+from roachplan.experiments._choose import (
+    Candidate,
+    ChooseConfig,
+    _eliminate,
+    race,
+    rank,
+    wilson,
+    within_zone,
+)
 from roachplan.experiments._uncertainty import UncertaintyConfig, draw, rollout_seed
 
 
@@ -60,6 +68,105 @@ def test_ranking_never_puts_a_candidate_above_one_wholly_more_likely_to_succeed(
     # Two safe ones: the cheaper first.
     cheap_safe = _cand(2, "1" * 20, 1.5)
     assert rank([safe_costly, cheap_safe], 0.95, None)[0] is cheap_safe
+
+
+def _drawn(i: int, n: int, p: float, energy: float, sd: float, seed: int = 0) -> Candidate:
+    """A candidate with n rollouts drawn (seeded) from P(success) p and relative energy
+    N(energy, sd^2) over the successes."""
+    c = Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
+    c.rollouts = [_rollout(i, rollout_seed(seed, i, k), p, energy, sd) for k in range(n)]
+    return c
+
+
+def _rollout(i: int, seed: int, p: float, energy: float, sd: float) -> dict:
+    rng = np.random.default_rng(seed)
+    ok = rng.random() < p
+    e = float(rng.normal(energy, sd))
+    return {"candidate": i, "seed": seed, "outcome": "success" if ok else "fell",
+            "relative_energy": e, "energy": e, "drive_time": 1.0, "end": [0, 0]}  # fmt: skip
+
+
+def _race(truths, **cfg):
+    """Race hand-made candidates whose rollouts come from truths[i] = (p, energy, sd): the
+    race's own logic on seeded draws, no simulation."""
+    racers = [Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
+              for i in range(len(truths))]  # fmt: skip
+
+    def run(calls):
+        return [_rollout(i, seed, *truths[i]) for i, _path, seed in calls]
+
+    return race(racers, ChooseConfig(candidates=len(truths), budget_s=None, **cfg), run, mass=1.0)
+
+
+def test_practically_equal_candidates_stop_within_the_indifference_zone():
+    conf = 1 - 0.05 / 2
+    # 200/200 and 199/200 with energies 1 % apart: not separable, but equal within (0.05, 5 %).
+    a, b = _drawn(0, 200, 1.0, 1.84, 0.08), _drawn(1, 200, 0.995, 1.86, 0.08)
+    assert a.p_interval(conf)[2] >= b.p_interval(conf)[1], "the intervals overlap"
+    best = within_zone([a, b], conf, None, (0.05, 0.05))
+    assert best is rank([a, b], conf, None)[0]
+    assert within_zone([a, b], conf, None, (0.0, 0.0)) is None
+    # Too few rollouts to bound P(success) within 0.05: no decision yet.
+    assert within_zone([_drawn(0, 40, 1.0, 1.84, 0.08), _drawn(1, 40, 1.0, 1.86, 0.08)],
+                       conf, None, (0.05, 0.05)) is None  # fmt: skip
+    # A rival that may be more than 5 % cheaper (energy 10 % lower) is no decision either.
+    cheap = _drawn(1, 200, 1.0, 1.66, 0.08)
+    assert within_zone([a, cheap], conf, None, (0.05, 0.05)) in (None, cheap)
+
+    # The race: stops in the zone, well before the cap, and says so.
+    truths = [(1.0, 1.84, 0.08), (0.995, 1.86, 0.08)]
+    zoned = _race(truths, rollouts=800, max_per_candidate=400, seed=3)
+    assert zoned.stopped == "within the indifference zone (P 0.05, energy 5%) at 95% confidence"
+    assert zoned.rollouts < 800 and zoned.chosen in (0, 1)
+    # With the zone off the same two never separate: the race runs to its cap.
+    plain = _race(truths, rollouts=800, max_per_candidate=400, seed=3, indifference=(0.0, 0.0))
+    assert "indifference" not in plain.stopped and "separated" not in plain.stopped
+    assert plain.rollouts == 800
+
+
+def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
+    conf = 1 - 0.05 / 3
+    good = _drawn(0, 40, 1.0, 1.8, 0.05)
+    risky = _drawn(1, 40, 0.5, 1.0, 0.05, seed=1)
+    costly = _drawn(2, 40, 1.0, 2.6, 0.05, seed=2)
+    alive = [good, risky, costly]
+    _eliminate(alive, conf, None)
+    assert not good.out
+    assert risky.out.startswith("less likely to succeed"), risky.out
+    assert costly.out.startswith("costs more energy than candidate 0"), costly.out
+    # One that left the race, however good its few rollouts look, ranks below those in it.
+    early = _drawn(3, 8, 1.0, 1.7, 0.05, seed=3)
+    early.out = "costs more energy than candidate 0 (intervals apart)"
+    ordered = rank([early, _drawn(0, 200, 0.99, 1.8, 0.05)], 1 - 0.05 / 2, None)
+    assert ordered[0].index == 0
+    # The race drops both and stops separated with the good one.
+    choice = _race([(1.0, 1.8, 0.05), (0.5, 1.0, 0.05), (1.0, 2.6, 0.05)], rollouts=600, seed=5)
+    assert choice.chosen == 0 and choice.stopped == "separated at 95% confidence"
+    assert {c.index for c in choice.candidates if c.out} == {1, 2}
+
+
+def test_the_chosen_is_never_wholly_below_another_with_or_without_the_zone():
+    rng = np.random.default_rng(17)
+    zoned = 0
+    for trial in range(60):
+        k = int(rng.integers(2, 6))
+        truths = [(float(rng.choice([1.0, 0.98, 0.9, 0.6])), float(rng.uniform(1.5, 2.0)), 0.1)
+                  for _ in range(k)]  # fmt: skip
+        zone = (0.05, 0.05) if trial % 2 else (0.0, 0.0)
+        choice = _race(truths, rollouts=int(rng.integers(40, 1000)), max_per_candidate=200,
+                       seed=trial, indifference=zone)  # fmt: skip
+        conf = 1 - 0.05 / k
+        chosen = next(c for c in choice.candidates if c.index == choice.chosen)
+        low = chosen.p_interval(conf)[1]
+        for c in choice.candidates:
+            assert not chosen.p_interval(conf)[2] < c.p_interval(conf)[1], (trial, choice.stopped)
+        assert choice.ranking[0]["candidate"] == choice.chosen
+        if choice.stopped.startswith("within the indifference zone"):
+            # The decision's statement holds on the race's own intervals.
+            rivals = [c for c in choice.candidates if not c.out and c is not chosen]
+            assert all(c.p_interval(conf)[2] <= low + 0.05 + 1e-12 for c in rivals)
+            zoned += 1
+    assert zoned >= 3, "the zone stopped some of the races"
 
 
 @pytest.fixture(scope="module")
@@ -219,13 +326,16 @@ def test_address_is_for_the_ray_backend():
     assert "--address RAY_ADDRESS" in helped.stdout
 
 
-def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path):
+def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, monkeypatch):
     """A Ray instance started by another process (as a cluster would be), reached with
     --address: the same seed and cap give the same ranking as local workers."""
     import os
     import subprocess
     import sys
 
+    # Ray's single-machine mode, for the holder and for roachplan: every address on loopback,
+    # not on the machine's network address (this test sends nothing off the machine).
+    monkeypatch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     scene = tmp_path / "flat.yaml"
     scene.write_text(FLAT)
     args = ("choose", "--scene", str(scene), "--candidates", "2", "--rollouts", "8",
@@ -245,8 +355,8 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path):
     )  # fmt: skip
     try:
         address = holder.stdout.readline().strip()
-        assert ":" in address, "the Ray holder did not start"
-        on_ray = roachplan(*args, "--backend", "ray", "--address", address, timeout=600)
+        assert address.startswith("127.0.0.1:"), f"the Ray holder did not start on loopback: {address!r}"
+        on_ray = roachplan(*args, "--backend", "ray", "--address", address, timeout=300)
     finally:
         holder.stdin.close()
         holder.wait(timeout=120)
