@@ -34,27 +34,22 @@ def scaled_scene(scene: Scene, factor: float | tuple[float, float, float]) -> Sc
 
 def with_scad_timeout(scene: Scene, timeout: float) -> Scene:
     """The scene with every OpenSCAD object's render time limit set to timeout [s]."""
-    problem = timeout_problem(timeout)
-    if problem:
-        raise SceneError(f"--scad-timeout: {problem}")
-    return dataclasses.replace(
-        scene,
-        terrain=tuple(
-            dataclasses.replace(o, timeout=float(timeout)) if o.kind == "scad" else o
-            for o in scene.terrain
-        ),
-    )
+    return _every_scad(scene, "--scad-timeout", timeout_problem(timeout), timeout=float(timeout))
 
 
 def with_scad_backend(scene: Scene, backend: str) -> Scene:
     """The scene with every OpenSCAD object rendered by backend ("cgal" or "manifold")."""
-    problem = backend_problem(backend)
+    return _every_scad(scene, "--scad-backend", backend_problem(backend), backend=backend)
+
+
+def _every_scad(scene: Scene, flag: str, problem: str | None, **change) -> Scene:
+    """The scene with `change` made to every OpenSCAD object; SceneError naming the flag when
+    its value has a problem."""
     if problem:
-        raise SceneError(f"--scad-backend: {problem}")
+        raise SceneError(f"{flag}: {problem}")
     return dataclasses.replace(
         scene,
         terrain=tuple(
-            dataclasses.replace(o, backend=backend) if o.kind == "scad" else o
-            for o in scene.terrain
+            dataclasses.replace(o, **change) if o.kind == "scad" else o for o in scene.terrain
         ),
     )
