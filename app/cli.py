@@ -947,6 +947,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per ratio")
     p.set_defaults(func=_cmd_calibrate_turning)
 
+    def _scad_flags(q) -> None:
+        """The OpenSCAD render's time limit and backend, as every command that renders takes."""
+        q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
+                       help="time limit of each OpenSCAD render (default: the scene's, else 600)")
+        q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
+                       help="who renders each OpenSCAD model: cgal (the openscad binary) or "
+                            "manifold (openscad-evaluator, faster on CSG-heavy models; refuses "
+                            "text() and surface()) (default: the scene's, else cgal)")  # fmt: skip
+
     p = sub.add_parser("scene", help="the scene library")
     scene_sub = p.add_subparsers(dest="scene_command", required=True)
     q = scene_sub.add_parser("list", help="list library scenes")
@@ -955,12 +964,7 @@ def build_parser() -> argparse.ArgumentParser:
         "check", help="validate scene files: load, render, and check start and goal"
     )
     q.add_argument("files", nargs="+", metavar="FILE", help="scene .yaml files or library names")
-    q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
-                   help="time limit of each OpenSCAD render (default: the scene's, else 600)")
-    q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
-                   help="who renders each OpenSCAD model: cgal (the openscad binary) or manifold "
-                        "(openscad-evaluator, faster on CSG-heavy models; refuses text() and "
-                        "surface()) (default: the scene's, else cgal)")  # fmt: skip
+    _scad_flags(q)
     q.set_defaults(func=_cmd_scene_check)
     q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
     q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
@@ -970,12 +974,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "input")  # fmt: skip
     q.add_argument("--scale", type=float, default=None, metavar="S",
                    help="scale every terrain model by S before placing it (0.001: millimetres)")
-    q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
-                   help="time limit of each OpenSCAD render (default: the scene's, else 600)")
-    q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
-                   help="who renders each OpenSCAD model: cgal (the openscad binary) or manifold "
-                        "(openscad-evaluator, faster on CSG-heavy models; refuses text() and "
-                        "surface()) (default: the scene's, else cgal)")  # fmt: skip
+    _scad_flags(q)
     q.add_argument("--force", action="store_true", help=FORCE_HELP)
     q.set_defaults(func=_cmd_scene_build)
     # --debug after the command too (`roachplan plan --debug`); SUPPRESS keeps the top level's
