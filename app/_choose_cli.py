@@ -31,6 +31,10 @@ def add_choose_parser(sub, terrain_help: str) -> None:
     p.add_argument("--confidence", type=float, default=0.95, help="joint confidence (default 0.95)")
     p.add_argument("--min-success", type=float, default=None, metavar="P",
                    help="choose the lowest-energy path whose P(success) lower bound is >= P")
+    p.add_argument("--indifference", default="0.05,0.05", metavar="DP,DE",
+                   help="stop once the chosen path is, at the confidence, within DP of the best "
+                        "P(success) and, among those as safe, within DE (a fraction) of the "
+                        "lowest energy (default 0.05,0.05; 0,0: stop only when separated)")  # fmt: skip
     p.add_argument("--seed", type=int, default=None, help="seed of every draw (default: the scene's)")
     p.add_argument("--reference", action="store_true",
                    help="the report's raw paths and algorithms 1-2 instead of drivable plans "
@@ -67,6 +71,7 @@ def _check(args: argparse.Namespace) -> None:
         raise bad("--confidence", args.confidence, "give a confidence in [0.5, 1), e.g. 0.95")
     if args.min_success is not None and not 0 < args.min_success < 1:
         raise bad("--min-success", args.min_success, "give a probability in (0, 1), e.g. 0.9")
+    args.indifference = _indifference(args.indifference, bad)
     if args.seed is not None and not 0 <= args.seed < 2**32:
         raise bad("--seed", args.seed, f"give a seed in [0, {2**32 - 1}]")
     if args.workers is not None and args.workers < 1:
@@ -75,6 +80,20 @@ def _check(args: argparse.Namespace) -> None:
         raise bad("--validate", args.validate, "give 0 or more repeats")
     if args.address is not None and args.backend != "ray":
         raise bad("--address", args.address, "a Ray cluster address is for --backend ray")
+
+
+def _indifference(text, bad) -> tuple[float, float]:
+    """--indifference "DP,DE" as (DP, DE), each in [0, 1); already parsed: as given."""
+    if isinstance(text, tuple):
+        return text
+    accepted = "give DP,DE: two numbers in [0, 1), e.g. 0.05,0.05 (0,0: no indifference zone)"
+    try:
+        dp, de = (float(v) for v in str(text).split(","))
+    except ValueError:
+        raise bad("--indifference", text, accepted) from None
+    if not (0 <= dp < 1 and 0 <= de < 1):
+        raise bad("--indifference", text, accepted)
+    return dp, de
 
 
 def _fmt(v: float, digits: int = 2) -> str:
@@ -125,7 +144,6 @@ def _jsonable(obj):
 def cmd_choose(args: argparse.Namespace) -> int:
     import dataclasses
     import os
-    from pathlib import Path
 
     from roachplan.experiments import atomic_write, prepare_output_folder
     from roachplan.experiments._choose import ChooseConfig, choose
@@ -147,6 +165,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
     cfg = ChooseConfig(
         candidates=args.candidates, rollouts=args.rollouts, budget_s=budget,
         confidence=args.confidence, min_success=args.min_success,
+        indifference=args.indifference,
         seed=scene.seed if args.seed is None else args.seed, uncertainty=scene.uncertainty,
     )  # fmt: skip
 
@@ -171,6 +190,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
         "scene": scene.name, "chosen": choice.chosen, "stopped": choice.stopped,
         "rollouts": choice.rollouts, "wall_time_s": round(choice.wall_time, 2),
         "seed": cfg.seed, "confidence": cfg.confidence, "min_success": cfg.min_success,
+        "indifference": list(cfg.indifference),
         "turning_radius": scene.planner.turning_radius, "driver": scene.driver.kind,
         "uncertainty": dataclasses.asdict(cfg.uncertainty),
         "ranking": choice.ranking, "validation": checked,

@@ -16,6 +16,19 @@ candidate is left (separated at the requested confidence), when the rollout cap 
 budget is spent, or, with min_success, when the cheapest candidate whose lower bound clears it
 is separated from the other such ones. Which of these stopped it is reported.
 
+Indifference zone (DP, DE) = cfg.indifference: candidates that are practically equal never
+separate (two paths that succeed 199 and 200 times in 200 would need many thousands of
+rollouts), so the race also stops, "within the indifference zone", when this holds for the
+candidate the ranking puts first (c*), at the requested joint confidence (the same Bonferroni
+intervals): every other candidate still in the race has P(success) upper bound at most c*'s
+lower bound + DP [probability], and each of them that is not clearly less safe (its P upper
+bound at or above c*'s lower bound) has a mean relative energy lower bound at least c*'s upper
+bound / (1 + DE) [DE a fraction of the energy]. That is: at the requested confidence, the
+chosen candidate is within DP of the best P(success) and, among those as safe, within DE of
+the lowest energy (the candidates that left the race were beaten outright). With min_success
+only the energy part applies, among the candidates whose P upper bound clears min_success.
+(0, 0) turns the zone off: the race then stops only as described above.
+
 Everything drawn flows from `seed`: the candidates are planned with seeds seed, seed + 1, ...,
 and rollout k of candidate c has seed rollout_seed(seed, c, k). Rounds end only when all their
 rollouts are in, so with a rollout cap (not a time budget) the same seed gives the same choice.
@@ -62,6 +75,10 @@ class ChooseConfig:
     max_per_candidate: int = 200
     """A candidate gets at most this many rollouts [-]."""
     seed: int = 0
+    indifference: tuple[float, float] = (0.05, 0.05)
+    """(DP, DE): differences too small to matter, DP in P(success) [-] and DE in mean relative
+    energy [fraction, 0.05 = 5 %]; the race stops once the first-ranked candidate is within
+    them of the best (module docstring). (0, 0): off, stop only on separation."""
     uncertainty: UncertaintyConfig | None = None
     """What each rollout's world is drawn from; None: the scene's (its `uncertainty:` key,
     else the defaults of experiments/_uncertainty.py)."""
@@ -266,18 +283,53 @@ def _eliminate(alive: list[Candidate], conf: float, min_success: float | None) -
                 break
 
 
+def within_zone(
+    alive: list[Candidate],
+    conf: float,
+    min_success: float | None,
+    indifference: tuple[float, float],
+) -> Candidate | None:
+    """The first-ranked of `alive` if the indifference-zone decision holds for it at per-
+    candidate confidence conf (module docstring), else None. Never with the zone off, nor for
+    a candidate with fewer than 2 successes (its energy interval is unbounded)."""
+    dp, de = indifference
+    if (dp <= 0 and de <= 0) or not alive:
+        return None
+    best = rank(alive, conf, min_success)[0]
+    _, b_lo, b_hi = best.p_interval(conf)
+    be_hi = best.energy_interval(conf)[2]
+    if len(best.successes) < 2:
+        return None
+    if min_success is not None and b_lo < min_success:
+        return None
+    for d in alive:
+        if d is best:
+            continue
+        _, d_lo, d_hi = d.p_interval(conf)
+        if min_success is None and d_hi > b_lo + dp:
+            return None  # d might be more than DP safer
+        # Only a candidate that might be as safe (or might qualify) counts for energy.
+        if (d_hi < min_success) if min_success is not None else (d_hi < b_lo):
+            continue
+        if not be_hi <= (1 + de) * d.energy_interval(conf)[1]:
+            return None  # d might be more than DE cheaper (or its energy is not known yet)
+    return best
+
+
 def rank(candidates: list[Candidate], conf: float, min_success: float | None) -> list[Candidate]:
     """Best first: with min_success, the qualifying ones by energy; else by P(success), then
-    energy. A candidate whose P(success) interval lies wholly below another's never ranks
-    above it."""
+    energy. Those still in the race rank above those that left it (a candidate that left on
+    energy after 12 rollouts, all successes, must not outrank the one that beat it at 199 in
+    200). A candidate whose P(success) interval lies wholly below another's never ranks above
+    it."""
 
     def key(c: Candidate):
         p, lo, _ = c.p_interval(conf)
         energy = c.energy_interval(conf)[0]
         energy = energy if math.isfinite(energy) else math.inf
         if min_success is not None:
-            return (lo < min_success, energy, -p)
-        return (-(p if math.isfinite(p) else -1), energy)
+            return (bool(c.out), lo < min_success, energy, -p)
+        return (bool(c.out), -(p if math.isfinite(p) else -1), energy)
 
     ordered = sorted(candidates, key=key)
     # No candidate above one whose P interval lies wholly above its own.
@@ -291,6 +343,22 @@ def rank(candidates: list[Candidate], conf: float, min_success: float | None) ->
         if not moved:
             break
     return ordered
+
+
+def _decided(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> str:
+    """Why the race can stop with a decision short of separation, or "": with min_success, one
+    candidate alone clears it; or the first-ranked is within the indifference zone."""
+    if cfg.min_success is not None:
+        qualifying = [c for c in alive if c.p_interval(conf)[1] >= cfg.min_success]
+        if len(qualifying) == 1 and all(
+            c is qualifying[0] or c.p_interval(conf)[2] < cfg.min_success for c in alive
+        ):
+            return f"only one candidate clears P(success) >= {cfg.min_success:g}"
+    if within_zone(alive, conf, cfg.min_success, cfg.indifference):
+        dp, de = cfg.indifference
+        return (f"within the indifference zone (P {dp:g}, energy {de:.0%}) at "
+                f"{cfg.confidence:.0%} confidence")  # fmt: skip
+    return ""
 
 
 def race(
@@ -317,13 +385,9 @@ def race(
         if len(alive) <= 1 and len(candidates) > 1:
             stopped = f"separated at {cfg.confidence:.0%} confidence"
             break
-        if cfg.min_success is not None:
-            qualifying = [c for c in alive if c.p_interval(conf)[1] >= cfg.min_success]
-            if len(qualifying) == 1 and all(
-                c is qualifying[0] or c.p_interval(conf)[2] < cfg.min_success for c in alive
-            ):
-                stopped = f"only one candidate clears P(success) >= {cfg.min_success:g}"
-                break
+        stopped = _decided(alive, conf, cfg) if len(candidates) > 1 else ""
+        if stopped:
+            break
         if cancelled():
             stopped = "cancelled"
             break

@@ -70,7 +70,7 @@ def test_ranking_never_puts_a_candidate_above_one_wholly_more_likely_to_succeed(
     assert rank([safe_costly, cheap_safe], 0.95, None)[0] is cheap_safe
 
 
-def _drawn(i: int, n: int, p: float, energy: float, sd: float, seed: int = 0) -> Candidate:
+def _drawn(i: int, n: int, p: float, energy: float, sd: float, *, seed: int = 0) -> Candidate:
     """A candidate with n rollouts drawn (seeded) from P(success) p and relative energy
     N(energy, sd^2) over the successes."""
     c = Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
@@ -316,6 +316,13 @@ def test_a_bad_uncertainty_is_refused_naming_file_key_and_range(tmp_path, body, 
     done = roachplan("experiment", str(spec), "--out", str(tmp_path / "out"))
     assert done.returncode == 2 and str(spec) in done.stderr and message in done.stderr, done.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("value", ["0.05", "x,0.05", "1.5,0.05", "0.05,-0.1", "nan,0"])
+def test_a_bad_indifference_is_refused_in_one_line(value):
+    proc = roachplan("choose", "--scene", "flat", f"--indifference={value}")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"--indifference {value}: give DP,DE" in proc.stderr, proc.stderr
 
 
 def test_address_is_for_the_ray_backend():
