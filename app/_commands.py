@@ -59,7 +59,7 @@ def do_plan(app, cmd: Cmd) -> None:
         app._notify(cmd.client_id, "Planning failed", errors[0], error=True)
         return
     app.plan_endpoints = (start, goal)
-    app.set_plans(plans)
+    app.set_plans(plans, drawn=True)  # (drawn as they were found)
     seeds = f"seeds {seed}-{seed + len(tried) - 1}" if len(tried) > 1 else f"seed {seed}"
     tries = f"{len(tried)} {'try' if len(tried) == 1 else 'tries'}"
     routes = ", ".join(lp.route for lp in plans)

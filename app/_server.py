@@ -374,15 +374,20 @@ class RoachApp:
         if self.drive_path_picker.value != str(k + 1):  # (the picker calls back: a no-op)
             self.drive_path_picker.value = str(k + 1)
 
-    def set_plans(self, plans: list) -> None:
+    def set_plans(self, plans: list, *, drawn: bool = False) -> None:
         """The plan's paths (LabelledPlans; none: nothing drawn), drawn with the first marked
-        for Drive; and the roadmap of the first, always kept (so Show roadmap acts at once)."""
+        for Drive; and the roadmap of the first, always kept (so Show roadmap acts at once).
+        drawn: the view shows these paths already, in this order (Plan draws each as it is
+        found): only the mark is added, not every path sent to the browsers again."""
         self.plans, self.drive_path = list(plans), 0
         self.roadmap = self.plans[0].plan.roadmap if self.plans else None
         names = tuple(str(k + 1) for k in range(len(self.plans))) or ("none",)
         self.drive_path_picker.options = names
         self.drive_path_picker.value = names[0]
-        if self.plans:
+        if self.plans and drawn and len(self.view.path_nodes) == len(self.plans):
+            self.view.mark_path(0)
+            self._show_roadmap()
+        elif self.plans:
             self.show_plans()
         else:
             self.view.hide_paths()
