@@ -94,3 +94,40 @@ def clean_terrain_mesh(
         if float((out.face_normals[:, 2] * out.area_faces).sum()) < 0:
             out.invert()
     return out
+
+
+def surface_distances(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20_000) -> np.ndarray:
+    """(n,) distances [model units] of n points sampled on a's surface (seed 0) to b's surface:
+    for comparing two renders of one model (the OpenSCAD backends).
+
+    Open3D's distance query finds them fast but not always right: on voxel_wall's 7 m x 2 cm
+    slab faces it reported 5 mm for points lying on the other mesh's face (1e-11 exactly). So
+    every point it puts further than 1e-5 of the diagonal away, the only ones that can decide
+    a tolerance below, is measured again exactly against every triangle of b (float64)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(b.vertices.astype(np.float32)), o3d.core.Tensor(b.faces.astype(np.uint32))
+    )
+    points, _ = trimesh.sample.sample_surface(a, n, seed=0)
+    d = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
+    for i in np.flatnonzero(d > 1e-5 * np.linalg.norm(a.extents)):
+        nearest = trimesh.triangles.closest_point(
+            b.triangles, np.tile(points[i], (len(b.faces), 1))
+        )
+        d[i] = np.linalg.norm(nearest - points[i], axis=1).min()
+    return d
+
+
+def disagreement(a: trimesh.Trimesh, b: trimesh.Trimesh) -> dict[str, float]:
+    """How far two meshes of one model are apart, each as a fraction of a's bounding-box
+    diagonal: "bounds" (largest bounds difference), "p99" and "hausdorff" (99th percentile and
+    max of the symmetric surface distance, surface_distances both ways)."""
+    diag = float(np.linalg.norm(a.extents))
+    d = np.concatenate([surface_distances(a, b), surface_distances(b, a)])
+    return {
+        "bounds": float(np.abs(a.bounds - b.bounds).max()) / diag,
+        "p99": float(np.quantile(d, 0.99)) / diag,
+        "hausdorff": float(d.max()) / diag,
+    }

@@ -47,6 +47,17 @@ def artifacts() -> Path:
     return ARTIFACTS
 
 
+@pytest.fixture
+def app():
+    """The browser app on double_bridge, in this process (to read its state), on a free port."""
+    from roachplan.app._server import RoachApp
+    from roachplan.scenes import build_world, load_scene
+
+    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
+    yield app
+    app.stop()
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

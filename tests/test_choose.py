@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import trimesh
 from conftest import roachplan
-
 from roachplan.experiments._choose import (
     Candidate,
     ChooseConfig,

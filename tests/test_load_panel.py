@@ -9,21 +9,10 @@ import re
 import numpy as np
 import pytest
 import yaml
-from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_perception import REAL
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
-
-
-@pytest.fixture
-def app():
-    from roachplan.app._server import RoachApp
-    from roachplan.scenes import build_world, load_scene
-
-    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
-    yield app
-    app.stop()
 
 
 def _scene_of(app) -> dict:

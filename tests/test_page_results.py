@@ -13,22 +13,11 @@ import re
 import numpy as np
 import pytest
 import trimesh
-from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
 
 HEADERS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "label")
-
-
-@pytest.fixture
-def app():
-    from roachplan.app._server import RoachApp
-    from roachplan.scenes import build_world, load_scene
-
-    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
-    yield app
-    app.stop()
 
 
 def _plan_and_drive(page, trial: int) -> int:
@@ -127,6 +116,14 @@ def _cloud_in_millimetres(path, rng) -> None:
     path.write_text(head + "".join(f"{x:.2f} {y:.2f} {z:.2f}\n" for x, y, z in pts))
 
 
+def _refusal(page, name: str):
+    """The notification that the upload `name` could not be loaded, once it shows."""
+    note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
+    note = note.filter(has_text=name)
+    note.wait_for(timeout=120_000)
+    return note
+
+
 def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
     cloud = tmp_path / "cloud_mm.pcd"
     _cloud_in_millimetres(cloud, np.random.default_rng(16))
@@ -134,9 +131,7 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
     trimesh.creation.box((600.0, 600.0, 40.0)).export(step)
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         upload(page, cloud)
-        note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
-        note = note.filter(has_text="cloud_mm.pcd")
-        note.wait_for(timeout=120_000)
+        note = _refusal(page, "cloud_mm.pcd")
         text = note.inner_text()
         page.screenshot(path=artifacts / "results-03-bad-upload.png")
         # What happened, with the file's own name, and what to do, in the page's terms.
@@ -154,9 +149,7 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
 
         # A model in millimetres: the advice names the page's button, once, and it works.
         upload(page, step)
-        note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
-        note = note.filter(has_text="step_mm.stl")
-        note.wait_for(timeout=120_000)
+        note = _refusal(page, "step_mm.stl")
         text = note.inner_text()
         page.screenshot(path=artifacts / "results-04-model-in-millimetres.png")
         for internal in ("--", "/tmp", ".yaml", "terrain object", "terrain[0]"):

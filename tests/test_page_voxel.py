@@ -9,7 +9,6 @@ import re
 
 import numpy as np
 import pytest
-from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value, upload
 from test_perception import REAL
 
@@ -17,16 +16,6 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not in
 
 NOT_FLAT = "does not look like one flat surface"
 """planarity_warning's words."""
-
-
-@pytest.fixture
-def app():
-    from roachplan.app._server import RoachApp
-    from roachplan.scenes import build_world, load_scene
-
-    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
-    yield app
-    app.stop()
 
 
 def _table(page) -> list[list[str]]:

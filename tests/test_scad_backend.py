@@ -23,13 +23,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
 import pytest
 import trimesh
 import yaml
 from conftest import ROOT, roachplan
 from roachplan.scenes import LIBRARY, SceneError, load_scene, render_scad
 from roachplan.scenes._manifold_main import openscad_rands
+from roachplan.scenes._mesh import disagreement
 from roachplan.scenes._openscad import (
     JAIL_OUT,
     _manifold_argv,
@@ -84,37 +84,8 @@ def fresh_cache(tmp_path, monkeypatch):
     monkeypatch.delenv("ROACHPLAN_UNSAFE_SCAD", raising=False)
 
 
-def _surface_distances(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20_000) -> np.ndarray:
-    """Distances of n points sampled on a's surface (seed 0) to b's surface [model units].
-
-    Open3D's distance query finds them fast but not always right: on voxel_wall's 7 m x 2 cm
-    slab faces it reported 5 mm for points lying on the other mesh's face (1e-11 exactly). So
-    every point it puts further than 1e-5 of the diagonal away, the only ones that can decide
-    a tolerance below, is measured again exactly against every triangle of b (float64)."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(b.vertices.astype(np.float32)), o3d.core.Tensor(b.faces.astype(np.uint32))
-    )
-    points, _ = trimesh.sample.sample_surface(a, n, seed=0)
-    d = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
-    for i in np.flatnonzero(d > 1e-5 * np.linalg.norm(a.extents)):
-        nearest = trimesh.triangles.closest_point(
-            b.triangles, np.tile(points[i], (len(b.faces), 1))
-        )
-        d[i] = np.linalg.norm(nearest - points[i], axis=1).min()
-    return d
 
 
-def _disagreement(a: trimesh.Trimesh, b: trimesh.Trimesh) -> dict[str, float]:
-    """Bounds difference, 99th percentile and max of the symmetric surface distance, each as a
-    fraction of a's bounding-box diagonal."""
-    diag = float(np.linalg.norm(a.extents))
-    d = np.concatenate([_surface_distances(a, b), _surface_distances(b, a)])
-    return {
-        "bounds": float(np.abs(a.bounds - b.bounds).max()) / diag,
-        "p99": float(np.quantile(d, 0.99)) / diag,
-        "hausdorff": float(d.max()) / diag,
-    }
 
 
 def _csg_box(tmp_path: Path) -> Path:
@@ -140,7 +111,7 @@ def test_manifold_agrees_with_the_binary(name, tmp_path):
     fast_path = render_scad(model, params, backend="manifold")
     fast = trimesh.load(fast_path)
     assert fast.is_watertight and fast.volume > 0
-    err = _disagreement(reference, fast)
+    err = disagreement(reference, fast)
     assert err["bounds"] <= AGREE_BOUNDS, err
     assert err["p99"] <= AGREE_P99, err
     assert err["hausdorff"] <= AGREE, err
@@ -160,7 +131,7 @@ def test_the_tolerance_catches_a_real_difference():
     b = trimesh.load(
         render_scad(LIBRARY / "double_bridge.scad", {**ROUGH, "bump_seed": 1}, backend="manifold")
     )
-    assert _disagreement(a, b)["hausdorff"] > AGREE
+    assert disagreement(a, b)["hausdorff"] > AGREE
 
 
 @pytest.mark.parametrize("seed", [0, 7, 42, -3, 123456])
@@ -413,7 +384,7 @@ def test_the_page_renders_with_the_backend_chosen_and_says_why_it_refuses(tmp_pa
         rendered = render_scad(platform, backend="manifold")
         # The page's terrain is that render, and it agrees with the binary's.
         reference = trimesh.load(render_scad(platform, backend="cgal"))
-        err = _disagreement(reference, trimesh.load(rendered))
+        err = disagreement(reference, trimesh.load(rendered))
         assert err["hausdorff"] <= AGREE, err
         assert np.allclose(app.world.mesh.bounds[1][2], reference.bounds[1][2], atol=1e-4)
     finally:
