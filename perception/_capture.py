@@ -489,10 +489,16 @@ def find_sidecar(path: Path) -> Path | None:
     return None
 
 
-def _needs_intrinsics(path: Path) -> CaptureError:
+def _needs_intrinsics(path: Path, why: str = "a depth image needs intrinsics",
+                      size: tuple[int, int] | None = None) -> CaptureError:  # fmt: skip
+    """The refusal of a depth image without usable intrinsics; with the image's size (w, h),
+    the presets of that size come first."""
+    fits = [k for k, v in PRESETS.items() if size is not None and (v.width, v.height) == size]
+    names = [*fits, *(k for k in PRESETS if k not in fits)]
+    lead = f"presets of {size[0]}x{size[1]}: {', '.join(fits)}; " if fits else ""
     return CaptureError(
-        f"{path}: a depth image needs intrinsics: pass --intrinsics with a preset "
-        f"({', '.join(PRESETS)}) or a calibration file, or the numbers --fx --fy --cx --cy "
+        f"{path}: {why}: {lead}pass --intrinsics with a preset "
+        f"({', '.join(names)}) or a calibration file, or the numbers --fx --fy --cx --cy "
         f"(`intrinsics: {{fx, fy, cx, cy}}` in a scene), or put {path.stem}.json, .xml, .yaml "
         f"or .yml beside it. Calibration files: {CALIBRATION_FORMATS}"
     )
@@ -518,10 +524,10 @@ def _load_depth_image(path: Path, intrinsics, depth_scale: float | None) -> Capt
     depth_scale = depth_scale or 1000.0
     if (intr.width, intr.height) != (w, h):
         if abs(intr.width / w - intr.height / h) > 1e-6:
-            raise CaptureError(
-                f"{path}: the image is {w}x{h}, the intrinsics are for "
-                f"{intr.width}x{intr.height} (another aspect ratio)"
-            )
+            raise _needs_intrinsics(
+                path, f"the image is {w}x{h}, the intrinsics are for {intr.width}x"
+                f"{intr.height} (another aspect ratio)", size=(w, h),
+            )  # fmt: skip
         intr = intr.scaled(w, h)
     if not np.any(depth > 0):
         raise CaptureError(f"{path}: every pixel is 0 (no depth measured)")

@@ -330,3 +330,20 @@ def test_cli_fx_fy_cx_cy_flags(tmp_path):
     assert r.returncode == 2 and "--cy -3: expected a number of pixels > 0" in r.stderr
     r = roachplan("mesh", str(png), "-o", str(out), *flags, "--intrinsics", "kinect1")
     assert r.returncode == 2 and "either --intrinsics or --fx" in r.stderr
+
+
+def test_a_preset_of_another_aspect_ratio_is_refused_naming_the_presets_that_fit(tmp_path):
+    """A 640x480 image read with a Kinect v2 QHD preset (960x540, the page's default camera):
+    the refusal names the presets of the image's size first, and the page says it in its own
+    terms (the Camera choice), not as a command-line flag."""
+    from roachplan.app._uploads import public_message
+
+    png = tmp_path / "frame.png"
+    shutil.copy(REAL / "frame_20121214T142255.814212_depth_mm.png", png)
+    done = roachplan("mesh", str(png), "-o", str(tmp_path / "f.ply"), "--intrinsics", "kinect2-qhd")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "the image is 640x480, the intrinsics are for 960x540" in done.stderr
+    fit = done.stderr.split("presets of 640x480: ", 1)[1].split(";", 1)[0].split(", ")
+    assert fit and "primesense" in fit and "kinect2-qhd" not in fit
+    page = public_message(done.stderr.removeprefix("roachplan: error: "), tmp_path)
+    assert "--" not in page and "Camera (next capture)" in page, page
