@@ -249,7 +249,7 @@ def choose_ground(
             f"the ground is tilted {ground.angle_deg:.0f} deg from the assumed gravity: a steep "
             f"camera, or the wrong surface"
         )
-    n, d = _refit(points, ground, cfg.threshold)
+    n, d = _refit(points, ground.normal, ground.offset, cfg.threshold)
     support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
     return GroundChoice(
         normal=n, offset=d, support=support, fraction=support / len(points), area=ground.area,
@@ -292,14 +292,14 @@ def _ground_through(
              if np.mean(np.abs(local @ p.normal + p.offset) <= 3 * cfg.threshold) >= 0.3
              and (not clear or _angle(p.normal, n_loc) <= 10.0 or _angle(p.normal, -n_loc) <= 10.0)]
     if on_it:
-        n, d = _refit(points, max(on_it, key=lambda p: p.support), cfg.threshold)
+        best = max(on_it, key=lambda p: p.support)
+        n, d = _refit(points, best.normal, best.offset, cfg.threshold)
     else:
         if (d_loc < 0) if toward_sensor else (n_loc @ up < 0):
             n_loc, d_loc = -n_loc, -d_loc
         n, d = n_loc, float(d_loc)
         for _ in range(3):  # refit on the cloud's points on it; a few rounds settle it
-            n, d = _refit(points, Plane(normal=n, offset=d, support=0, area=0.0, angle_deg=0.0),
-                          cfg.threshold)  # fmt: skip
+            n, d = _refit(points, n, d, cfg.threshold)
     on = np.abs(points @ n + d) <= cfg.threshold
     support = int(np.sum(on))
     return GroundChoice(
@@ -308,15 +308,18 @@ def _ground_through(
     )  # fmt: skip
 
 
-def _refit(points: np.ndarray, plane: Plane, threshold: float) -> tuple[np.ndarray, float]:
-    """Least-squares plane of the points within threshold of plane (the RANSAC plane is only
-    as good as its best 3-point sample); its normal keeps the plane's side."""
-    near = points[np.abs(points @ plane.normal + plane.offset) <= threshold]
+def _refit(
+    points: np.ndarray, normal: np.ndarray, offset: float, threshold: float
+) -> tuple[np.ndarray, float]:
+    """Least-squares plane (unit normal, offset) of the points within threshold of the plane
+    normal . p + offset = 0 (a RANSAC plane is only as good as its best 3-point sample); its
+    normal keeps that plane's side."""
+    near = points[np.abs(points @ normal + offset) <= threshold]
     if len(near) < 3:
-        return plane.normal, plane.offset
+        return normal, offset
     centre = near.mean(axis=0)
     n = np.linalg.svd(near - centre, full_matrices=False)[2][2]
-    if n @ plane.normal < 0:
+    if n @ normal < 0:
         n = -n
     return n, float(-n @ centre)
 
