@@ -13,7 +13,7 @@ from roachplan.experiments import TrialResult
 from roachplan.planning import PlanResult
 
 from ._draw import BLACK, BLUE, path_fraction
-from ._jobs import Cmd, Job, _drive_job, _plan_job
+from ._jobs import Cmd, _drive_job, _plan_job
 
 PLAN_GRACE = 0.8
 """How long past its budget a plan's child may run before it is killed [s]: it stops by itself
@@ -33,7 +33,7 @@ def do_plan(app, cmd: Cmd) -> None:
     tried, plans, errors = [], [], []
     deadline = time.monotonic() + budget
     request = dict(seed=seed, start=start, goal=goal, planner=planner)
-    job = Job(_plan_job, app.world, count, request, deadline)
+    job = app.world_job(_plan_job, count, request, deadline)
 
     def step(messages) -> bool:
         for kind, payload in messages:
@@ -104,7 +104,7 @@ def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialR
     """Drive in a child and play its frames back at `speed` x real time as they come
     (every frame the browser can take: at most 60 per second)."""
     app.view.clear("/trajectories")
-    job = Job(_drive_job, app.world, planned, start, goal)
+    job = app.world_job(_drive_job, planned, start, goal)
     frames, results, errors = [], [], []
     path_xy = np.asarray(planned.path_xyz)[:, :2]
     play = {"t": 0.0, "wall": time.monotonic(), "k": -1, "drawn": 0.0}

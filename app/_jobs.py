@@ -1,7 +1,12 @@
 """What the page's callbacks enqueue (one frozen dataclass per command), and the work that runs
-outside the server's process: each plan, drive and scene load in a fresh child of a fork server
-(OMPL holds the GIL while it solves, and a fresh process is where its seed takes effect), which
-the loop follows without blocking and can kill at once (Cancel).
+outside the server's process: each plan, drive and scene load in a fresh child process (OMPL
+holds the GIL while it solves, and a fresh process is where its seed takes effect), which the
+loop follows without blocking and can kill at once (Cancel).
+
+A scene load is a child of the fork server. A plan or a drive is a fork of the current world's
+host (WorldHost): a child of the fork server that received the world once, when it was loaded,
+and forks on request. Handing the world (0.7 MB pickled) to a new child on every click cost
+0.33-0.38 s of the 0.5 s a Plan took in the server (issue 16).
 """
 
 from __future__ import annotations
@@ -9,10 +14,12 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
-from multiprocessing.connection import wait
+from multiprocessing import reduction
+from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from roachplan.experiments import finish_trial, plan_many
@@ -164,7 +171,8 @@ def _warm_job(conn) -> None:
 
 class Job:
     """target(conn, *args) in a fresh child process: what it has sent so far, without blocking;
-    `cancel` kills it (and whatever it started) at once."""
+    `cancel` kills it (and whatever it started) at once. Job.on(host, target, *args) runs
+    target(conn, host's world, *args) in a fork of a WorldHost instead."""
 
     def __init__(self, target, *args) -> None:
         self.started = time.monotonic()
@@ -172,8 +180,23 @@ class Job:
         self._proc = _CTX.Process(target=target, args=(child, *args), daemon=True)
         self._proc.start()
         child.close()
+        self._host: WorldHost | None = None
+        self.pid = self._proc.pid
         self.done = False
         """The child has closed its end (finished, failed or killed)."""
+
+    @classmethod
+    def on(cls, host: WorldHost, target, *args) -> Job:
+        job = cls.__new__(cls)
+        job.started = time.monotonic()
+        job._conn, child = _CTX.Pipe(duplex=False)
+        job._proc, job._host = None, host
+        try:
+            job.pid = host.fork(target, args, child)
+        finally:
+            child.close()  # (the fork holds the only writer: its exit is this end's EOF)
+        job.done = False
+        return job
 
     @property
     def elapsed(self) -> float:
@@ -193,18 +216,93 @@ class Job:
                 out.append(self._conn.recv())
             except (EOFError, OSError):
                 self.done = True
-                self._proc.join(timeout=5)
+                if self._proc is not None:
+                    self._proc.join(timeout=5)
         return out
+
+    def _running(self) -> bool:
+        """The child has not exited (an exited child's pid may soon belong to another)."""
+        if self._proc is not None:
+            return self._proc.exitcode is None
+        return self._host is not None and self._host.is_parent_of(self.pid)
 
     def cancel(self) -> None:
         """Kill the child and every process under it, now."""
         if self.done:
             return
-        if self._proc.exitcode is None:  # (an exited child's pid may belong to another soon)
-            kill_tree(self._proc.pid)
+        if self._running():
+            kill_tree(self.pid)
         self.done = True
         self._conn.close()
-        self._proc.join(timeout=5)
+        if self._proc is not None:
+            self._proc.join(timeout=5)
+
+
+def _host_main(conn, world: World) -> None:
+    """A WorldHost's process: for each (target, args) and writable end received, fork a child
+    that runs target(end, world, *args), and answer its pid. It never plans or draws a random
+    number itself, so each child starts from OMPL's clean state (planning/_isolated.py), and
+    it has one thread, so a bare fork is safe."""
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # (the kernel reaps the children)
+    while True:
+        try:
+            target, args = conn.recv()
+            fd = reduction.recv_handle(conn)
+        except (EOFError, OSError):  # the server closed its end or died: so does the host
+            return
+        pid = os.fork()
+        if pid == 0:  # the child: never returns into the loop
+            status = 1
+            try:
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)  # (it waits for its own children)
+                conn.close()
+                target(Connection(fd, readable=False), world, *args)
+                status = 0
+            finally:
+                os._exit(status)
+        os.close(fd)
+        conn.send(pid)
+
+
+class WorldHost:
+    """A long-lived child of the fork server holding one world, which forks a fresh child of
+    itself for each job on that world (Job.on): a job starts in a few milliseconds, where a
+    child of the fork server first has to receive the world."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._conn, child = _CTX.Pipe(duplex=True)  # (a socket pair: it can carry an fd)
+        self._proc = _CTX.Process(target=_host_main, args=(child, world), daemon=True,
+                                  name="roachplan-world-host")  # fmt: skip
+        self._proc.start()
+        child.close()
+        self._lock = threading.Lock()
+
+    @property
+    def alive(self) -> bool:
+        return self._proc.exitcode is None and not self._conn.closed
+
+    def fork(self, target, args: tuple, end) -> int:
+        """Start target(end, world, *args) in a fork of the host; its pid."""
+        with self._lock:
+            self._conn.send((target, args))
+            reduction.send_handle(self._conn, end.fileno(), self._proc.pid)
+            return self._conn.recv()
+
+    def is_parent_of(self, pid: int) -> bool:
+        try:
+            return _parent(Path(f"/proc/{pid}/stat").read_text()) == self._proc.pid
+        except OSError:
+            return False
+
+    def close(self) -> None:
+        """End the host (the jobs it started run on until they finish or are cancelled)."""
+        if not self._conn.closed:
+            self._conn.close()  # (its recv ends: it returns)
+        self._proc.join(timeout=1)
+        if self._proc.exitcode is None:
+            self._proc.kill()
+            self._proc.join(timeout=5)
 
 
 def run_to_end(target, *args) -> list[tuple[str, object]]:
@@ -213,6 +311,11 @@ def run_to_end(target, *args) -> list[tuple[str, object]]:
     while not job.done:
         out += job.poll(timeout=1.0)
     return out
+
+
+def _parent(stat: str) -> int:
+    """The parent pid in the text of /proc/PID/stat."""
+    return int(stat.rsplit(")", 1)[1].split()[1])  # (the name may hold spaces)
 
 
 def _children() -> dict[int, list[int]]:
@@ -224,8 +327,7 @@ def _children() -> dict[int, list[int]]:
                 stat = Path(entry.path, "stat").read_text()
             except OSError:
                 continue
-            ppid = int(stat.rsplit(")", 1)[1].split()[1])  # (the name may hold spaces)
-            out.setdefault(ppid, []).append(int(entry.name))
+            out.setdefault(_parent(stat), []).append(int(entry.name))
     return out
 
 

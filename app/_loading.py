@@ -131,6 +131,7 @@ def swap_in(app, ld: Loading) -> None:
     app.load_panel.offer_scale(None)
     app.next_seeds[str(app.world.scene.path)] = app._next_seed
     app.world = world
+    app.host_world()
     if ld.from_upload or ld.label in app.files:
         app.files[ld.label] = (ld.ref, ld.from_upload)
         app.scene_picker.options = (*list_scenes(), *app.files)

@@ -58,6 +58,7 @@ from ._jobs import (
     ShowTrialCmd,
     UploadCmd,
     ViewCmd,
+    WorldHost,
     _warm_job,
     load_world,
     run_to_end,
@@ -85,6 +86,8 @@ class RoachApp:
     ):  # fmt: skip
         """view: the capture view of world (load_world), to re-mesh and re-level it."""
         self.world = world
+        self._host: WorldHost | None = None
+        """The process plans and drives on this world are forked from (host_world)."""
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.commands: queue.Queue[Cmd] = queue.Queue()
         self.waiting: deque[Cmd] = deque()
@@ -453,11 +456,32 @@ class RoachApp:
         self.plot.image = energy_plot(trials)
         self.show_trial.options = ("-", *(str(k + 1) for k in range(len(trials))))
 
+    # jobs on the world ------------------------------------------------------------------
+
+    def host_world(self) -> None:
+        """Hand the current world to a new WorldHost (the old one ends): once per world, on
+        the loop thread, so that no click waits for it."""
+        if self._host is not None:
+            self._host.close()
+        self._host = WorldHost(self.world)
+
+    def world_job(self, target, *args) -> Job:
+        """target(conn, self.world, *args) in a fresh child: a fork of the world's host, or,
+        while it is not up (or has died), a child that is sent the world."""
+        host = self._host
+        if host is not None and host.world is self.world and host.alive:
+            try:
+                return Job.on(host, target, *args)
+            except (OSError, EOFError):  # the host died: a plain child this time
+                pass
+        return Job(target, self.world, *args)
+
     # the loop ----------------------------------------------------------------------------
 
     def _run(self) -> None:
         # Start the fork server now (~1 s, its modules preloaded), not on the first click.
         run_to_end(_warm_job)
+        self.host_world()
         while not self._stop.is_set():
             self._background(idle=not self.waiting)
             if self.waiting:
@@ -673,6 +697,8 @@ class RoachApp:
         self.loading.stop()
         self._stop.set()
         self._loop.join(timeout=5)
+        if self._host is not None:
+            self._host.close()
         self.server.stop()
 
 

@@ -1,0 +1,92 @@
+"""The app's world host (issue 16): plans and drives run in forks of a process that received
+the world once, so a click does not wait for the world to be sent. A fork plans what a child
+sent the world plans (the same seed gives the same path), Cancel kills the fork and the host
+serves the next job, and the app falls back to a plain child when its host has died."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from roachplan.app._jobs import Job, WorldHost, _plan_job
+
+
+def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
+    """The paths a plan job sent, once it has finished."""
+    out, end = [], time.monotonic() + timeout
+    while not job.done and time.monotonic() < end:
+        for kind, payload in job.poll(timeout=0.5):
+            assert kind != "error", payload
+            if kind == "attempt" and payload[1] is not None:
+                out.append(np.asarray(payload[1].plan.path_xyz))
+    assert job.done, "the plan job did not finish"
+    return out
+
+
+def _request(world, seed: int, **planner) -> dict:
+    import dataclasses
+
+    cfg = dataclasses.replace(world.scene.planner, **planner)
+    return dict(seed=seed, start=None, goal=None, planner=cfg)
+
+
+@pytest.fixture(scope="module")
+def host(world):
+    h = WorldHost(world)
+    yield h
+    h.close()
+
+
+def test_a_fork_of_the_host_plans_what_a_child_sent_the_world_plans(world, host):
+    far = time.monotonic() + 60
+    hosted = [_paths(Job.on(host, _plan_job, 2, _request(world, 5), far)) for _ in range(2)]
+    plain = _paths(Job(_plan_job, world, 2, _request(world, 5), far))
+    assert len(plain) == 2
+    for paths in hosted:  # (the host never draws: each fork starts from OMPL's clean state)
+        assert len(paths) == len(plain)
+        for a, b in zip(paths, plain):
+            np.testing.assert_array_equal(a, b)
+    other = _paths(Job.on(host, _plan_job, 1, _request(world, 6), far))
+    assert not np.array_equal(other[0], plain[0]), "another seed, another path"
+
+
+def test_cancel_kills_the_fork_and_the_host_serves_the_next_job(world, host):
+    # Fifty distinct paths asked for: it plans for seconds, up to 160 tries.
+    job = Job.on(host, _plan_job, 50, _request(world, 0, time_limit=30.0),
+                 time.monotonic() + 300)  # fmt: skip
+    time.sleep(0.5)
+    assert host.is_parent_of(job.pid) and not job.done
+    job.cancel()
+    for _ in range(100):
+        if not host.is_parent_of(job.pid):
+            break
+        time.sleep(0.05)
+    assert not host.is_parent_of(job.pid), "the cancelled fork is gone"
+    assert len(_paths(Job.on(host, _plan_job, 1, _request(world, 3), time.monotonic() + 60))) == 1
+
+
+def test_the_app_plans_without_its_host_once_it_has_died(world):
+    from conftest import free_port
+    from roachplan.app._server import RoachApp
+
+    app = RoachApp(world, host="127.0.0.1", port=free_port())
+    try:
+        for _ in range(200):
+            if app._host is not None:
+                break
+            time.sleep(0.05)
+        assert app._host is not None and app._host.world is app.world
+        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app._host
+        hosted = _paths(job)
+        os.kill(app._host._proc.pid, signal.SIGKILL)
+        app._host._proc.join(timeout=5)
+        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is None, "a plain child, sent the world"
+        np.testing.assert_array_equal(_paths(job)[0], hosted[0])
+    finally:
+        app.stop()
