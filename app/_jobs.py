@@ -195,6 +195,7 @@ class Job:
             job.pid = host.fork(target, args, child)
         finally:
             child.close()  # (the fork holds the only writer: its exit is this end's EOF)
+        job._born = _start_time(job.pid)
         job.done = False
         return job
 
@@ -224,7 +225,9 @@ class Job:
         """The child has not exited (an exited child's pid may soon belong to another)."""
         if self._proc is not None:
             return self._proc.exitcode is None
-        return self._host is not None and self._host.is_parent_of(self.pid)
+        # A fork of a host: the same pid and start time (it outlives a host closed meanwhile,
+        # a new scene loaded while it ran, and is then a child of init's).
+        return self._born is not None and _start_time(self.pid) == self._born
 
     def cancel(self) -> None:
         """Kill the child and every process under it, now."""
@@ -295,6 +298,7 @@ class WorldHost:
         except OSError:
             return False
 
+
     def close(self) -> None:
         """End the host (the jobs it started run on until they finish or are cancelled)."""
         if not self._conn.closed:
@@ -312,6 +316,14 @@ def run_to_end(target, *args) -> list[tuple[str, object]]:
         out += job.poll(timeout=1.0)
     return out
 
+
+def _start_time(pid: int) -> int | None:
+    """When the process started (clock ticks since boot), None if there is no such process:
+    with the pid, it names one process even after the pid is reused."""
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19])
+    except (OSError, IndexError, ValueError):
+        return None
 
 def _parent(stat: str) -> int:
     """The parent pid in the text of /proc/PID/stat."""

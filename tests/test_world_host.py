@@ -90,3 +90,29 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
     finally:
         app.stop()
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or only its exit status left (a zombie)."""
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return True
+    return stat.rsplit(")", 1)[1].split()[0] in ("Z", "X")
+
+
+def test_cancel_kills_a_fork_whose_host_has_closed_meanwhile(world):
+    # A new scene loaded while a plan runs closes the old world's host; Cancel must still
+    # reach the plan, now a child of init's.
+    old = WorldHost(world)
+    job = Job.on(old, _plan_job, 50, _request(world, 0, time_limit=30.0),
+                 time.monotonic() + 300)  # fmt: skip
+    time.sleep(0.3)
+    old.close()
+    assert not old.is_parent_of(job.pid) and not _gone(job.pid), "it runs on, orphaned"
+    job.cancel()
+    for _ in range(100):
+        if _gone(job.pid):
+            break
+        time.sleep(0.05)
+    assert _gone(job.pid)
