@@ -188,6 +188,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
     shown.close()
     result = _jsonable({
         "scene": scene.name, "chosen": choice.chosen, "stopped": choice.stopped,
+        "confidence_reached": choice.confidence_reached,
         "rollouts": choice.rollouts, "wall_time_s": round(choice.wall_time, 2),
         "seed": cfg.seed, "confidence": cfg.confidence, "min_success": cfg.min_success,
         "indifference": list(cfg.indifference),

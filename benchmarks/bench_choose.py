@@ -71,8 +71,11 @@ def _drive_all(pool, cfg, candidates, n: int, stream: int, *, paired: bool = Fal
     calls = [("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u))
              for c in candidates for k in range(n)]  # fmt: skip
     out: dict[int, list[dict]] = {c.index: [] for c in candidates}
-    for rec in pool.run(calls):
+    for rec in pool.run(calls):  # (in the order they finish)
         out[rec["candidate"]].append(rec)
+    k_of = {seed(c, k): k for c in candidates for k in range(n)}
+    for recs in out.values():  # rollout k at [k]: paired, [k] is world k for every candidate
+        recs.sort(key=lambda r: k_of[r["seed"]])
     return out
 
 
@@ -100,7 +103,7 @@ def racing_vs_bank(quick: bool, args) -> None:
     n_full = args.bank or (12 if quick else 200)
     pool = _pool(scene, 2)
     try:
-        bank = _drive_all(pool, cfg, candidates, n_full, stream=2)
+        bank = _drive_all(pool, cfg, candidates, n_full, stream=2, paired=True)
     finally:
         pool.close()
     full = [dataclasses.replace(c, rollouts=bank[c.index], out="") for c in candidates]
@@ -115,7 +118,10 @@ def racing_vs_bank(quick: bool, args) -> None:
     agree, in_zone, used, stops = 0, 0, [], Counter()
     runs = args.races or (5 if quick else 20)
     for r in range(runs):
-        order = {c.index: np.random.default_rng([r, c.index]).permutation(n_full) for c in candidates}
+        # One order of the bank's worlds per race, the same for every candidate: the race
+        # compares candidates in the same worlds (common random numbers), and so does the bank.
+        shared = np.random.default_rng([r]).permutation(n_full)
+        order = {c.index: shared for c in candidates}
         taken = {c.index: 0 for c in candidates}
 
         def replay(calls, order=order, taken=taken):

@@ -2,40 +2,47 @@
 much confidence, by racing rollouts under an uncertainty model.
 
 The candidates are K distinct plans (plan_many), routes taken round-robin so that where the
-terrain has several routes each gets a candidate. Each round gives every candidate still in
-the race `batch` more rollouts (experiments/_uncertainty.py: each its own seed) on the worker
-pool; after each round a candidate leaves the race when it is clearly beaten:
+terrain has several routes each gets a candidate. Each round gives `batch` more rollouts
+(experiments/_uncertainty.py: each its own seed) on the worker pool to the candidates whose
+intervals stand between the race and a decision (_to_sample: at first every one; then, in
+each comparison that keeps the decision below from holding, the side with the wider
+interval); after each round a candidate leaves the race when it is clearly beaten:
 
 - on success: its upper confidence bound on P(success) is below another's lower bound;
-- on energy, among the equally safe: another candidate at least as likely to succeed (point
-  estimate) has an upper bound on mean relative energy below this one's lower bound.
+- on energy: another candidate at least as likely to succeed (its P lower bound at or above
+  this one's upper bound less DP, the indifference in P below) has an upper bound on mean
+  relative energy below this one's lower bound.
 
-Bounds are Wilson intervals for P(success) and t intervals for the mean energy over successes,
-each at confidence 1 - (1 - c) / K (Bonferroni over the candidates). The race stops when one
-candidate is left (separated at the requested confidence), when the rollout cap or the time
-budget is spent, or, with min_success, when the cheapest candidate whose lower bound clears it
-is separated from the other such ones. Which of these stopped it is reported.
+Bounds are Clopper-Pearson intervals for P(success) and t intervals for the mean energy over
+successes, each at confidence 1 - (1 - c) / K (Bonferroni over the candidates). The race stops
+when one candidate is left (separated at the requested confidence), when the rollout cap or the
+time budget is spent, or, with min_success, when the cheapest candidate whose lower bound clears
+it is separated from the other such ones. Which of these stopped it is reported.
 
 Indifference zone (DP, DE) = cfg.indifference: candidates that are practically equal never
 separate (two paths that succeed 199 and 200 times in 200 would need many thousands of
 rollouts), so the race also stops, "within the indifference zone", when this holds for the
 candidate the ranking puts first (c*), at the requested joint confidence (the same Bonferroni
 intervals): every other candidate still in the race has P(success) upper bound at most c*'s
-lower bound + DP [probability], and each of them that is not clearly less safe (its P upper
-bound at or above c*'s lower bound) has a mean relative energy lower bound at least c*'s upper
-bound / (1 + DE) [DE a fraction of the energy]. That is: at the requested confidence, the
-chosen candidate is within DP of the best P(success) and, among those as safe, within DE of
-the lowest energy (the candidates that left the race were beaten outright). With min_success
-only the energy part applies, among the candidates whose P upper bound clears min_success.
+lower bound + DP [probability], and for each of them that is not clearly less safe (its P
+upper bound at or above c*'s lower bound) the upper bound on the mean of c*'s relative energy
+less (1 + DE) times its own, over the worlds both succeeded in, is at most 0 [DE a fraction
+of the energy] (energy_excess_bound: paired, so the world's shared part cancels). That is: at
+the requested confidence, the chosen candidate is within DP of the best P(success) and, among
+those as safe, within DE of the lowest energy (the candidates that left the race were beaten
+outright). With min_success only the energy part applies, among the candidates whose P upper
+bound clears min_success.
 (0, 0) turns the zone off: the race then stops only as described above.
 
 Everything drawn flows from `seed`: the candidates are planned with seeds seed, seed + 1, ...,
-and rollout k of candidate c has seed rollout_seed(seed, c, k). Rounds end only when all their
+and rollout k of every candidate drives the world of seed world_seed(seed, k) (common random
+numbers: the candidates are compared in the same worlds). Rounds end only when all their
 rollouts are in, so with a rollout cap (not a time budget) the same seed gives the same choice.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import Counter
@@ -84,15 +91,19 @@ class ChooseConfig:
     else the defaults of experiments/_uncertainty.py)."""
 
 
-def wilson(successes: int, n: int, confidence: float) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion [-]; (0, 1) without trials."""
+@functools.lru_cache(maxsize=65536)  # (ranking asks for the same few intervals many times)
+def clopper_pearson(successes: int, n: int, confidence: float) -> tuple[float, float]:
+    """Clopper-Pearson (exact) interval of a binomial proportion [-]; (0, 1) without trials.
+    Its coverage is at least `confidence` for every p (Wilson's dips below it near 0 and 1),
+    and where the race decides, at or near n successes in n, it is the narrower: the lower
+    bound for n in n is ((1 - c) / 2)^(1/n), about 1 - 5.8 / n at c = 1 - 0.05 / 8, where
+    Wilson's n / (n + z^2) is 1 - 7.5 / n."""
     if n == 0:
         return 0.0, 1.0
-    z = stats.norm.ppf(1 - (1 - confidence) / 2)
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+    a = (1 - confidence) / 2
+    lo = 0.0 if successes == 0 else float(stats.beta.ppf(a, successes, n - successes + 1))
+    hi = 1.0 if successes == n else float(stats.beta.ppf(1 - a, successes + 1, n - successes))
+    return lo, hi
 
 
 def mean_interval(values: list[float], confidence: float) -> tuple[float, float, float]:
@@ -106,6 +117,18 @@ def mean_interval(values: list[float], confidence: float) -> tuple[float, float,
         float(np.std(values, ddof=1)) / math.sqrt(len(values))
     )
     return m, m - half, m + half
+
+
+def energy_excess_bound(best: Candidate, other: Candidate, conf: float, de: float) -> float:
+    """Upper confidence bound [relative energy] on the mean of e_best - (1 + de) e_other over
+    the worlds both succeeded in (rollout k of every candidate drives the same world: common
+    random numbers, so the draws' shared effect on energy cancels in each difference; on
+    double_bridge_rough they explain a third to a half of its spread); +inf with fewer than 2
+    such worlds. <= 0: at confidence conf, best needs at most (1 + de) times other's energy."""
+    mine = {r["seed"]: r["relative_energy"] for r in best.successes}
+    diffs = [mine[r["seed"]] - (1 + de) * r["relative_energy"]
+             for r in other.successes if r["seed"] in mine]  # fmt: skip
+    return mean_interval(diffs, conf)[2] if len(diffs) >= 2 else math.inf
 
 
 @dataclass
@@ -133,7 +156,7 @@ class Candidate:
 
     def p_interval(self, confidence: float) -> tuple[float, float, float]:
         k = len(self.successes)
-        lo, hi = wilson(k, self.n, confidence)
+        lo, hi = clopper_pearson(k, self.n, confidence)
         return (k / self.n if self.n else math.nan), lo, hi
 
     def energy_interval(self, confidence: float) -> tuple[float, float, float]:
@@ -175,6 +198,10 @@ class Choice:
     wall_time: float
     """[s]"""
     candidates: list[Candidate]
+    confidence_reached: float | None = None
+    """When the race ended on its budget or cap short of a decision: the highest joint
+    confidence (from 0.5) at which the ranking's first is within the indifference zone on the
+    rollouts it had, to 0.01; None when it decided, or not even at 0.5."""
 
 
 def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) -> list[Candidate]:
@@ -258,8 +285,13 @@ def _plan_via(world, via, *, seed: int) -> PlanResult | None:
     )
 
 
-def _eliminate(alive: list[Candidate], conf: float, min_success: float | None) -> None:
-    """Mark the candidates that are clearly beaten (see the module docstring)."""
+def _eliminate(alive: list[Candidate], conf: float, min_success: float | None,
+               dp: float = 0.0) -> None:  # fmt: skip
+    """Mark the candidates that are clearly beaten (see the module docstring). On energy, only
+    by a candidate that is at least as safe at confidence conf: its P lower bound clears
+    min_success, or this one's P upper bound less dp (the indifference in P). A point estimate
+    is not enough: a path that fails 6 times in 100 has succeeded in all of its first 24
+    rollouts one time in five, and would then knock out a safer, costlier one for good."""
     p = {c.index: c.p_interval(conf) for c in alive}
     e = {c.index: c.energy_interval(conf) for c in alive}
     if min_success is None:
@@ -277,10 +309,45 @@ def _eliminate(alive: list[Candidate], conf: float, min_success: float | None) -
             if d is c or d.out:
                 continue
             safe_enough = (p[d.index][1] >= min_success if min_success is not None
-                           else p[d.index][0] >= p[c.index][0])  # fmt: skip
+                           else p[d.index][1] >= p[c.index][2] - dp)  # fmt: skip
             if safe_enough and e[d.index][2] < e[c.index][1]:
                 c.out = f"costs more energy than candidate {d.index} (intervals apart)"
                 break
+
+
+def zone_blockers(
+    alive: list[Candidate],
+    conf: float,
+    min_success: float | None,
+    indifference: tuple[float, float],
+) -> tuple[Candidate | None, list[Candidate]]:
+    """(c*, blockers): the first-ranked of `alive`, and the candidates whose intervals keep the
+    indifference-zone decision (module docstring) from holding for it at per-candidate
+    confidence conf, c* first among them when any is; no blockers: the decision holds. With
+    the zone off nothing but separation decides: every candidate blocks."""
+    dp, de = indifference
+    if (dp <= 0 and de <= 0) or not alive:
+        return None, list(alive)
+    best = rank(alive, conf, min_success)[0]
+    _, b_lo, _ = best.p_interval(conf)
+    blockers = []
+    for d in alive:
+        if d is best:
+            continue
+        _, d_lo, d_hi = d.p_interval(conf)
+        if min_success is None and d_hi > b_lo + dp:
+            blockers.append(d)  # d might be more than DP safer
+            continue
+        # Only a candidate that might be as safe (or might qualify) counts for energy.
+        if (d_hi < min_success) if min_success is not None else (d_hi < b_lo):
+            continue
+        if not energy_excess_bound(best, d, conf, de) <= 0:
+            blockers.append(d)  # d might be more than DE cheaper (or its energy is not known)
+    # c*'s own bounds: fewer than 2 successes leave its energy unbounded; with min_success it
+    # must clear it; and it is one side of every comparison above.
+    if blockers or len(best.successes) < 2 or (min_success is not None and b_lo < min_success):
+        blockers.insert(0, best)
+    return best, blockers
 
 
 def within_zone(
@@ -292,28 +359,8 @@ def within_zone(
     """The first-ranked of `alive` if the indifference-zone decision holds for it at per-
     candidate confidence conf (module docstring), else None. Never with the zone off, nor for
     a candidate with fewer than 2 successes (its energy interval is unbounded)."""
-    dp, de = indifference
-    if (dp <= 0 and de <= 0) or not alive:
-        return None
-    best = rank(alive, conf, min_success)[0]
-    _, b_lo, b_hi = best.p_interval(conf)
-    be_hi = best.energy_interval(conf)[2]
-    if len(best.successes) < 2:
-        return None
-    if min_success is not None and b_lo < min_success:
-        return None
-    for d in alive:
-        if d is best:
-            continue
-        _, d_lo, d_hi = d.p_interval(conf)
-        if min_success is None and d_hi > b_lo + dp:
-            return None  # d might be more than DP safer
-        # Only a candidate that might be as safe (or might qualify) counts for energy.
-        if (d_hi < min_success) if min_success is not None else (d_hi < b_lo):
-            continue
-        if not be_hi <= (1 + de) * d.energy_interval(conf)[1]:
-            return None  # d might be more than DE cheaper (or its energy is not known yet)
-    return best
+    best, blockers = zone_blockers(alive, conf, min_success, indifference)
+    return best if best is not None and not blockers else None
 
 
 def rank(candidates: list[Candidate], conf: float, min_success: float | None) -> list[Candidate]:
@@ -361,6 +408,42 @@ def _decided(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> str:
     return ""
 
 
+def _to_sample(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> list[Candidate]:
+    """The candidates the next round gives rollouts to: every one until it has a round's
+    worth; then, with the zone on, for each comparison that keeps the decision from holding
+    (zone_blockers: c* against a blocker d), the side whose interval is the wider where they
+    meet. Sampling the other side cannot settle it: when d succeeds 40 times in 40 its upper
+    bound stays 1 however often it is driven, and only c*'s lower bound can rise within DP of
+    it. With the zone off, every candidate in the race (separation needs them all)."""
+    new = [c for c in alive if c.n < cfg.batch]
+    if new:
+        return new
+    best, blockers = zone_blockers(alive, conf, cfg.min_success, cfg.indifference)
+    if best is None:
+        return list(alive)
+    picked: dict[int, Candidate] = {}
+    p_b, b_lo, _ = best.p_interval(conf)
+    if not blockers[1:]:  # c* alone: its own bounds (too few successes, or below min_success)
+        picked[best.index] = best
+    for d in blockers[1:]:
+        p_d, _, d_hi = d.p_interval(conf)
+        if cfg.min_success is None and d_hi > b_lo + cfg.indifference[0]:
+            sides = [best if p_b - b_lo >= d_hi - p_d else d]
+        else:  # energy: only worlds both have driven pair up, so the one behind catches up
+            sides = [c for c in (best, d) if c.n == min(best.n, d.n)]
+        for side in sides:
+            if side.n >= cfg.max_per_candidate:  # (spent: only the other can move)
+                side = d if side is best else best
+            picked[side.index] = side
+    return [c for c in alive if c.index in picked]
+
+
+def world_seed(seed: int, k: int) -> int:
+    """The seed of the world of every candidate's rollout k in a race seeded `seed` (common
+    random numbers: candidates are compared in the same worlds)."""
+    return rollout_seed(seed, 0, k)
+
+
 def race(
     candidates: list[Candidate],
     cfg: ChooseConfig,
@@ -377,7 +460,7 @@ def race(
     conf = 1 - (1 - cfg.confidence) / k
     used = 0
     stopped = ""
-    last_round = 0.0  # expected wall time of the next round [s]
+    per_rollout = 0.0  # wall time per rollout in the last round [s]
     while True:
         alive = [c for c in candidates if not c.out]
         # A lone candidate from the start is not a decision: it races on (alone) until the
@@ -391,23 +474,26 @@ def race(
         if cancelled():
             stopped = "cancelled"
             break
-        # Stop before a round that would overrun the budget (a round takes about as long as
-        # the last one per rollout).
-        if cfg.budget_s is not None and time.monotonic() - t0 + last_round >= cfg.budget_s:
-            stopped = f"time budget of {cfg.budget_s:.1f} s spent"
-            break
         room = None if cfg.rollouts is None else cfg.rollouts - used
         if not alive:  # only when no candidate was planned
             stopped = "no candidate to race"
             break
-        if room is not None and room < len(alive):
+        targets = _to_sample(alive, conf, cfg) if len(candidates) > 1 else alive
+        if room is not None and room < len(targets):
             stopped = f"rollout cap of {cfg.rollouts} reached"
             break
-        per = cfg.batch if room is None else min(cfg.batch, room // len(alive))
-        calls = [(c.index, c.path_xyz.tolist(), rollout_seed(cfg.seed, c.index, c.n + j))
-                 for c in alive if c.n < cfg.max_per_candidate for j in range(per)]  # fmt: skip
+        per = cfg.batch if room is None else min(cfg.batch, room // len(targets))
+        calls = [(c.index, c.path_xyz.tolist(), world_seed(cfg.seed, c.n + j))
+                 for c in targets if c.n < cfg.max_per_candidate for j in range(per)]  # fmt: skip
         if not calls:
             stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
+            break
+        # Stop before a round that would overrun the budget (a rollout takes about as long as
+        # one of the last round did).
+        if cfg.budget_s is not None and (
+            time.monotonic() - t0 + per_rollout * len(calls) >= cfg.budget_s
+        ):
+            stopped = f"time budget of {cfg.budget_s:.1f} s spent"
             break
         t_round = time.monotonic()
         for rec in run_rollouts(calls):
@@ -416,14 +502,22 @@ def race(
         for c in alive:  # the order rollouts came back in must not matter
             c.rollouts.sort(key=lambda r: r["seed"])
         used += len(calls)
-        _eliminate(alive, conf, cfg.min_success)
-        last_round = per_rollout * cfg.batch * sum(not c.out for c in candidates)
+        _eliminate(alive, conf, cfg.min_success, cfg.indifference[0])
         if progress is not None:
             frac = used / cfg.rollouts if cfg.rollouts else (time.monotonic() - t0) / (cfg.budget_s or 1)
             left = sum(not c.out for c in candidates)
             progress(f"{used} rollouts, {left} of {len(candidates)} candidates in the race", min(frac, 1.0))
     ordered = rank(candidates, conf, cfg.min_success)
     chosen = next((c.index for c in ordered if c.successes), None)
+    reached = None
+    if stopped.endswith(("spent", "reached", "rollouts")) and len(candidates) > 1:
+        reached = _confidence_reached([c for c in candidates if not c.out], k, cfg)
+        if reached is not None:
+            stopped += (f"; the first-ranked is within the indifference zone at {reached:.0%} "
+                        f"confidence (not {cfg.confidence:.0%})")  # fmt: skip
+        elif cfg.indifference != (0.0, 0.0):
+            stopped += ("; the first-ranked is not within the indifference zone even at 50% "
+                        "confidence")
     return Choice(
         chosen=chosen,
         ranking=[c.summary(conf, mass) for c in ordered],
@@ -431,7 +525,24 @@ def race(
         rollouts=used,
         wall_time=time.monotonic() - t0,
         candidates=candidates,
+        confidence_reached=reached,
     )
+
+
+def _confidence_reached(alive: list[Candidate], k: int, cfg: ChooseConfig) -> float | None:
+    """The highest joint confidence in [0.5, cfg.confidence) at which within_zone holds for
+    alive, to 0.01 (bisection: a lower confidence only narrows the intervals); None if none."""
+
+    def holds(c: float) -> bool:
+        return within_zone(alive, 1 - (1 - c) / k, cfg.min_success, cfg.indifference) is not None
+
+    lo, hi = 0.5, cfg.confidence
+    if not holds(lo):
+        return None
+    while hi - lo > 0.005:
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+    return math.floor(lo * 100) / 100
 
 
 def validate(
