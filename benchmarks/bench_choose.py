@@ -7,11 +7,14 @@
 Parts 1-2 race with an indifference zone (experiments/_choose.py): on double_bridge_rough the best
 candidates succeed 194-200 times in 200 and never separate. Part 2's bank is therefore 200
 rollouts per candidate (the race's own cap, max_per_candidate): the zone is out of reach below
-about 150 (with every rollout a success the Wilson lower bound at 1 - 0.05/8 is n / (n + 7.45),
->= 0.95 only from n = 142), and with a bank of 40 every race ran to the bank's end.
-Measured (2-core VM, load 2.1-3.2, nice 10): part 1 54 s, 124 rollouts, budget spent, no
-decision (0.1,0.05: 168 rollouts, none either); part 2 20/20 same choice, 42 % of the rollouts
-(max 53 %), every race stopped in the zone; part 2 took 589 s.
+about 120 (with every rollout a success the Clopper-Pearson lower bound at 1 - 0.05/8 reaches
+0.95 at n = 112), and with a bank of 40 every race ran to the bank's end. The bank drives every
+candidate in the same worlds, as the race does (common random numbers).
+Measured (2-core VM, load 1-3, mostly its own workers): part 1 59.5 s, 176 rollouts, budget
+spent, no decision (uncapped: decided in 88.8 s, 280 rollouts); part 2 10/20 the same choice,
+20/20 within the zone of it, 21 % of the rollouts (max 38 %), every race stopped in the zone,
+brute force's own choice firm in 133 of 200 resamples; part 2 took 509 s; part 3 97 % vs 81 %
+(double_bridge_rough), 95 % vs 93 % (kinect_bridge).
 
 1. Decision time: `double_bridge_rough`, K = 8, 95 % confidence, 60 s budget, 2 workers; the wall
    time as a ratio to the report's minute per trial and to the robot's own traverse time.
@@ -108,6 +111,16 @@ def racing_vs_bank(quick: bool, args) -> None:
         pool.close()
     full = [dataclasses.replace(c, rollouts=bank[c.index], out="") for c in candidates]
     truth = rank(full, 1 - (1 - cfg.confidence) / len(full), None)[0].index
+    # How firm brute force's own choice is: its choice on 200 resamples of the bank's worlds
+    # (with replacement, the same worlds for every candidate). Between near-equal candidates it
+    # moves, and no race using part of the bank can agree with it more often than that.
+    firm = Counter()
+    for b in range(200):
+        pick = np.random.default_rng([7, b]).integers(0, n_full, n_full)
+        resampled = [dataclasses.replace(c, out="", rollouts=[{**bank[c.index][i], "seed": j}
+                                                              for j, i in enumerate(pick)])
+                     for c in candidates]  # fmt: skip
+        firm[rank(resampled, 1 - (1 - cfg.confidence) / len(full), None)[0].index] += 1
     # Brute force's choice and everything within the indifference zone of it on the bank's own
     # estimates (P within DP, mean relative energy within DE): a race that stops in the zone
     # may pick any of these, which is as good as brute force's choice by the zone's definition.
@@ -143,6 +156,8 @@ def racing_vs_bank(quick: bool, args) -> None:
           f"{dp:g}, {de:.0%}): same choice in {agree}/{runs} races, within the zone of it "
           f"{in_zone}/{runs}, using {np.mean(used):.0%} of the rollouts (mean; max "
           f"{np.max(used):.0%})")
+    print("   brute force's own choice on 200 resamples of its bank: "
+          + ", ".join(f"{i} {k}x" for i, k in firm.most_common()))
     print(f"   brute force: candidate {truth}; zone {sorted(zone)}; bank estimates "
           + ", ".join(f"{i}: {p:.3f} {e:.3f}" for i, (p, e) in est.items()))
     print("   stopped: " + "; ".join(f"{n}x {why}" for why, n in stops.items()))
