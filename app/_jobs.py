@@ -14,8 +14,10 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import sys
 import threading
 import time
+import traceback
 from contextlib import contextmanager
 from dataclasses import dataclass
 from multiprocessing import reduction
@@ -261,7 +263,11 @@ def _host_main(conn, world: World) -> None:
                 conn.close()
                 target(Connection(fd, readable=False), world, *args)
                 status = 0
+            except BaseException:  # (as a Process would show it: the server's log)
+                traceback.print_exc()
             finally:
+                sys.stdout.flush()  # (os._exit flushes nothing)
+                sys.stderr.flush()
                 os._exit(status)
         os.close(fd)
         conn.send(pid)
@@ -301,8 +307,14 @@ class WorldHost:
 
     def close(self) -> None:
         """End the host (the jobs it started run on until they finish or are cancelled)."""
-        if not self._conn.closed:
-            self._conn.close()  # (its recv ends: it returns)
+        if not self._lock.acquire(timeout=2):  # (a fork request stuck mid-way: end it hard)
+            self._proc.kill()
+            self._lock.acquire()
+        try:
+            if not self._conn.closed:
+                self._conn.close()  # (its recv ends: it returns)
+        finally:
+            self._lock.release()
         self._proc.join(timeout=1)
         if self._proc.exitcode is None:
             self._proc.kill()

@@ -463,7 +463,11 @@ class RoachApp:
         the loop thread, so that no click waits for it."""
         if self._host is not None:
             self._host.close()
-        self._host = WorldHost(self.world)
+        self._host = None
+        try:
+            self._host = WorldHost(self.world)
+        except OSError:  # (no process to be had now: jobs go to plain children, world_job)
+            pass
 
     def world_job(self, target, *args) -> Job:
         """target(conn, self.world, *args) in a fresh child: a fork of the world's host, or,
@@ -474,7 +478,9 @@ class RoachApp:
                 return Job.on(host, target, *args)
             except (OSError, EOFError):  # the host died: a plain child this time
                 pass
-        return Job(target, self.world, *args)
+        job = Job(target, self.world, *args)
+        self.host_world()  # (a new host for the next click, while this job starts)
+        return job
 
     # the loop ----------------------------------------------------------------------------
 

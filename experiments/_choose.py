@@ -411,20 +411,27 @@ def _decided(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> str:
 def _to_sample(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> list[Candidate]:
     """The candidates the next round gives rollouts to: every one until it has a round's
     worth; then, with the zone on, for each comparison that keeps the decision from holding
-    (zone_blockers: c* against a blocker d), the side whose interval is the wider where they
-    meet. Sampling the other side cannot settle it: when d succeeds 40 times in 40 its upper
+    (zone_blockers: c* against a blocker d), on P(success) the side whose interval is the wider
+    where they meet, on energy the side with fewer rollouts (only worlds both have driven pair
+    up). Sampling the other side cannot settle it: when d succeeds 40 times in 40 its upper
     bound stays 1 however often it is driven, and only c*'s lower bound can rise within DP of
-    it. With the zone off, every candidate in the race (separation needs them all)."""
-    new = [c for c in alive if c.n < cfg.batch]
+    it. When c* is held back by its own bounds only (with min_success: below it), every
+    candidate that might yet qualify is driven too. With the zone off, every candidate in the
+    race (separation needs them all). Never a candidate that has its max_per_candidate; if the
+    ones picked all have, every candidate in the race that has not."""
+    open_ = [c for c in alive if c.n < cfg.max_per_candidate]
+    new = [c for c in open_ if c.n < cfg.batch]
     if new:
         return new
     best, blockers = zone_blockers(alive, conf, cfg.min_success, cfg.indifference)
     if best is None:
-        return list(alive)
+        return open_
     picked: dict[int, Candidate] = {}
     p_b, b_lo, _ = best.p_interval(conf)
     if not blockers[1:]:  # c* alone: its own bounds (too few successes, or below min_success)
         picked[best.index] = best
+        if cfg.min_success is not None:  # (another may be the one that qualifies)
+            picked |= {c.index: c for c in alive if c.p_interval(conf)[2] >= cfg.min_success}
     for d in blockers[1:]:
         p_d, _, d_hi = d.p_interval(conf)
         if cfg.min_success is None and d_hi > b_lo + cfg.indifference[0]:
@@ -435,7 +442,7 @@ def _to_sample(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> list[C
             if side.n >= cfg.max_per_candidate:  # (spent: only the other can move)
                 side = d if side is best else best
             picked[side.index] = side
-    return [c for c in alive if c.index in picked]
+    return [c for c in open_ if c.index in picked] or open_
 
 
 def world_seed(seed: int, k: int) -> int:
@@ -479,6 +486,10 @@ def race(
             stopped = "no candidate to race"
             break
         targets = _to_sample(alive, conf, cfg) if len(candidates) > 1 else alive
+        targets = [c for c in targets if c.n < cfg.max_per_candidate]
+        if not targets:
+            stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
+            break
         if room is not None and room < len(targets):
             stopped = f"rollout cap of {cfg.rollouts} reached"
             break
@@ -530,19 +541,16 @@ def race(
 
 
 def _confidence_reached(alive: list[Candidate], k: int, cfg: ChooseConfig) -> float | None:
-    """The highest joint confidence in [0.5, cfg.confidence) at which within_zone holds for
-    alive, to 0.01 (bisection: a lower confidence only narrows the intervals); None if none."""
-
-    def holds(c: float) -> bool:
-        return within_zone(alive, 1 - (1 - c) / k, cfg.min_success, cfg.indifference) is not None
-
-    lo, hi = 0.5, cfg.confidence
-    if not holds(lo):
-        return None
-    while hi - lo > 0.005:
-        mid = (lo + hi) / 2
-        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
-    return math.floor(lo * 100) / 100
+    """The highest joint confidence on the 0.01 grid in [0.5, cfg.confidence) at which
+    within_zone holds for alive with the candidate it holds for at cfg.confidence's ranking
+    first; None if at none."""
+    conf = 1 - (1 - cfg.confidence) / k
+    first = rank(alive, conf, cfg.min_success)[0] if alive else None
+    top = math.ceil(cfg.confidence * 100 - 1e-9) - 1
+    for c in (v / 100 for v in range(top, 49, -1)):
+        if within_zone(alive, 1 - (1 - c) / k, cfg.min_success, cfg.indifference) is first:
+            return c
+    return None
 
 
 def validate(

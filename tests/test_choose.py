@@ -187,8 +187,17 @@ def test_a_race_cut_short_says_at_what_confidence_its_choice_stands():
     alive = [c for c in short.candidates if not c.out]
     at = within_zone(alive, 1 - (1 - reached) / 3, None, (0.05, 0.05))
     assert at is not None and at.index == short.chosen  # it holds there ...
-    assert within_zone(alive, 1 - (1 - reached - 0.01) / 3, None, (0.05, 0.05)) is None  # not above
+    assert within_zone(alive, 1 - (1 - reached - 0.01) / 3, None, (0.05, 0.05)) is not at  # not above
     assert _race(truths, max_per_candidate=400, seed=2).confidence_reached is None  # decided
+
+
+def test_with_min_success_the_one_that_may_qualify_is_driven_too():
+    # The cheap path fails 15 % of the time and can never clear 0.9; the costly one never
+    # fails. The race must drive the costly one, not spend every rollout on the cheap one.
+    choice = _race([(0.85, 1.2, 0.05), (1.0, 2.0, 0.05)], min_success=0.9,
+                   max_per_candidate=60, seed=1)  # fmt: skip
+    n = {c.index: c.n for c in choice.candidates}
+    assert choice.chosen == 1 and n[1] >= 40, (choice.stopped, n)
 
 
 def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():

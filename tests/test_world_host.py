@@ -88,6 +88,10 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
         job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is None, "a plain child, sent the world"
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
+        assert app._host is not None and app._host.alive, "and a new host for the next click"
+        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app._host
+        np.testing.assert_array_equal(_paths(job)[0], hosted[0])
     finally:
         app.stop()
 
