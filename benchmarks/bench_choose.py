@@ -8,7 +8,7 @@ Parts 1-2 race with an indifference zone (experiments/_choose.py): on double_bri
 candidates succeed 194-200 times in 200 and never separate. Part 2's bank is therefore 200
 rollouts per candidate (the race's own cap, max_per_candidate): the zone is out of reach below
 about 120 (with every rollout a success the Clopper-Pearson lower bound at 1 - 0.05/8 reaches
-0.95 at n = 112), and with a bank of 40 every race ran to the bank's end. The bank drives every
+0.95 at n = 113), and with a bank of 40 every race ran to the bank's end. The bank drives every
 candidate in the same worlds, as the race does (common random numbers).
 Measured (2-core VM, load 1-3, mostly its own workers): part 1 59.5 s, 176 rollouts, budget
 spent, no decision (uncapped: decided in 88.8 s, 280 rollouts); part 2 10/20 the same choice,
