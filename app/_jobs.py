@@ -173,33 +173,25 @@ def _warm_job(conn) -> None:
 
 class Job:
     """target(conn, *args) in a fresh child process: what it has sent so far, without blocking;
-    `cancel` kills it (and whatever it started) at once. Job.on(host, target, *args) runs
-    target(conn, host's world, *args) in a fork of a WorldHost instead."""
+    `cancel` kills it (and whatever it started) at once. With host, target(conn, host's world,
+    *args) in a fork of that WorldHost instead."""
 
-    def __init__(self, target, *args) -> None:
+    def __init__(self, target, *args, host: WorldHost | None = None) -> None:
         self.started = time.monotonic()
         self._conn, child = _CTX.Pipe(duplex=False)
-        self._proc = _CTX.Process(target=target, args=(child, *args), daemon=True)
-        self._proc.start()
-        child.close()
-        self._host: WorldHost | None = None
-        self.pid = self._proc.pid
+        self._host, self._proc, self._born = host, None, None
+        try:
+            if host is None:
+                self._proc = _CTX.Process(target=target, args=(child, *args), daemon=True)
+                self._proc.start()
+                self.pid = self._proc.pid
+            else:
+                self.pid = host.fork(target, args, child)
+                self._born = _start_time(self.pid)
+        finally:
+            child.close()  # (the child holds the only writer: its exit is this end's EOF)
         self.done = False
         """The child has closed its end (finished, failed or killed)."""
-
-    @classmethod
-    def on(cls, host: WorldHost, target, *args) -> Job:
-        job = cls.__new__(cls)
-        job.started = time.monotonic()
-        job._conn, child = _CTX.Pipe(duplex=False)
-        job._proc, job._host = None, host
-        try:
-            job.pid = host.fork(target, args, child)
-        finally:
-            child.close()  # (the fork holds the only writer: its exit is this end's EOF)
-        job._born = _start_time(job.pid)
-        job.done = False
-        return job
 
     @property
     def elapsed(self) -> float:
@@ -275,7 +267,7 @@ def _host_main(conn, world: World) -> None:
 
 class WorldHost:
     """A long-lived child of the fork server holding one world, which forks a fresh child of
-    itself for each job on that world (Job.on): a job starts in a few milliseconds, where a
+    itself for each job on that world (Job(..., host=)): a job starts in a few milliseconds, where a
     child of the fork server first has to receive the world."""
 
     def __init__(self, world: World) -> None:

@@ -475,7 +475,7 @@ class RoachApp:
         host = self._host
         if host is not None and host.world is self.world and host.alive:
             try:
-                return Job.on(host, target, *args)
+                return Job(target, *args, host=host)
             except (OSError, EOFError):  # the host died: a plain child this time
                 pass
         job = Job(target, self.world, *args)

@@ -43,21 +43,21 @@ def host(world):
 
 def test_a_fork_of_the_host_plans_what_a_child_sent_the_world_plans(world, host):
     far = time.monotonic() + 60
-    hosted = [_paths(Job.on(host, _plan_job, 2, _request(world, 5), far)) for _ in range(2)]
+    hosted = [_paths(Job(_plan_job, 2, _request(world, 5), far, host=host)) for _ in range(2)]
     plain = _paths(Job(_plan_job, world, 2, _request(world, 5), far))
     assert len(plain) == 2
     for paths in hosted:  # (the host never draws: each fork starts from OMPL's clean state)
         assert len(paths) == len(plain)
         for a, b in zip(paths, plain):
             np.testing.assert_array_equal(a, b)
-    other = _paths(Job.on(host, _plan_job, 1, _request(world, 6), far))
+    other = _paths(Job(_plan_job, 1, _request(world, 6), far, host=host))
     assert not np.array_equal(other[0], plain[0]), "another seed, another path"
 
 
 def test_cancel_kills_the_fork_and_the_host_serves_the_next_job(world, host):
     # Fifty distinct paths asked for: it plans for seconds, up to 160 tries.
-    job = Job.on(host, _plan_job, 50, _request(world, 0, time_limit=30.0),
-                 time.monotonic() + 300)  # fmt: skip
+    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300,
+              host=host)  # fmt: skip
     time.sleep(0.5)
     assert host.is_parent_of(job.pid) and not job.done
     job.cancel()
@@ -66,7 +66,7 @@ def test_cancel_kills_the_fork_and_the_host_serves_the_next_job(world, host):
             break
         time.sleep(0.05)
     assert not host.is_parent_of(job.pid), "the cancelled fork is gone"
-    assert len(_paths(Job.on(host, _plan_job, 1, _request(world, 3), time.monotonic() + 60))) == 1
+    assert len(_paths(Job(_plan_job, 1, _request(world, 3), time.monotonic() + 60, host=host))) == 1
 
 
 def test_the_app_plans_without_its_host_once_it_has_died(world):
@@ -109,8 +109,8 @@ def test_cancel_kills_a_fork_whose_host_has_closed_meanwhile(world):
     # A new scene loaded while a plan runs closes the old world's host; Cancel must still
     # reach the plan, now a child of init's.
     old = WorldHost(world)
-    job = Job.on(old, _plan_job, 50, _request(world, 0, time_limit=30.0),
-                 time.monotonic() + 300)  # fmt: skip
+    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300,
+              host=old)  # fmt: skip
     time.sleep(0.3)
     old.close()
     assert not old.is_parent_of(job.pid) and not _gone(job.pid), "it runs on, orphaned"
