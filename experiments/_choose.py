@@ -320,14 +320,16 @@ def zone_blockers(
     conf: float,
     min_success: float | None,
     indifference: tuple[float, float],
-) -> tuple[Candidate | None, list[Candidate]]:
+) -> tuple[Candidate | None, list[tuple[Candidate, str]]]:
     """(c*, blockers): the first-ranked of `alive`, and the candidates whose intervals keep the
     indifference-zone decision (module docstring) from holding for it at per-candidate
-    confidence conf, c* first among them when any is; no blockers: the decision holds. With
-    the zone off nothing but separation decides: every candidate blocks."""
+    confidence conf, each with why: "p" (it might be more than DP safer), "energy" (it might
+    be more than DE cheaper, or its energy is not known), "own" (c* itself, first among them
+    when any is). No blockers: the decision holds. With the zone off nothing but separation
+    decides: every candidate blocks ("own")."""
     dp, de = indifference
     if (dp <= 0 and de <= 0) or not alive:
-        return None, list(alive)
+        return None, [(c, "own") for c in alive]
     best = rank(alive, conf, min_success)[0]
     _, b_lo, _ = best.p_interval(conf)
     blockers = []
@@ -336,17 +338,17 @@ def zone_blockers(
             continue
         _, d_lo, d_hi = d.p_interval(conf)
         if min_success is None and d_hi > b_lo + dp:
-            blockers.append(d)  # d might be more than DP safer
+            blockers.append((d, "p"))
             continue
         # Only a candidate that might be as safe (or might qualify) counts for energy.
         if (d_hi < min_success) if min_success is not None else (d_hi < b_lo):
             continue
         if not energy_excess_bound(best, d, conf, de) <= 0:
-            blockers.append(d)  # d might be more than DE cheaper (or its energy is not known)
+            blockers.append((d, "energy"))
     # c*'s own bounds: fewer than 2 successes leave its energy unbounded; with min_success it
     # must clear it; and it is one side of every comparison above.
     if blockers or len(best.successes) < 2 or (min_success is not None and b_lo < min_success):
-        blockers.insert(0, best)
+        blockers.insert(0, (best, "own"))
     return best, blockers
 
 
@@ -432,9 +434,9 @@ def _to_sample(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> list[C
         picked[best.index] = best
         if cfg.min_success is not None:  # (another may be the one that qualifies)
             picked |= {c.index: c for c in alive if c.p_interval(conf)[2] >= cfg.min_success}
-    for d in blockers[1:]:
-        p_d, _, d_hi = d.p_interval(conf)
-        if cfg.min_success is None and d_hi > b_lo + cfg.indifference[0]:
+    for d, why in blockers[1:]:
+        if why == "p":
+            p_d, _, d_hi = d.p_interval(conf)
             sides = [best if p_b - b_lo >= d_hi - p_d else d]
         else:  # energy: only worlds both have driven pair up, so the one behind catches up
             sides = [c for c in (best, d) if c.n == min(best.n, d.n)]
@@ -468,6 +470,7 @@ def race(
     used = 0
     stopped = ""
     per_rollout = 0.0  # wall time per rollout in the last round [s]
+    cut_short = False  # stopped by the budget, the cap or max_per_candidate, not a decision
     while True:
         alive = [c for c in candidates if not c.out]
         # A lone candidate from the start is not a decision: it races on (alone) until the
@@ -485,26 +488,23 @@ def race(
         if not alive:  # only when no candidate was planned
             stopped = "no candidate to race"
             break
-        targets = _to_sample(alive, conf, cfg) if len(candidates) > 1 else alive
-        targets = [c for c in targets if c.n < cfg.max_per_candidate]
+        targets = _to_sample(alive, conf, cfg)
         if not targets:
             stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
+            cut_short = True
             break
         if room is not None and room < len(targets):
-            stopped = f"rollout cap of {cfg.rollouts} reached"
+            stopped, cut_short = f"rollout cap of {cfg.rollouts} reached", True
             break
         per = cfg.batch if room is None else min(cfg.batch, room // len(targets))
         calls = [(c.index, c.path_xyz.tolist(), world_seed(cfg.seed, c.n + j))
-                 for c in targets if c.n < cfg.max_per_candidate for j in range(per)]  # fmt: skip
-        if not calls:
-            stopped = f"every candidate has its {cfg.max_per_candidate} rollouts"
-            break
+                 for c in targets for j in range(per)]  # fmt: skip
         # Stop before a round that would overrun the budget (a rollout takes about as long as
         # one of the last round did).
         if cfg.budget_s is not None and (
             time.monotonic() - t0 + per_rollout * len(calls) >= cfg.budget_s
         ):
-            stopped = f"time budget of {cfg.budget_s:.1f} s spent"
+            stopped, cut_short = f"time budget of {cfg.budget_s:.1f} s spent", True
             break
         t_round = time.monotonic()
         for rec in run_rollouts(calls):
@@ -521,7 +521,7 @@ def race(
     ordered = rank(candidates, conf, cfg.min_success)
     chosen = next((c.index for c in ordered if c.successes), None)
     reached = None
-    if stopped.endswith(("spent", "reached", "rollouts")) and len(candidates) > 1:
+    if cut_short and len(candidates) > 1:
         reached = _confidence_reached([c for c in candidates if not c.out], k, cfg)
         if reached is not None:
             stopped += (f"; the first-ranked is within the indifference zone at {reached:.0%} "
