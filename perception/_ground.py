@@ -1,10 +1,13 @@
-"""Which surface of a capture is the ground: a gravity prior, not the largest plane.
+"""Which surface of a capture is the ground: gravity first, not the largest plane.
 
-A room capture's largest plane is often a wall, and a table capture's a background surface
-(3 of 7 real room/table clouds). So the ground is chosen as a person would: gravity points
-roughly along the camera's +y (a level camera's "up" is -y) unless a calibration, an IMU or
-the user says otherwise; among the planes found in the cloud, the horizontal ones are those
-parallel to the best-supported plane near that prior; the ground is the lowest of them that is
+A room capture's largest plane is often a wall, and a table capture's a background surface;
+in a level-camera office or a room with people in it the floor may be a few per cent of the
+points, behind walls and furniture. So the ground is searched for as a person would: gravity
+points roughly along the camera's +y (a level camera's "up" is -y) unless a calibration, an
+IMU or the user says otherwise; only surfaces that face up under that prior are searched,
+however small a share of the cloud they are (each point's normal decides, so a floor of 3 %
+of the points is found among walls of 60 %); among the planes found there, the horizontal
+ones are those parallel to the best-supported one; the ground is the lowest of them that is
 well supported (the floor under a desk, not the desk; never a wall).
 
 All directions here are in the capture's frame (a camera's: x right, y down, z forward).
@@ -22,6 +25,9 @@ CAMERA_UP = (0.0, -1.0, 0.0)
 """A level camera's up in its optical frame (x right, y down, z forward)."""
 Z_UP = (0.0, 0.0, 1.0)
 """Up in a world or robot frame (REP 103: z up)."""
+MAX_BAND = 0.05
+"""Widest band round the ground plane its final fit takes points from [m]: a rough or noisy
+ground's scatter, short of what a curb or a rug would add."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,20 +96,26 @@ class GroundChoice:
 
 
 def find_planes(
-    points: np.ndarray, up: np.ndarray, cfg: GroundConfig, toward_sensor: bool = True
+    points: np.ndarray,
+    up: np.ndarray,
+    cfg: GroundConfig,
+    toward_sensor: bool = True,
+    cone_deg: float | None = None,
 ) -> list[Plane]:
     """Up to cfg.max_planes planes of points ((N, 3), capture frame [m]), by sequential seeded
     RANSAC (_ransac_plane). toward_sensor: each normal faces the sensor (the origin), so a
     surface seen from below (a ceiling, a table's underside) faces away from up and cannot be
-    the ground; else (a world-frame cloud, whose origin may be anywhere) each faces up ((3,))."""
+    the ground; else (a world-frame cloud, whose origin may be anywhere) each faces up ((3,)).
+    cone_deg: only planes within this angle of up ((3,) unit) are hypotheses (None: any)."""
     if len(points) < 3:
         raise CaptureError("too few points left to find the ground plane")
     rng = np.random.default_rng(cfg.seed)
     rest = points
     planes: list[Plane] = []
     min_points = max(50, int(0.01 * len(points)))
+    cone = None if cone_deg is None else (up, float(np.cos(np.radians(cone_deg))))
     while len(planes) < cfg.max_planes and len(rest) >= min_points:
-        n, d, inliers = _ransac_plane(rest, cfg.threshold, cfg.iterations, rng)
+        n, d, inliers = _ransac_plane(rest, cfg.threshold, cfg.iterations, rng, cone)
         if len(inliers) < min_points:
             break
         if (d < 0) if toward_sensor else (n @ up < 0):
@@ -121,18 +133,26 @@ def find_planes(
 
 
 def _ransac_plane(
-    points: np.ndarray, threshold: float, iterations: int, rng: np.random.Generator
+    points: np.ndarray,
+    threshold: float,
+    iterations: int,
+    rng: np.random.Generator,
+    cone: tuple[np.ndarray, float] | None = None,
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """(unit normal (3,), offset d, inlier indices) of the plane n . p + d = 0 through three of
     the points ((N, 3) [m]) that the most points lie within threshold [m] of, over `iterations`
-    random triples. Ours, not Open3D's segment_plane: that one draws its triples across
-    OpenMP threads, so the same seed gave different planes under different machine load."""
+    random triples. cone (up (3,) unit, cos of the largest angle): triples whose plane is
+    steeper than that to up are no hypotheses. Ours, not Open3D's segment_plane: that one
+    draws its triples across OpenMP threads, so the same seed gave different planes under
+    different machine load."""
     pts = np.asarray(points, dtype=np.float64)
     triples = rng.integers(0, len(pts), size=(iterations, 3))
     a, b, c = pts[triples[:, 0]], pts[triples[:, 1]], pts[triples[:, 2]]
     normals = np.cross(b - a, c - a)
     length = np.linalg.norm(normals, axis=1)
     ok = length > 1e-12  # three distinct, not collinear points
+    if cone is not None:
+        ok &= np.abs(normals @ cone[0]) >= cone[1] * length
     normals, a = normals[ok] / length[ok, None], a[ok]
     offsets = -np.einsum("ij,ij->i", normals, a)
     best, best_count = 0, -1
@@ -182,17 +202,31 @@ def choose_ground(
     up = up / np.linalg.norm(up)
     # Planes are searched in an even subsample (RANSAC's cost grows with the points; 30,000
     # still put dozens in every 5 cm cell of a surface); the chosen one is refitted on all.
-    planes = find_planes(points[:: max(1, len(points) // 30000)], up, cfg, toward_sensor)
-    if not planes:
-        raise CaptureError("no plane found in the capture: nothing to take as the ground")
-    total = len(points[:: max(1, len(points) // 30000)])
+    sub = points[:: max(1, len(points) // 30000)]
     warnings: list[str] = []
     if near is not None:
+        planes = find_planes(sub, up, cfg, toward_sensor)
+        if not planes:
+            raise CaptureError("no plane found in the capture: nothing to take as the ground")
         return _ground_through(
             points, planes, np.asarray(near, dtype=np.float64), cfg, up, toward_sensor
         )
+    # Gravity first: only points whose surface faces up under the prior are searched, and
+    # only planes within the prior's cone are hypotheses. Searching the whole cloud found the
+    # largest planes first (walls, furniture), and a floor of a few per cent was never among
+    # the eight (a level-camera office, a room with a person in it).
+    facing = _facing_up(sub, up, cfg.prior_tolerance_deg, toward_sensor)
+    planes = []
+    if facing.sum() >= 50:
+        planes = find_planes(sub[facing], up, cfg, toward_sensor,
+                             cone_deg=cfg.prior_tolerance_deg)  # fmt: skip
+    pool = int(facing.sum())  # the points a ground may be a share of
     candidates = [p for p in planes if p.angle_deg <= cfg.prior_tolerance_deg]
     if not candidates:
+        planes = find_planes(sub, up, cfg, toward_sensor)
+        if not planes:
+            raise CaptureError("no plane found in the capture: nothing to take as the ground")
+        pool = len(sub)
         best = min(planes, key=lambda p: p.angle_deg)
         warnings.append(
             f"no plane faces up within {cfg.prior_tolerance_deg:g} deg of the assumed gravity; "
@@ -224,8 +258,9 @@ def choose_ground(
         level = _angle(p.normal, refined) <= cfg.parallel_deg
         if level and all(abs(p.offset - q.offset) >= cfg.level_gap for q in horizontal):
             horizontal.append(p)
+    total = len(sub)
     well = [p for p in horizontal
-            if p.area >= cfg.min_area and p.support >= cfg.min_fraction * total]  # fmt: skip
+            if p.area >= cfg.min_area and p.support >= cfg.min_fraction * pool]  # fmt: skip
     if not well:
         well = [max(horizontal, key=lambda p: p.support)]
         warnings.append(
@@ -233,7 +268,7 @@ def choose_ground(
             f"{100 * well[0].support / total:.0f} % of the points)"
         )
     ground = max(well, key=lambda p: p.offset)  # the lowest: farthest below the sensor
-    if ground.offset <= 0:
+    if toward_sensor and ground.offset <= 0:
         warnings.append("the sensor is not above the ground chosen: check the up direction")
     higher = [p for p in well if p is not ground and p.support > ground.support]
     if higher:
@@ -249,12 +284,35 @@ def choose_ground(
             f"the ground is tilted {ground.angle_deg:.0f} deg from the assumed gravity: a steep "
             f"camera, or the wrong surface"
         )
-    n, d = _refit(points, ground.normal, ground.offset, cfg.threshold)
+    # The level surfaces share one normal (a floor and the desks on it): fitted jointly, their
+    # up is better known than from the ground alone, which may be a strip a few tens of
+    # centimetres deep at the bottom of the view (2 deg there is 5 cm at the camera).
+    level = [(p.normal, p.offset) for p in [ground, *[q for q in well if q is not ground]]]
+    n, d = _refit_level(points, level, cfg.threshold)
     support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
     return GroundChoice(
         normal=n, offset=d, support=support, fraction=support / len(points), area=ground.area,
         planes=tuple(planes), warnings=tuple(warnings),
     )  # fmt: skip
+
+
+def _facing_up(
+    points: np.ndarray, up: np.ndarray, tolerance_deg: float, toward_sensor: bool
+) -> np.ndarray:
+    """(N,) bool: the points ((N, 3) [m]) whose surface faces up within tolerance_deg of up
+    ((3,) unit). Each point's normal is the smallest principal direction of its 16 nearest
+    neighbours (Open3D), turned to face the sensor at the origin (toward_sensor: a surface
+    seen from below, a ceiling or a table's underside, then faces down) or else up."""
+    import open3d as o3d
+
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(16))
+    normals = np.asarray(cloud.normals)
+    if toward_sensor:
+        normals = np.where(np.einsum("ij,ij->i", normals, points)[:, None] > 0, -normals, normals)
+    else:
+        normals = np.where((normals @ up)[:, None] < 0, -normals, normals)
+    return normals @ up >= np.cos(np.radians(tolerance_deg))
 
 
 def _ground_through(
@@ -293,13 +351,14 @@ def _ground_through(
              and (not clear or _angle(p.normal, n_loc) <= 10.0 or _angle(p.normal, -n_loc) <= 10.0)]
     if on_it:
         best = max(on_it, key=lambda p: p.support)
-        n, d = _refit(points, best.normal, best.offset, cfg.threshold)
+        n, d = _refit_level(points, [(best.normal, best.offset)], cfg.threshold)
     else:
         if (d_loc < 0) if toward_sensor else (n_loc @ up < 0):
             n_loc, d_loc = -n_loc, -d_loc
         n, d = n_loc, float(d_loc)
         for _ in range(3):  # refit on the cloud's points on it; a few rounds settle it
             n, d = _refit(points, n, d, cfg.threshold)
+        n, d = _refit_level(points, [(n, d)], cfg.threshold)
     on = np.abs(points @ n + d) <= cfg.threshold
     support = int(np.sum(on))
     return GroundChoice(
@@ -322,6 +381,37 @@ def _refit(
     if n @ normal < 0:
         n = -n
     return n, float(-n @ centre)
+
+
+def _refit_level(
+    points: np.ndarray, level: list[tuple[np.ndarray, float]], threshold: float
+) -> tuple[np.ndarray, float]:
+    """(unit normal, offset of level[0]) of parallel planes fitted jointly by least squares to
+    the points ((N, 3) [m]) near each plane (normal (3,), offset [m]) of level (the ground
+    first): one normal, an offset per plane (each plane's points centred on their own centroid). "Near" starts at threshold
+    [m] and settles on the ground's own scatter (2.5 rms, at most MAX_BAND): a rough or noisy
+    ground (wood chips, a far floor) is fitted on its whole band, not on a 1.5 cm slab of it."""
+    n, d = _refit(points, *level[0], threshold)
+    offsets = [d]
+    for normal, offset in level[1:]:  # each one's offset under the common normal
+        on = points[np.abs(points @ normal + offset) <= threshold]
+        offsets.append(float(-n @ on.mean(axis=0)) if len(on) else offset)
+    band = threshold
+    for _ in range(10):  # the inliers move with the planes and the band until it settles
+        groups = [points[np.abs(points @ n + dk) <= band] for dk in offsets]
+        if len(groups[0]) < 3:
+            break
+        stacked = np.concatenate([g - g.mean(axis=0) for g in groups if len(g) >= 3])
+        m = np.linalg.svd(stacked, full_matrices=False)[2][2]
+        n = m if m @ n >= 0 else -m
+        offsets = [float(-n @ g.mean(axis=0)) if len(g) >= 3 else dk
+                   for g, dk in zip(groups, offsets, strict=True)]  # fmt: skip
+        rms = float(np.sqrt(np.mean((groups[0] @ n + offsets[0]) ** 2)))
+        wider = min(max(threshold, 2.5 * rms), MAX_BAND)
+        if abs(wider - band) < 1e-3:
+            break
+        band = wider
+    return n, offsets[0]
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:
