@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-Method = Literal["grid", "poisson", "ball-pivot"]
-METHODS: tuple[str, ...] = ("grid", "poisson", "ball-pivot")
+Method = Literal["sensor", "grid", "poisson", "ball-pivot"]
+METHODS: tuple[str, ...] = ("sensor", "grid", "poisson", "ball-pivot")
 Frame = Literal["auto", "camera", "world"]
 FRAMES: tuple[str, ...] = ("auto", "camera", "world")

@@ -26,6 +26,7 @@ from ._capture import Capture, depth_scale_advice, is_georeferenced
 from ._choices import FRAMES, METHODS, Frame, Method
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
+from ._surface import Surface, organized_surface, projected_surface, scattered_surface
 
 CAMERA_DEPTH_RANGE = (0.3, 8.0)
 """Default depth range of a camera-frame capture [m] (Kinect v2: 0.5-4.5 m rated)."""
@@ -65,7 +66,12 @@ class MeshingConfig:
     (the page's "click the ground to re-level")."""
     recentre: bool | None = None
     """Put the cloud's centre at x = y = 0 (world frame); None: when georeferenced."""
-    method: Method = "grid"
+    method: Method = "sensor"
+    """"sensor": samples joined at the density the sensor took them (perception/_surface.py);
+    "grid": a height field of cell-size cells; "poisson", "ball-pivot": Open3D's."""
+    max_fill: float = 0.3
+    """Sensor method: holes inside an observed surface at most this wide [m], with a flat rim,
+    are filled from it; larger ones (and every shadow) stay unknown."""
     cell: float | None = None
     """Grid method: cell size of the height field [m] (default: dx, or the cloud's point
     spacing when it is sparser, as an airborne lidar's metres)."""
@@ -222,15 +228,25 @@ def pose_matrix(pose: tuple[float, ...]) -> np.ndarray:
     return out
 
 
+CAMERA_MAX_TAN = 2.0
+"""No depth camera sees wider than this tangent off its optical axis (127 deg across; the
+widest, a 120 deg wide-angle mode, reaches 1.73) [-]."""
+
+
 def capture_frame(capture: Capture, points: np.ndarray, cfg: MeshingConfig) -> str:
     """"camera" or "world": the config's, else the file's word, else from the points ((N, 3)
-    finite, relative to the sensor): a georeferenced cloud, or one with points behind the
-    sensor (a lidar all round it; a camera sees only z > 0), is a world frame."""
+    finite, relative to the sensor): a georeferenced cloud, one with points behind the
+    sensor (a lidar all round it; a camera sees only z > 0), or one spread wider than any
+    camera's field of view (a lidar's patch of ground, its z up and small) is a world frame."""
     if cfg.frame != "auto":
         return cfg.frame
     if capture.frame is not None:
         return capture.frame
     if is_georeferenced(points) or np.mean(points[:, 2] <= 0.0) > 0.05:
+        return "world"
+    z = np.maximum(points[:, 2], 1e-12)
+    off_axis = np.maximum(np.abs(points[:, 0]), np.abs(points[:, 1])) / z
+    if np.mean(off_axis > CAMERA_MAX_TAN) > 0.05:
         return "world"
     return "camera"
 
@@ -340,15 +356,38 @@ def reconstruct(
         wfc, ground = _world_frame_transform(pts, up, gcfg, cfg, near_point, notes)
         if ground is not None:
             counts["ground inliers"] = ground.support
+    centred_to_world = wfc  # takes points relative to the sensor (camera) or as read (world)
     if frame == "camera":
         wfc = wfc @ _translation(-origin)  # the transform takes the file's own coordinates
     world = (pts + (origin if frame == "camera" else 0.0)) @ wfc[:3, :3].T + wfc[:3, 3]
-    if cfg.crop is not None:
-        lo, hi = np.asarray(cfg.crop[0]), np.asarray(cfg.crop[1])
-        world = world[np.all((world >= lo) & (world <= hi), axis=1)]
+    in_crop = _crop_mask(world, cfg.crop)
+    world = world[in_crop]
     stage("ground", len(world))
     camera = wfc[:3, 3] if frame == "camera" else _overhead(world)
-    if cfg.method == "grid":
+    if cfg.method == "sensor":
+        if frame == "camera" and capture.shape is not None:
+            keep = np.zeros(len(capture.points), dtype=bool)
+            keep[np.flatnonzero(capture.valid)[inside]] = True
+            grid = np.where(keep[:, None], capture.points - origin, np.nan)
+            keep[keep] = _crop_mask(grid[keep] @ centred_to_world[:3, :3].T
+                                    + centred_to_world[:3, 3], cfg.crop)  # fmt: skip
+            surface = organized_surface(grid.reshape(*capture.shape, 3),
+                                        keep.reshape(capture.shape), centred_to_world,
+                                        cfg.voxel[0], cfg.max_fill)  # fmt: skip
+        elif frame == "camera":
+            surface = projected_surface(pts[in_crop], centred_to_world, cfg.max_fill)
+        else:
+            surface = scattered_surface(world, cfg.max_fill)
+        mesh = surface_to_mesh(surface)
+        total = surface.observed_area + surface.filled_area
+        notes.append(
+            f"surface: {surface.observed_area:.2f} m^2 between measured samples; "
+            f"{surface.filled_area:.2f} m^2 ({100 * surface.filled_area / max(total, 1e-12):.1f} %) "
+            f"filled in from the rims of small holes; what the sensor did not see is left "
+            f"open (not walkable)"
+        )
+        counts["filled vertices"] = int(surface.filled.sum())
+    elif cfg.method == "grid":
         cell = cfg.cell or cfg.voxel[0]
         if cfg.cell is None:
             spacing = _point_spacing(world)
@@ -372,6 +411,25 @@ def reconstruct(
     return Reconstruction(
         mesh=mesh, world_from_camera=wfc, counts=counts, times=times, frame=frame,
         up_source=up_source, ground=ground, warnings=tuple(warnings), notes=tuple(notes),
+    )  # fmt: skip
+
+
+def _crop_mask(world: np.ndarray, crop) -> np.ndarray:
+    """(N,) bool: the world points ((N, 3) [m]) inside the crop box ((lo, hi) or None: all)."""
+    if crop is None:
+        return np.ones(len(world), dtype=bool)
+    lo, hi = np.asarray(crop[0]), np.asarray(crop[1])
+    return np.all((world >= lo) & (world <= hi), axis=1)
+
+
+def surface_to_mesh(surface: Surface) -> trimesh.Trimesh:
+    """A Surface as a trimesh mesh whose vertices carry "height_noise" [m] and "filled"
+    (1.0 where filled in): the scene keeps them through placing and merging, and the planner's
+    height field takes the noise (scenes/_world.py)."""
+    return trimesh.Trimesh(
+        surface.vertices, surface.faces, process=False,
+        vertex_attributes={"height_noise": surface.height_noise,
+                           "filled": surface.filled.astype(np.float64)},
     )  # fmt: skip
 
 

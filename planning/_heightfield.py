@@ -23,6 +23,9 @@ class HeightField:
     """Grid spacing [m]."""
     heights: np.ndarray
     """(ny, nx) float64 [m], NaN = no surface."""
+    noise: np.ndarray | None = None
+    """(ny, nx) float64: standard deviation of each height [m] (a capture's sensor noise;
+    None: exact, as a model's)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -50,6 +53,18 @@ class HeightField:
 
     def sample(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear surface height at xy ((..., 2) [m]); NaN off the grid or next to a NaN cell."""
+        return self._bilinear(self.heights, xy)
+
+    def sample_noise(self, xy: np.ndarray) -> np.ndarray:
+        """Bilinear height noise at xy ((..., 2) [m]) [m]; 0 where there is none (a model, or
+        off the surface)."""
+        if self.noise is None:
+            return np.zeros(np.shape(xy)[:-1])
+        return np.nan_to_num(self._bilinear(self.noise, xy))
+
+    def _bilinear(self, h: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Bilinear interpolation of a (ny, nx) grid on this one's points at xy ((..., 2) [m]);
+        NaN off the grid or next to a NaN cell."""
         xy = np.asarray(xy, dtype=np.float64)
         ny, nx = self.heights.shape
         u = (xy[..., 0] - self.x0) / self.resolution
@@ -59,7 +74,6 @@ class HeightField:
         j = np.clip(np.floor(v).astype(np.int64), 0, ny - 2)
         fu = np.clip(u - i, 0.0, 1.0)
         fv = np.clip(v - j, 0.0, 1.0)
-        h = self.heights
         z = (
             h[j, i] * (1 - fu) * (1 - fv)
             + h[j, i + 1] * fu * (1 - fv)
@@ -77,19 +91,25 @@ def heightfield_from_mesh(
     xy_max: tuple[float, float],
     resolution: float,
     ground_height: float | None,
+    vertex_noise: np.ndarray | None = None,
 ) -> HeightField:
     """Rasterise the upward-facing triangles of a mesh into a top-surface height field.
 
     vertices: (V, 3) world frame [m]; faces: (F, 3) int. Each grid point takes the highest
     triangle above it; points no triangle covers take ground_height (or NaN without ground).
     Exact for the piecewise-planar surface, and cheaper than one ray per cell.
+    vertex_noise: (V,) standard deviation of each vertex's height [m] (a capture's), or None;
+    each grid point takes the largest noise of the triangles above it (interpolated).
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     nx = int(np.floor((xy_max[0] - xy_min[0]) / resolution)) + 1
     ny = int(np.floor((xy_max[1] - xy_min[1]) / resolution)) + 1
     top = np.full((ny, nx), -np.inf)
+    noisy = vertex_noise is not None and bool(np.any(np.asarray(vertex_noise) > 0))
+    noise = np.zeros((ny, nx)) if noisy else None
     tri = vertices[faces]  # (F, 3, 3)
+    tri_noise = np.asarray(vertex_noise, dtype=np.float64)[faces] if noisy else None
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed xy area
@@ -99,6 +119,8 @@ def heightfield_from_mesh(
     # loader leaves every mesh) -- skipping them also skips a closed mesh's large bottom.
     keep = det > 1e-12
     tri, det = tri[keep], det[keep]
+    if tri_noise is not None:
+        tri_noise = tri_noise[keep]
     xy0 = np.asarray(xy_min, dtype=np.float64)
     lo = np.maximum(np.ceil((tri[:, :, :2].min(1) - xy0) / resolution - 1e-9), 0).astype(np.int64)
     hi = np.minimum(
@@ -128,8 +150,15 @@ def heightfield_from_mesh(
             inside = (a >= -eps) & (c >= -eps) & (a + c <= 1 + eps)
             inside &= np.all(cell <= hi[sel, None, :], axis=-1)
             z = o[..., 2] + a * e1[..., 2] + c * e2[..., 2]
-            np.maximum.at(flat, (cell[..., 1] * nx + cell[..., 0])[inside], z[inside])
+            at = (cell[..., 1] * nx + cell[..., 0])[inside]
+            np.maximum.at(flat, at, z[inside])
+            if noise is not None:
+                tn = tri_noise[sel]  # (n, 3): the noise at the corners, interpolated alike
+                sn = tn[:, None, 0] + a * (tn[:, None, 1] - tn[:, None, 0]) + c * (
+                    tn[:, None, 2] - tn[:, None, 0])  # fmt: skip
+                np.maximum.at(noise.reshape(-1), at, sn[inside])
     if ground_height is not None:
         top = np.maximum(top, ground_height)
     top[~np.isfinite(top)] = np.nan
-    return HeightField(x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, heights=top)
+    return HeightField(x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution,
+                       heights=top, noise=noise)  # fmt: skip

@@ -52,14 +52,16 @@ def looks_like_millimetres(mesh: trimesh.Trimesh) -> bool:
 def scaled_mesh(mesh: trimesh.Trimesh, scale: tuple[float, float, float]) -> trimesh.Trimesh:
     """A copy of mesh with its vertices scaled about its origin by (sx, sy, sz) (positive)."""
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
-    return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False)
+    return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False,
+                           vertex_attributes=dict(mesh.vertex_attributes))  # fmt: skip
 
 
 def clean_terrain_mesh(
-    mesh: trimesh.Trimesh, label: str, check_units: bool = True
+    mesh: trimesh.Trimesh, label: str, check_units: bool = True, rewind: bool = True
 ) -> trimesh.Trimesh:
     """A copy with non-finite vertices, duplicate vertices and degenerate faces removed and the
-    faces wound consistently with normals outward (closed meshes) or upward (open surfaces).
+    faces wound consistently with normals outward (closed meshes) or upward (open surfaces);
+    rewind False keeps each face's winding (a capture's facets already face its sensor).
 
     Raises SceneError naming `label` when nothing usable is left or the size is absurd.
     """
@@ -69,7 +71,9 @@ def clean_terrain_mesh(
     faces = faces[np.all(finite[faces], axis=1)]
     if len(faces) == 0:
         raise SceneError(f"{label}: the mesh has no triangles with finite coordinates")
-    out = trimesh.Trimesh(vertices, faces, process=False)
+    # Per-vertex values (a capture's height noise) stay with their vertices through cleaning.
+    out = trimesh.Trimesh(vertices, faces, process=False,
+                          vertex_attributes=dict(mesh.vertex_attributes))  # fmt: skip
     out.remove_unreferenced_vertices()  # drops the non-finite ones before they are compared
     out.merge_vertices()
     out.update_faces(out.nondegenerate_faces())
@@ -85,6 +89,8 @@ def clean_terrain_mesh(
             f"this is most likely a model in millimetres: add `scale: 0.001` to this terrain "
             f"object (or --scale 0.001)"
         )
+    if not rewind:
+        return out
     if out.is_watertight:
         trimesh.repair.fix_normals(out)  # consistent winding, outward (may flip all)
     else:

@@ -36,6 +36,10 @@ MAX_DEPTH_BELOW_GROUND = 1.0
 """How deep the terrain may reach under the ground plane [m] before build_world warns: a model
 sunk a little into the floor is common; metres down is most often a wrong position z, units or
 orientation."""
+VERTEX_VALUES = ("height_noise", "filled")
+"""Per-vertex values a terrain mesh may carry (a capture's, perception/_surface.py): the
+standard deviation of the vertex's height [m], and 1.0 where it was filled in from a hole's
+rim; 0 on models and mesh files."""
 MAX_PLANNING_AREA = 400.0
 """Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
 and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
@@ -96,6 +100,7 @@ def footprint_of(robot: RobotConfig) -> Footprint:
         body_length=robot.body_length,
         body_width=robot.body_width,
         body_clearance=robot.standing_height - robot.body_height / 2,
+        leg_reach=robot.leg_length + robot.leg_radius,
     )
 
 
@@ -118,7 +123,10 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
         raw = read_mesh(source, label)
     if obj.scale != (1.0, 1.0, 1.0):  # before the unit check: a model in mm passes once scaled
         raw = scaled_mesh(raw, obj.scale)
-    mesh = clean_terrain_mesh(raw, label, check_units=obj.kind != "capture")
+    # A capture's units were judged by perception from the sensor's range, and its facets
+    # face the sensor (section 3.2): neither is redone here.
+    capture = obj.kind == "capture"
+    mesh = clean_terrain_mesh(raw, label, check_units=not capture, rewind=not capture)
     transform = np.eye(4)
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position
@@ -135,6 +143,10 @@ def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
         problem = below_ground_problem(placed, scene.ground)
         if problem:
             raise SceneError(f"{scene.path}: {obj.key}: {problem}")
+    for m in meshes:  # every piece carries the same per-vertex values, or concatenate drops them
+        for key in VERTEX_VALUES:
+            if key not in m.vertex_attributes:
+                m.vertex_attributes[key] = np.zeros(len(m.vertices))
     mesh = trimesh.util.concatenate(meshes)
     mesh.merge_vertices()
     return mesh
@@ -217,6 +229,7 @@ def build_world(
         xy_max=(hi[0] + margin, hi[1] + margin),
         resolution=HEIGHTFIELD_RESOLUTION,
         ground_height=scene.ground,
+        vertex_noise=mesh.vertex_attributes.get("height_noise"),
     )
     world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
     if scene.start is None:

@@ -19,8 +19,10 @@ from roachplan.perception import (
     CaptureError,
     MeshingConfig,
     NoiseModel,
+    capture_settings,
     load_capture,
     look_at,
+    mesh_capture,
     reconstruct,
     render_depth,
     save_depth,
@@ -291,10 +293,10 @@ def test_box_on_floor_is_meshed_where_it_is(box_capture, given_pose):
     assert np.all(v[outside, 2] < 0.02)
 
 
-@pytest.mark.parametrize("method", ["grid", "poisson", "ball-pivot"])
+@pytest.mark.parametrize("method", ["sensor", "grid", "poisson", "ball-pivot"])
 def test_every_facet_faces_the_camera(box_capture, method):
-    """Section 3.2: <x_i, n_i> <= 0 in camera coordinates, for every facet; and (the default,
-    a height field) every facet faces up in the world."""
+    """Section 3.2: <x_i, n_i> <= 0 in camera coordinates, for every facet; and (a height
+    field) every facet faces up in the world."""
     path, _ = box_capture
     rec = reconstruct(load_capture(path), MeshingConfig(method=method, voxel=(0.02,) * 3))
     m = rec.mesh
@@ -307,10 +309,11 @@ def test_every_facet_faces_the_camera(box_capture, method):
         assert np.all(m.face_normals[:, 2] > 0)
 
 
-def test_grid_mesh_does_not_bridge_the_shadow_behind_the_box(box_capture):
+@pytest.mark.parametrize("method", ["sensor", "grid"])
+def test_the_mesh_does_not_bridge_the_shadow_behind_the_box(box_capture, method):
     """The floor the box hides from the camera stays open rather than being spanned."""
     path, pose = box_capture
-    rec = reconstruct(load_capture(path), MeshingConfig())
+    rec = reconstruct(load_capture(path), MeshingConfig(method=method))
     v = _to_true_world(rec, pose)
     eye = np.asarray(EYE)
     # A point on the floor just behind the box, along the line of sight over its far top edge.
@@ -371,7 +374,11 @@ def test_mesh_cli_on_the_real_depth_png(tmp_path):
     done = roachplan("mesh", str(FRAME_PNG), "-o", str(out), "--voxel", "0.02")
     assert done.returncode == 0, done.stderr
     mesh = trimesh.load(out)
-    assert len(mesh.faces) > 1000 and np.all(mesh.face_normals[:, 2] > 0)
+    assert len(mesh.faces) > 1000
+    rec = mesh_capture(FRAME_PNG, capture_settings({"voxel": 0.02}))
+    camera = rec.world_from_camera[:3, 3]  # every facet faces it (section 3.2)
+    toward = np.einsum("ij,ij->i", mesh.triangles_center - camera, mesh.face_normals)
+    assert np.all(toward <= 1e-9)
     assert "camera pose in the world" in done.stdout
     assert all(stage in done.stdout for stage in ("voxel", "outliers", "ground", "mesh"))
 
