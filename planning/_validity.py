@@ -44,6 +44,9 @@ class Footprint:
     """Body extent along y [m]."""
     body_clearance: float
     """Height of the body's underside above the support plane [m]."""
+    leg_reach: float = 0.0
+    """How far a foot's tip reaches from its hip [m]: the legs sweep the ground this far in
+    front of and behind the hips, beside the body (0: the legs are not checked)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,8 +61,16 @@ class ValidityConfig:
     collision_margin: float = 0.002
     """Condition 1: the terrain may rise this far into the body's underside before it counts
     as a collision [m] (absorbs interpolation error)."""
+    leg_clearance: float = 0.02
+    """Condition 1, the legs: the terrain where they sweep may rise at most this far above the
+    support plane [m]. A leg steps onto a bump lower than its hip (2.5 cm up) and strikes a
+    higher one (a chair's foot beside the body flipped the robot in a real room capture)."""
     max_slope_deg: float = 25.0
     """Condition 4: steepest allowed support plane [deg]."""
+    noise_sigmas: float = 2.5
+    """On a capture, conditions 1-3 allow this many standard deviations of the terrain's
+    height noise at each sample on top of their tolerances [-]: a floor that is flat within
+    the sensor's noise is flat; a step or an object higher than that still counts."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,17 +90,27 @@ class StateCheck:
 
 
 @functools.lru_cache(maxsize=16)
-def _footprint_terms(fp: Footprint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _footprint_terms(
+    fp: Footprint,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What check_states needs of a footprint, computed once per footprint: sample points
-    ((P, 2) feet then body, body frame [m]), the support-plane fit ((3, F) pseudo-inverse), and
-    the plane's design matrices at the feet (F, 3) and the body samples (B, 3)."""
+    ((P, 2) feet, then body, then the legs' sweep, body frame [m]), the support-plane fit
+    ((3, F) pseudo-inverse), and the plane's design matrices at the feet (F, 3), the body
+    samples (B, 3) and the legs' sweep samples (L, 3; L = 0 without leg_reach)."""
     u = np.linspace(-fp.body_length / 2, fp.body_length / 2, 5)
     v = np.linspace(-fp.body_width / 2, fp.body_width / 2, 3)
     body = np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
-    local = np.concatenate([fp.feet_xy, body])
+    legs = np.zeros((0, 2))
+    if fp.leg_reach > 0:  # each side's line of hips, from the front foot's reach to the rear's
+        xs = fp.feet_xy[:, 0]
+        along = np.linspace(xs.min() - fp.leg_reach, xs.max() + fp.leg_reach, 7)
+        sides = np.unique(np.round(fp.feet_xy[:, 1], 9))
+        legs = np.array([(x, y) for y in sides for x in along])
+    local = np.concatenate([fp.feet_xy, body, legs])
     design = np.column_stack([np.ones(len(fp.feet_xy)), fp.feet_xy])
     body_design = np.column_stack([np.ones(len(body)), body])
-    return local, np.linalg.pinv(design), design, body_design
+    leg_design = np.column_stack([np.ones(len(legs)), legs])
+    return local, np.linalg.pinv(design), design, body_design, leg_design
 
 
 def check_states(
@@ -99,23 +120,27 @@ def check_states(
     states = np.atleast_2d(np.asarray(states, dtype=np.float64))
     if states.shape[-1] != 3:
         raise ValueError(f"states must be (N, 3) x, y, yaw; got {states.shape}")
-    local, fit, design, body_design = _footprint_terms(fp)
+    local, fit, design, body_design, leg_design = _footprint_terms(fp)
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
     wx = states[:, None, 0] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
     wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
-    h = hf.sample(np.stack([wx, wy], axis=-1))  # (N, P), NaN where there is no surface
+    xy = np.stack([wx, wy], axis=-1)
+    h = hf.sample(xy)  # (N, P), NaN where there is no surface
+    slack = cfg.noise_sigmas * hf.sample_noise(xy)  # (N, P) [m], 0 on exact terrain
     x0, x1, y0, y1 = hf.extent
     off_map = ((wx < x0) | (wx > x1) | (wy < y0) | (wy > y1)).any(axis=1)
-    n_feet = len(fp.feet_xy)
-    h_feet, h_body = h[:, :n_feet], h[:, n_feet:]
+    n_feet, n_body = len(fp.feet_xy), len(body_design)
+    h_feet, h_body = h[:, :n_feet], h[:, n_feet : n_feet + n_body]
+    h_legs = h[:, n_feet + n_body :]
     # Support plane z = a + b u + c v in body coordinates (u, v): a least-squares fit through
     # the ground under the feet; its pseudo-inverse is the same for every state.
     coef = np.nan_to_num(h_feet) @ fit.T  # (N, 3)
     plane_feet = coef @ design.T
     plane_body = coef @ body_design.T
+    plane_legs = coef @ leg_design.T
     residual = h_feet - plane_feet  # < 0: ground below where the foot would be
     residual = np.nan_to_num(residual, nan=-np.inf)
-    unsupported = residual < -cfg.foot_tolerance
+    unsupported = residual < -(cfg.foot_tolerance + slack[:, :n_feet])
     # A plane fit cannot tell "front too high" from "rear too low"; among the feet that fail,
     # the one over the lowest ground is the one over the pit.
     worst_foot = np.where(
@@ -130,11 +155,17 @@ def check_states(
     checks = (
         (OFF_MAP, off_map),
         (FOOT, unsupported.any(axis=1)),
-        (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin).any(axis=1)),
+        (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin
+                     + slack[:, n_feet : n_feet + n_body]).any(axis=1)),
         (SLOPE, slope > cfg.max_slope_deg),
+        # After the slope: on a steep curved ramp the legs' sweep uphill rises above the plane
+        # through the feet, and "too steep" is the better explanation.
+        (COLLISION, (h_legs - plane_legs > cfg.leg_clearance
+                     + slack[:, n_feet + n_body :]).any(axis=1)),
         (
             BODY_HEIGHT,
-            plane_body[:, centre] - np.nan_to_num(h_body[:, centre], nan=-np.inf) > cfg.body_band,
+            plane_body[:, centre] - np.nan_to_num(h_body[:, centre], nan=-np.inf)
+            > cfg.body_band + slack[:, n_feet + centre],
         ),
     )
     # Later conditions only fill states no earlier condition has claimed: a foot over a pit
