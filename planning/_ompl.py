@@ -22,6 +22,7 @@ own path-length sampler.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -241,7 +242,10 @@ def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
     s = ob.State(space)
     s().setX(float(xyyaw[0]))
     s().setY(float(xyyaw[1]))
-    s().setYaw(float(xyyaw[2]))
+    # OMPL's SO(2) bounds are [-pi, pi): a start or goal heading exactly 180 deg was out of
+    # them, and PRM said "There are no valid initial states!".
+    yaw = math.remainder(float(xyyaw[2]), 2 * math.pi)
+    s().setYaw(-math.pi if yaw >= math.pi else yaw)
     return s
 
 
