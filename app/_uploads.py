@@ -16,7 +16,6 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import yaml
 from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
 from roachplan.scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
@@ -29,8 +28,6 @@ page's load panel sets another)."""
 UPLOAD_SUFFIXES = tuple(
     sorted({".scad", ".yaml", ".yml", ".zip", *MESH_SUFFIXES, *CAPTURE_SUFFIXES})
 )
-MIN_GROUND_SPAN = 2.0
-"""Smallest side of the planning area of a model on a ground plane [m]."""
 DEPTH_IMAGE_SUFFIXES = (".png", ".pgm", ".ppm")
 """Captures that need intrinsics (a pending calibration applies to them)."""
 
@@ -179,27 +176,12 @@ def prepare_upload_scene(scene_path: Path):
     back into the file, so batch workers and `roachplan trial` rebuild the same world without
     picking again. Returns the World (its notes say what was picked)."""
     from roachplan.scenes import build_terrain_mesh, build_world, load_scene
-    from roachplan.scenes._autopose import auto_bounds
 
     raw = load_yaml(scene_path.read_bytes(), scene_path.name, SceneError)
     scene = load_scene(scene_path)
-    mesh = build_terrain_mesh(scene)
-    notes = []
-    if scene.bounds is None and scene.ground is not None and len(mesh.faces):
-        # A small model on a ground plane (a step, a rock) is walked onto from the ground
-        # round it: the area is the model with at least MIN_GROUND_SPAN of ground, and, as for
-        # any terrain, at most auto_bounds' window at its centre (a 45 m model at 1 cm would
-        # be a 20-million-cell height field).
-        lo, hi = mesh.bounds[0][:2], mesh.bounds[1][:2]
-        c, half = (lo + hi) / 2, np.maximum((hi - lo) / 2, MIN_GROUND_SPAN / 2)
-        bounds, note = auto_bounds(np.array([[*(c - half), 0.0], [*(c + half), 0.0]]), margin=0.0)
-        notes += [note] if note else []
-        raw["bounds"] = [[round(v, 4) for v in corner] for corner in bounds]
-        scene_path.write_text(yaml.safe_dump(raw, sort_keys=False))
-        scene = load_scene(scene_path)
-    world = build_world(scene, check_poses=False, mesh=mesh)
-    if notes:
-        world = dataclasses.replace(world, notes=(*notes, *world.notes))
+    # The same picking as the command line's: a model on a ground plane gets the ground round
+    # it and start and goal at either end of it (scenes/_autopose.py).
+    world = build_world(scene, check_poses=False, mesh=build_terrain_mesh(scene))
     sc = world.scene
     filled = {}
     if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:

@@ -1,9 +1,13 @@
-"""Start and goal for a terrain nobody placed them on (a capture, a mesh, a model).
+"""Start, goal and planning area for a terrain nobody placed them on (a capture, a mesh, a
+model).
 
-They go inside the largest connected region where the robot can stand, as far apart as that
-region allows up to a cap (a trial's drive time grows with the distance), each valid, and
-joined by a plan (the planner must be able to connect them: a region 4-connected at 4 cm can
-still hold a neck the robot cannot turn through).
+A model on a ground plane is something to cross: the planning area reaches past it onto the
+ground on every side, and start and goal stand on the ground at either end of its long axis,
+so a plan crosses it where the robot can, or goes round it. Otherwise (a capture, whose floor
+is the ground; a model too large to go round) they go inside the largest connected region
+where the robot can stand, as far apart as that region allows up to a cap (a trial's drive
+time grows with the distance). Either way each is valid and a plan joins them (a region
+4-connected at 4 cm can still hold a neck the robot cannot turn through).
 """
 
 from __future__ import annotations
@@ -23,6 +27,12 @@ MIN_AUTO_DISTANCE = 1.0
 """Start and goal are at least this far apart where the region is that large [m]."""
 MAX_AUTO_EXTENT = 10.0
 """Largest side of the planning area chosen automatically [m] (the height field is 1 cm)."""
+GROUND_APRON = 0.5
+"""On a terrain with a ground plane, the planning area reaches this far past the model on
+every side [m]: room to start and stop on the ground and to go round it."""
+GROUND_CLEARANCE = 0.25
+"""Start and goal stand on the ground this far beyond the model's ends [m] (the robot's feet
+and legs reach 7 cm from its centre)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -38,11 +48,14 @@ class AutoPoses:
     """How they were chosen, for the user."""
 
 
-def auto_bounds(mesh_bounds: np.ndarray, margin: float = 0.15):
+def auto_bounds(mesh_bounds: np.ndarray, *, ground: bool):
     """((xmin, ymin), (xmax, ymax)) for the robot's centre over a terrain whose mesh has these
-    (2, 3) bounds [m]: margin inside its edges, at most MAX_AUTO_EXTENT a side around its
-    centre; and a note when the terrain was larger."""
-    lo, hi = np.asarray(mesh_bounds)[0][:2] + margin, np.asarray(mesh_bounds)[1][:2] - margin
+    (2, 3) bounds [m]: on a ground plane (ground), GROUND_APRON past them on every side; else
+    (a capture) the terrain's own (a place at its edge fails the feet's check by itself); at
+    most MAX_AUTO_EXTENT a side around the centre; and a note when the terrain was larger."""
+    apron = GROUND_APRON if ground else 0.0
+    lo = np.asarray(mesh_bounds)[0][:2] - apron
+    hi = np.asarray(mesh_bounds)[1][:2] + apron
     note = ""
     centre = (lo + hi) / 2
     if np.any(hi - lo > MAX_AUTO_EXTENT):
@@ -56,6 +69,9 @@ def auto_bounds(mesh_bounds: np.ndarray, margin: float = 0.15):
 def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
     """Start and goal on the world's terrain (see the module docstring); PlanningError saying
     why when there is nowhere to stand or no two places a plan joins."""
+    across = across_the_model(world, seed=seed)
+    if across is not None:
+        return across
     sc, hf, fp = world.scene, world.heightfield, world.footprint
     vcfg = sc.planner.validity
     bounds = sc.bounds
@@ -119,12 +135,72 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
             if d < MIN_AUTO_DISTANCE:
                 note += f"; it allows no more than {d:.2f} m"
             return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
-        failures.append(f"{planner.name} found no path in {planner.time_limit:g} s")
+        failures.append(_why_not(result, np.linalg.norm(pb - pa)))
+    distinct = list(dict.fromkeys(failures))  # the same reason twice is said once
     raise PlanningError(
         f"could not pick a start and goal the planner joins in the largest standable region "
-        f"({area:.2f} m^2): {'; '.join(failures[-2:]) or 'the region is a single place'}; "
+        f"({area:.2f} m^2): {'; '.join(distinct[-2:]) or 'the region is a single place'}; "
         f"give start and goal"
     )
+
+
+def _why_not(result, distance: float) -> str:
+    """The planner's own reason for not joining two places `distance` [m] apart."""
+    return f"{distance:.2f} m apart: {result.message}"
+
+
+def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
+    """Start and goal on the ground at either end of the model's long axis (the longer side
+    of the smallest rectangle round its footprint), GROUND_CLEARANCE past it, facing along the
+    axis, when the scene has a ground plane, the model fits in the planning area, the robot
+    can stand there (moved up to 20 cm further out, or aside, if not) and a plan joins them;
+    else None."""
+    import trimesh
+
+    sc, mesh = world.scene, world.mesh
+    if sc.ground is None or len(mesh.faces) == 0:
+        return None
+    xy = np.unique(np.asarray(mesh.vertices)[:, :2].round(6), axis=0)
+    (xa, ya), (xb, yb) = sc.bounds
+    if xy[:, 0].min() < xa or xy[:, 0].max() > xb or xy[:, 1].min() < ya or xy[:, 1].max() > yb:
+        return None  # larger than the area planned over: as for any terrain
+    try:
+        transform, extents = trimesh.bounds.oriented_bounds_2D(xy)
+    except Exception:  # a footprint with no area (a model that is a line): as any terrain
+        return None
+    world_from_box = np.linalg.inv(transform)  # (3, 3) homogeneous 2D: box frame -> world
+    long = int(np.argmax(extents))
+    axis = world_from_box[:2, long]
+    if axis[np.argmax(np.abs(axis))] < 0:  # start at the -x (or -y) end, whatever the fit's sign
+        axis = -axis
+    centre = world_from_box[:2, 2]
+    heading = float(np.arctan2(axis[1], axis[0]))
+    half = extents[long] / 2 + GROUND_CLEARANCE
+    side = np.array([-axis[1], axis[0]])
+    ends = []
+    for sign in (-1.0, 1.0):
+        pose = None
+        for out in np.arange(0.0, 0.201, 0.02):  # further out first, then aside
+            for aside in (0.0, 0.05, -0.05, 0.1, -0.1, 0.2, -0.2):
+                p = centre + sign * (half + out) * axis + aside * side
+                if xa <= p[0] <= xb and ya <= p[1] <= yb:
+                    pose = _valid_pose(world, p, heading, exact=True)
+                if pose is not None:
+                    break
+            if pose is not None:
+                break
+        if pose is None:
+            return None
+        ends.append(pose)
+    start, goal = ends
+    result = plan_path(world.heightfield, world.footprint, start, goal, bounds=sc.bounds,
+                       cfg=_quick(sc.planner), seed=seed)  # fmt: skip
+    if not result.found:
+        return None
+    d = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
+    note = (f"start and goal picked automatically on the ground at either end of the model "
+            f"({extents[long]:.2f} m long), {d:.2f} m apart")  # fmt: skip
+    return AutoPoses(start=start, goal=goal, distance=d, region_area=float("nan"), note=note)
 
 
 def _quick(cfg):
@@ -134,8 +210,11 @@ def _quick(cfg):
     return dataclasses.replace(cfg, time_limit=min(cfg.time_limit, 5.0))
 
 
-def _valid_pose(world, xy: np.ndarray, heading: float) -> tuple[float, float, float] | None:
-    """(x, y, yaw) at xy with the yaw nearest heading (in 16 steps) where the robot stands."""
+def _valid_pose(
+    world, xy: np.ndarray, heading: float, exact: bool = False
+) -> tuple[float, float, float] | None:
+    """(x, y, yaw) at xy with the yaw nearest heading (in 16 steps; exact: heading only) where
+    the robot stands."""
     sc = world.scene
     # Checked as a scene file will hold it (x, y to 0.1 mm, yaw to 0.001 deg): on a rough
     # capture 0.1 mm can cross a height-field cell and make a checked pose invalid.
@@ -144,14 +223,16 @@ def _valid_pose(world, xy: np.ndarray, heading: float) -> tuple[float, float, fl
     (xa, ya), (xb, yb) = sc.bounds
     x = min(max(round(float(xy[0]), 4), math.ceil(xa * 1e4) / 1e4), math.floor(xb * 1e4) / 1e4)
     y = min(max(round(float(xy[1]), 4), math.ceil(ya * 1e4) / 1e4), math.floor(yb * 1e4) / 1e4)
-    yaws = heading + np.array([0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6, 7, -7, 8]) * np.pi / 8
+    x, y = x + 0.0, y + 0.0  # not -0.0
+    steps = [0] if exact else [0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6, 7, -7, 8]
+    yaws = heading + np.array(steps) * np.pi / 8
     yaws = np.radians(np.round(np.degrees(np.arctan2(np.sin(yaws), np.cos(yaws))), 3))
     states = np.column_stack([np.full(len(yaws), x), np.full(len(yaws), y), yaws])
     code = check_states(world.heightfield, world.footprint, sc.planner.validity, states).code
     ok = np.flatnonzero(code == VALID)
     if not len(ok):
         return None
-    return (x, y, float(yaws[ok[0]]))
+    return (x, y, float(yaws[ok[0]]) + 0.0)
 
 
 def _farthest(mask: np.ndarray, source: tuple[int, int]) -> tuple[tuple[int, int], np.ndarray]:

@@ -204,7 +204,7 @@ def build_world(
     if scene.bounds is None:
         if len(mesh.faces) == 0:
             raise SceneError(f"{scene.path}: give bounds: the scene has no terrain to take them from")
-        bounds, note = auto_bounds(mesh.bounds)
+        bounds, note = auto_bounds(mesh.bounds, ground=scene.ground is not None)
         if bounds[0][0] >= bounds[1][0] or bounds[0][1] >= bounds[1][1]:
             raise SceneError(
                 f"{scene.path}: the terrain ({mesh.extents[0]:.2f} m x {mesh.extents[1]:.2f} m) "
