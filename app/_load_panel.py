@@ -287,12 +287,7 @@ class LoadPanel:
                                  calibration=self.calibration_for(cmd.name),
                                  scad_timeout=float(self.scad_timeout.value),
                                  scad_backend=self.scad_backend.value)  # fmt: skip
-        label, what = f"upload: {cmd.name}", None
-        if Path(cmd.name).suffix.lower() in (".scad", ".zip"):
-            who = "OpenSCAD" if self.scad_backend.value == "cgal" else "Manifold"
-            what = (f"Rendering {cmd.name} with {who} (limit "
-                    f"{float(self.scad_timeout.value):g} s)")  # fmt: skip
-        app._load(cmd, str(path), from_upload=True, label=label, what=what)
+        app._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
 
     def _reload_with(self, app, cmd, changes: dict) -> None:
         """Change the loaded capture's settings and load it again, in the background. Its scene

@@ -214,6 +214,39 @@ def prepare_upload_scene(scene_path: Path):
     return world
 
 
+RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold"}
+"""Who renders a model, by its `backend:`, as the page names it."""
+
+
+def load_announcement(label: str, ref: str | Path) -> str:
+    """What the page says while a scene (a file or a library name) loads: what is really done
+    to each of its terrain files - a capture read and meshed, a model rendered (by whom, under
+    which limit), a mesh read - not what an uploaded file's suffix suggests (a .zip may hold a
+    capture or a model). label: the upload's or the picker's name; "Loading label" when the
+    scene does not read (its load will say why)."""
+    from roachplan.scenes import load_scene
+
+    try:
+        scene = load_scene(ref)
+    except (SceneError, OSError, ValueError):
+        return f"Loading {label}"
+    said = []
+    for obj in scene.terrain:
+        if obj.kind == "capture":
+            said.append(f"reading and meshing the capture {obj.source.name}")
+        elif obj.kind == "scad":
+            who = RENDERERS.get(obj.backend, f"OpenSCAD (backend {obj.backend})")
+            said.append(f"rendering {obj.source.name} with {who} (limit {obj.timeout:g} s)")
+        else:
+            said.append(f"reading the mesh {obj.source.name}")
+    if not said:
+        return f"Loading {label}"
+    text = "; ".join(dict.fromkeys(said))  # (each once, in order)
+    if Path(label.split(": ", 1)[-1]).name in text:  # the label's file is named already
+        return text[0].upper() + text[1:]
+    return f"{label}: {text}"
+
+
 def _pose_yaml(pose) -> list[float]:
     """(x [m], y [m], yaw [rad]) as a scene file writes it: [x, y, yaw_deg]."""
     return [round(float(pose[0]), 4), round(float(pose[1]), 4), round(math.degrees(pose[2]), 3)]
