@@ -66,7 +66,7 @@ from ._jobs import (
 )
 from ._load_panel import LoadPanel, PanelCmd
 from ._loading import BackgroundLoad, report_failure, swap_in
-from ._markers import StartGoal
+from ._markers import StartGoal, pick_failure
 from ._panel import energy_plot, summary_markdown, trials_csv, trials_markdown
 from ._picking import ray_hit_heightfield
 from ._relevel import CaptureView
@@ -135,7 +135,7 @@ class RoachApp:
                                                intensity=1.5, position=(0.0, 0.0, 1.0))  # fmt: skip
         self._build_gui()
         self._show_world()
-        self.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
+        self.load_panel.show_loaded(world, view)
         self._stop = threading.Event()
         self._loop = threading.Thread(target=self._run, name="roachplan-loop", daemon=True)
         self._loop.start()
@@ -296,7 +296,9 @@ class RoachApp:
     def _show_world(self) -> None:
         scene = self.world.scene
         self.view.show(self.world, lambda ev: self.commands.put(MarkersCmd(ev.client_id)))
-        self.markers.reset(self.world)
+        failure = pick_failure(self.world)
+        self.markers.reset(self.world, None if failure is None
+                           else public_message(failure, self.upload_dir))  # fmt: skip
         self.plan_endpoints, self._standable = None, None
         self.set_plans([])
         self.choose_panel.clear()

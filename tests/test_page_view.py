@@ -251,6 +251,16 @@ def in_view(camera, points) -> np.ndarray:
             & (np.abs(rel @ right) <= tan_h * depth + 1e-9))  # fmt: skip
 
 
+def framed(cameras, lo, hi, points) -> bool:
+    """Whether one of the reported cameras looks at a point within the box lo..hi ((3,) [m])
+    with every point in view."""
+    for position, look_at, fov, aspect in cameras:
+        inside = np.all((lo - 1e-6 <= look_at) & (look_at <= hi + 1e-6))
+        if inside and in_view((position, look_at, fov, aspect), points).all():
+            return True
+    return False
+
+
 def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, artifacts):
     """The camera each browser reports back (not what the server asked for) after a capture is
     loaded and after it is re-meshed: it looks at a point within the terrain's bounds, from a
@@ -285,15 +295,8 @@ def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, arti
                                 for z in (lo[2], hi[2])])  # fmt: skip
             markers = [on_surface(world, p) for p in (world.scene.start, world.scene.goal)]
 
-            def framed(world=world, lo=lo, hi=hi, corners=corners, markers=markers, n=n):
-                for position, look_at, fov, aspect in reported[n - 1:]:
-                    inside = np.all((lo - 1e-6 <= look_at) & (look_at <= hi + 1e-6))
-                    cam = (position, look_at, fov, aspect)
-                    if inside and in_view(cam, [*corners, *markers]).all():
-                        return True
-                return False
-
-            wait_until(framed, 30)
+            shown = [*corners, *markers]
+            wait_until(lambda: framed(reported[n - 1:], lo, hi, shown), 30)  # noqa: B023
             page.wait_for_timeout(1000)
             page.screenshot(path=artifacts / f"view-10-framed-after-{step}.png")
             assert not in_view(((0.3, 0.2, 0.05), np.array([40.0, -30.0, 0.05]), 1.0, 1.4),
