@@ -360,12 +360,8 @@ class LoadPanel:
     def _show_up(self, view: CaptureView | None) -> None:
         """The Up direction the loaded capture was meshed with: an axis, auto, or the vector its
         scene file gives (shown as one more choice)."""
-        up = None
-        if view is not None:
-            raw = load_yaml(view.scene_path.read_bytes(), view.scene_path.name)
-            obj = next((o for o in raw.get("terrain", ()) if "capture" in o), {}) if isinstance(
-                raw, dict) else {}  # fmt: skip
-            up = (obj.get("perception") or {}).get("up")
+        obj = self._capture_object(view) if view is not None else {}
+        up = (obj.get("perception") or {}).get("up")
         axis = next((k for k, v in UP_AXES.items() if up is not None and list(v) == list(up)),
                     None)  # fmt: skip
         label = AUTO if up is None else axis or f"({', '.join(f'{v:g}' for v in up)})"
@@ -475,12 +471,19 @@ class LoadPanel:
                           ground=ground)  # fmt: skip
         app._load(cmd, str(path), from_upload=True, label=label)
 
+    @staticmethod
+    def _capture_object(view: CaptureView) -> dict:
+        """The capture's terrain object in its scene file, as written ({"capture": the file}
+        for a capture file that is a scene of its own)."""
+        path = view.scene_path
+        if path.suffix.lower() not in (".yaml", ".yml"):
+            return {"capture": path.name}
+        raw = load_yaml(path.read_bytes(), path.name)
+        return next(o for o in raw["terrain"] if isinstance(o, dict) and "capture" in o)
+
     def _capture_name(self) -> str:
         """The loaded capture's file name (its suffix says whether Cloud units apply)."""
-        raw = load_yaml(self.view.scene_path.read_bytes(), self.view.scene_path.name)
-        if not isinstance(raw, dict):  # (a capture file as a scene of its own)
-            return self.view.scene_path.name
-        return str(next(o["capture"] for o in raw["terrain"] if "capture" in o))
+        return str(self._capture_object(self.view)["capture"])
 
     def relevel_at_click(self, app, cmd, p_world) -> None:
         """Re-mesh the loaded capture with its ground through the clicked world point."""
