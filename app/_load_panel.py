@@ -1,10 +1,12 @@
-"""The page's load panel: how the next capture is read (meshing, camera intrinsics, depth scale
-and range, a calibration file uploaded before its depth image), re-meshing the loaded capture
-with other settings (voxel, cell, method, depth range, a crop box) or re-levelling it (click its
-ground, or type the camera's height, pitch and roll) without uploading it again, the OpenSCAD
-time limit, and reloading a model in millimetres scaled by 0.001. Callbacks only put a PanelCmd
-on the app's queue; the app's loop calls `handle` (and `upload`, `relevel_at_click`), which
-start a load in the background (`app._load`).
+"""The page's load panel: how the next capture is read (meshing, camera intrinsics, depth scale,
+depth units and range, cloud units, a calibration file uploaded before its depth image),
+re-meshing the loaded capture with other settings (voxel, cell, method, depth range, a crop box)
+or re-levelling it (click its ground, type the camera's height, pitch and roll, or choose its up
+direction) without uploading it again, placing a loaded model again (position, ground plane),
+the planning area of the loaded scene, the OpenSCAD time limit, and reloading a model in
+millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the app's loop
+calls `handle` (and `upload`, `relevel_at_click`), which start a load in the background
+(`app._load`).
 """
 
 from __future__ import annotations
@@ -60,13 +62,13 @@ terrain, same start and goal) as on the command line."""
 CAMERA_SUFFIXES = (*DEPTH_IMAGE_SUFFIXES, ".bag")
 """Captures that a camera's intrinsics and depth scale apply to."""
 CALIBRATION_KEYS = ("camera_matrix", "K", "k", "fx", "intrinsic_matrix", "Camera.fx")
+"""Keys by which an uploaded YAML is a camera calibration rather than a scene."""
 UP_AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0),
            "-y": (0.0, -1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}  # fmt: skip
 """The Up direction dropdown's axes of the capture's own frame (a camera's: x right, y down,
 z forward, so a level camera's up is -y; a lidar's or map's: z up)."""
 AUTO = "auto"
 """The dropdowns' entry for the pipeline's own choice (the setting left out)."""
-"""Keys by which an uploaded YAML is a camera calibration rather than a scene."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,8 @@ def needs_millimetre_scale(message: str) -> bool:
 
 class LoadPanel:
     """The widgets, and what the app keeps for them: the pending calibration, the loaded
-    capture's view, the upload offered a millimetre scale."""
+    capture's view, the loaded (or failed) model's view, the upload offered a millimetre
+    scale."""
 
     def __init__(self, gui, put) -> None:  # noqa: PLR0915 - one widget per statement
         self.put = put
