@@ -146,6 +146,7 @@ def test_every_advice_in_the_code_is_said_with_the_pages_own_controls(app, tmp_p
         assert "`" not in page and not SCENE_SYNTAX.search(page), f"{where}: {page!r}"
         assert not scene_key.search(page), f"{where}: a scene-file key in {page!r}"
         assert named_controls(page, pairs), f"{where}: names no page control: {page!r}"
+        assert public_message(page, tmp_path) == page, f"{where}: said twice, said otherwise"
 
 
 def test_the_controls_the_advice_names_are_where_it_says(app):
