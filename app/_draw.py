@@ -216,14 +216,36 @@ def label_position(points: np.ndarray, k: int) -> tuple[float, float, float]:
     )
 
 
-def framing(points, fov: float, *, margin: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+def framing(
+    points, fov: float, *, margin: float = 0.15, aspect: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """(camera position, look-at) [m], world frame, of a view from VIEW_DIRECTION that holds
-    points ((N, 3) [m]) with margin [m] around them in a vertical field of view fov [rad]."""
+    points ((N, 3) [m]) with margin [m] around them in a vertical field of view fov [rad] on a
+    view aspect (width / height) wide."""
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
     radius = float(np.max(np.linalg.norm(pts - centre, axis=1))) + margin
-    distance = radius / math.sin(fov / 2)  # (the sphere round them inside the view cone)
+    # The narrower of the vertical and horizontal fields (a tall, narrow window).
+    half = min(fov / 2, math.atan(min(aspect, 1.0) * math.tan(fov / 2)))
+    distance = radius / math.sin(half)  # (the sphere round them inside the view cone)
     return centre + distance * VIEW_DIRECTION, centre
+
+
+def terrain_box(world: World) -> np.ndarray:
+    """(8, 3) corners [m] of the terrain the robot plans on: the mesh within the planning area
+    (a 45 m model is planned in its central 10 m, where a view of all of it would leave the
+    robot a dot), with the ground plane; the planning area itself when no mesh lies in it."""
+    (x0, y0), (x1, y1) = np.asarray(world.scene.bounds, dtype=float)
+    v = np.asarray(world.mesh.vertices, dtype=float).reshape(-1, 3)
+    v = v[(v[:, 0] >= x0) & (v[:, 0] <= x1) & (v[:, 1] >= y0) & (v[:, 1] <= y1)]
+    zs = [float(v[:, 2].min()), float(v[:, 2].max())] if len(v) else []
+    if world.scene.ground is not None:
+        zs.append(float(world.scene.ground))
+    zs = zs or [0.0]
+    if len(v):  # the mesh's own extent in the area, when smaller
+        x0, y0 = max(x0, v[:, 0].min()), max(y0, v[:, 1].min())
+        x1, y1 = min(x1, v[:, 0].max()), min(y1, v[:, 1].max())
+    return np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (min(zs), max(zs))])
 
 
 def robot_distance(length: float, fov: float, image_height: int, pixels: float) -> float:

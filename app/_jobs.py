@@ -160,8 +160,9 @@ def _load_job(conn, ref: str, from_upload: bool) -> None:
         conn.send(("world", load_world(ref, from_upload=from_upload)))
     except MemoryError:
         conn.send(("error", f"loading this file needed more memory than the server allows a "
-                            f"load ({limit / 2**30:.1f} GiB): try a larger voxel size or a "
-                            f"crop box"))  # fmt: skip
+                            f"load ({limit / 2**30:.1f} GiB): set a larger Meshing "
+                            f"(captures) → Voxel [m], or tick Meshing (captures) → Crop and "
+                            f"set its box, and load it again"))  # fmt: skip
     except Exception as exc:
         conn.send(("error", f"{exc}"))
     conn.close()

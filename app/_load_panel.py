@@ -1,10 +1,12 @@
-"""The page's load panel: how the next capture is read (meshing, camera intrinsics, depth scale
-and range, a calibration file uploaded before its depth image), re-meshing the loaded capture
-with other settings (voxel, cell, method, depth range, a crop box) or re-levelling it (click its
-ground, or type the camera's height, pitch and roll) without uploading it again, the OpenSCAD
-time limit, and reloading a model in millimetres scaled by 0.001. Callbacks only put a PanelCmd
-on the app's queue; the app's loop calls `handle` (and `upload`, `relevel_at_click`), which
-start a load in the background (`app._load`).
+"""The page's load panel: how the next capture is read (meshing, camera intrinsics, depth scale,
+depth units and range, cloud units, a calibration file uploaded before its depth image),
+re-meshing the loaded capture with other settings (voxel, cell, method, depth range, a crop box)
+or re-levelling it (click its ground, type the camera's height, pitch and roll, or choose its up
+direction) without uploading it again, placing a loaded model again (position, ground plane),
+the planning area of the loaded scene, the OpenSCAD time limit, and reloading a model in
+millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the app's loop
+calls `handle` (and `upload`, `relevel_at_click`), which start a load in the background
+(`app._load`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pathlib import Path
 
 import yaml
 from roachplan.perception import (
+    DEPTH_UNITS,
     METHODS,
     PRESETS,
     CaptureError,
@@ -25,6 +28,14 @@ from roachplan.perception import (
 )
 from roachplan.scenes import BACKENDS, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
+from ._placement import (
+    ModelView,
+    adopt_scene,
+    area_of,
+    model_view,
+    planning_area,
+    rewrite_placement,
+)
 from ._relevel import (
     CaptureView,
     adopt_capture_scene,
@@ -32,7 +43,13 @@ from ._relevel import (
     repose,
     rewrite_capture_settings,
 )
-from ._uploads import DEPTH_IMAGE_SUFFIXES, MAX_UPLOAD_BYTES, safe_name, scene_from_upload
+from ._uploads import (
+    DEPTH_IMAGE_SUFFIXES,
+    MAX_UPLOAD_BYTES,
+    public_message,
+    safe_name,
+    scene_from_upload,
+)
 
 NUMBERS = "numbers below"
 """The camera dropdown's entry that uses the fx, fy, cx, cy boxes."""
@@ -46,13 +63,20 @@ CAMERA_SUFFIXES = (*DEPTH_IMAGE_SUFFIXES, ".bag")
 """Captures that a camera's intrinsics and depth scale apply to."""
 CALIBRATION_KEYS = ("camera_matrix", "K", "k", "fx", "intrinsic_matrix", "Camera.fx")
 """Keys by which an uploaded YAML is a camera calibration rather than a scene."""
+UP_AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0),
+           "-y": (0.0, -1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}  # fmt: skip
+"""The Up direction dropdown's axes of the capture's own frame (a camera's: x right, y down,
+z forward, so a level camera's up is -y; a lidar's or map's: z up)."""
+AUTO = "auto"
+"""The dropdowns' entry for the pipeline's own choice (the setting left out)."""
 
 
 @dataclass(frozen=True)
 class PanelCmd:
     """A load-panel action: "scale" (reload in millimetres), "repose" (re-mesh with the typed
-    camera pose), "remesh" (re-mesh with the meshing boxes), "forget" (drop the pending
-    calibration)."""
+    camera pose), "remesh" (re-mesh with the meshing boxes), "up" (re-mesh with the Up
+    direction), "place" (reload the model with its position and ground plane), "area" (reload
+    the scene with the planning area), "forget" (drop the pending calibration)."""
 
     client_id: int | None
     action: str
@@ -83,9 +107,10 @@ def needs_millimetre_scale(message: str) -> bool:
 
 class LoadPanel:
     """The widgets, and what the app keeps for them: the pending calibration, the loaded
-    capture's view, the upload offered a millimetre scale."""
+    capture's view, the loaded (or failed) model's view, the upload offered a millimetre
+    scale."""
 
-    def __init__(self, gui, put) -> None:
+    def __init__(self, gui, put) -> None:  # noqa: PLR0915 - one widget per statement
         self.put = put
         self.pending: Path | None = None
         self.view: CaptureView | None = None
@@ -118,6 +143,11 @@ class LoadPanel:
             )  # fmt: skip
             self.crop_min = gui.add_vector3("Crop min [m]", (-1.0, -1.0, -1.0), step=0.01)
             self.crop_max = gui.add_vector3("Crop max [m]", (1.0, 1.0, 1.0), step=0.01)
+            self.cloud_units = gui.add_dropdown(
+                "Cloud units", (AUTO, "m", "mm"), initial_value=AUTO,
+                hint="Units of a point cloud's coordinates (not a depth image's); auto: metres, "
+                "unless the cloud can only be millimetres (then it is refused: choose one)",
+            )  # fmt: skip
             self.remesh_button = gui.add_button(
                 "Re-mesh loaded capture", disabled=True,
                 hint="Mesh the loaded capture again with these settings (no new upload)",
@@ -135,6 +165,12 @@ class LoadPanel:
             self.depth_scale = gui.add_number(
                 "Depth scale [units/m]", 0.0, min=0.0, step=1.0,
                 hint="0: the file's or calibration's, else 1000 (millimetres)",
+            )  # fmt: skip
+            self.depth_units = gui.add_dropdown(
+                "Depth units", (AUTO, *DEPTH_UNITS), initial_value=AUTO,
+                hint="auto: depth in units of the depth scale, or a Kinect v1's raw disparity "
+                "when the image plainly holds it; kinect-disparity: raw 11-bit Kinect v1 "
+                "disparity (NYU Depth v2's raw dumps), converted with NYU's model",
             )  # fmt: skip
             self.calibration = gui.add_markdown(
                 "To use a calibration file, load it first (it is kept as the *pending "
@@ -155,12 +191,51 @@ class LoadPanel:
                 hint="Pitch: degrees the optical axis points below the horizon; roll: degrees "
                 "about it, positive when the image's right side drops; heading and x, y kept",
             )  # fmt: skip
+            self.up = gui.add_dropdown(
+                "Up direction", (AUTO, *UP_AXES), initial_value=AUTO, disabled=True,
+                hint="Up in the capture's own frame (a camera's: x right, y down, z forward; a "
+                "level camera's up is -y); auto: a calibration's pose, a bag's IMU, else -y for "
+                "a camera, +z for a lidar or map",
+            )  # fmt: skip
+            self.up_button = gui.add_button(
+                "Re-mesh with this up direction", disabled=True,
+                hint="Find the ground again, facing this way up (a typed camera pose or a "
+                "picked ground is dropped)",
+            )  # fmt: skip
             self.capture_info = gui.add_markdown("No capture loaded.")
+        with gui.add_folder("Loaded model"):
+            self.position = gui.add_vector3("Position [m]", (0.0, 0.0, 0.0), step=0.01,
+                                            disabled=True)  # fmt: skip
+            self.ground_on = gui.add_checkbox(
+                "Ground plane", True, disabled=True,
+                hint="An endless floor under the model; off for a model with its own floor",
+            )  # fmt: skip
+            self.ground_height = gui.add_number("Ground height [m]", 0.0, step=0.01,
+                                                disabled=True)  # fmt: skip
+            self.place_button = gui.add_button(
+                "Reload model with these", disabled=True,
+                hint="Load the model again at this position, on this ground plane (start, goal "
+                "and planning area are picked again)",
+            )  # fmt: skip
+            self.model_info = gui.add_markdown("No model loaded.")
+        self.model: ModelView | None = None
+        """The loaded model (or the one that failed to load), to place again."""
+        with gui.add_folder("Planning area"):
+            self.area_min = gui.add_vector2("Min x, y [m]", (-1.0, -1.0), step=0.01)
+            self.area_max = gui.add_vector2("Max x, y [m]", (1.0, 1.0), step=0.01)
+            self.area_button = gui.add_button(
+                "Reload with this area",
+                hint="Load the scene again with the robot's centre kept in this box (world x, "
+                "y as drawn); start and goal are picked again inside it",
+            )  # fmt: skip
         self.preset.on_update(lambda ev: self._show_preset())
         self.scale_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "scale")))
         self.repose_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "repose")))
         self.remesh_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "remesh")))
         self.forget_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "forget")))
+        self.up_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "up")))
+        self.place_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "place")))
+        self.area_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "area")))
 
     def _show_preset(self) -> None:
         """Show the chosen preset's numbers (a GUI-only change: nothing is loaded)."""
@@ -195,10 +270,21 @@ class LoadPanel:
             "crop": crop,
         }
 
+    def units_change(self, name: str) -> dict:
+        """Cloud units as a change to the `perception:` block of the capture file `name`: a
+        depth image's points come out in metres whatever they are set to (its depth scale or
+        depth units say what its samples are)."""
+        units = self.cloud_units.value
+        depth_image = Path(name).suffix.lower() in DEPTH_IMAGE_SUFFIXES
+        return {"units": None if units == AUTO or depth_image else units}
+
     def capture_settings(self, name: str) -> dict:
         """The `perception:` block of an uploaded capture named `name` (plain data): only what
         differs from the pipeline's defaults, and the camera only for depth images and bags."""
-        out = {k: v for k, v in self.meshing_changes().items() if v is not None}
+        out = {k: v for k, v in {**self.meshing_changes(), **self.units_change(name)}.items()
+               if v is not None}  # fmt: skip
+        if Path(name).suffix.lower() in DEPTH_IMAGE_SUFFIXES and self.depth_units.value != AUTO:
+            out["depth_units"] = self.depth_units.value
         if Path(name).suffix.lower() in CAMERA_SUFFIXES:
             if self.preset.value == NUMBERS:
                 out["intrinsics"] = {k: float(getattr(self, k).value)
@@ -245,7 +331,9 @@ class LoadPanel:
         has_camera = view is not None and view.has_camera
         for w in (self.height, self.pitch, self.roll, self.repose_button):
             w.disabled = not has_camera
-        self.remesh_button.disabled = view is None
+        for w in (self.remesh_button, self.up, self.up_button):
+            w.disabled = view is None
+        self._show_up(view)
         if view is not None and bounds is not None and not self.crop.value:
             self.crop_min.value = tuple(round(float(v) - 0.005, 2) for v in bounds[0])
             self.crop_max.value = tuple(round(float(v) + 0.005, 2) for v in bounds[1])
@@ -267,7 +355,68 @@ class LoadPanel:
             head += (f"  \nGround: {ground['support_points']} points "
                      f"({100 * ground['support_fraction']:.0f} %), {ground['area_m2']:.2f} m².")  # fmt: skip
         warnings = "".join(f"  \n⚠ {w}" for w in rep.get("warnings", ()))
-        self.capture_info.content = head + warnings
+        notes = "".join(f"  \n{n}" for n in rep.get("notes", ()))
+        # In the page's words (its warnings advise the command line's --up, ...); the scene's
+        # folder is the only server path they might name.
+        self.capture_info.content = public_message(head + warnings + notes, view.scene_path.parent)
+
+    def _show_up(self, view: CaptureView | None) -> None:
+        """The Up direction the loaded capture was meshed with: an axis, auto, or the vector its
+        scene file gives (shown as one more choice)."""
+        obj = self._capture_object(view) if view is not None else {}
+        up = (obj.get("perception") or {}).get("up")
+        axis = next((k for k, v in UP_AXES.items() if up is not None and list(v) == list(up)),
+                    None)  # fmt: skip
+        label = AUTO if up is None else axis or f"({', '.join(f'{v:g}' for v in up)})"
+        options = (AUTO, *UP_AXES) + ((label,) if label not in (AUTO, *UP_AXES) else ())
+        if tuple(self.up.options) != options:
+            self.up.options = options
+        self.up.value = label
+
+    def up_changes(self) -> dict:
+        """The Up direction as capture-setting changes: the ground is found again under it (a
+        typed camera pose and a picked ground would override it, so they go)."""
+        choice = self.up.value
+        if choice == AUTO:
+            up = None
+        elif choice in UP_AXES:
+            up = list(UP_AXES[choice])
+        else:  # the scene file's own vector, kept
+            up = [float(v) for v in choice.strip("()").split(",")]
+        return {"up": up, "camera_pose": None, "ground_point": None}
+
+    def show_model(self, view: ModelView | None) -> None:
+        """Show the loaded terrain model's position and ground plane (or that none is loaded);
+        a model that failed to load is shown too, to be placed again."""
+        self.model = view
+        for w in (self.position, self.ground_on, self.ground_height, self.place_button):
+            w.disabled = view is None
+        if view is None:
+            self.model_info.content = "No model loaded."
+            return
+        self.position.value = view.position
+        self.ground_on.value = view.ground is not None
+        self.ground_height.value = 0.0 if view.ground is None else view.ground
+        ground = ("without a ground plane" if view.ground is None
+                  else f"on a ground plane at z = {view.ground:g} m")  # fmt: skip
+        at = ", ".join(f"{v:g}" for v in view.position)
+        self.model_info.content = (
+            f"`{view.model}` at ({at}) m, {ground}." if view.loaded else
+            f"**`{view.model}` did not load**: set its position or ground plane here, then "
+            f"press **Reload model with these**."
+        )  # fmt: skip
+
+    def show_area(self, world) -> None:
+        """Fill the Planning area boxes with the loaded world's."""
+        lo, hi = area_of(world)
+        self.area_min.value, self.area_max.value = lo, hi
+
+    def show_loaded(self, world, view: CaptureView | None) -> None:
+        """After a load: the capture's camera and up, or the model's placement; the planning
+        area."""
+        self.show_capture(view, world.mesh.bounds if view is not None else None)
+        self.show_model(None if view is not None else model_view(world.scene))
+        self.show_area(world)
 
     def offer_scale(self, offer: tuple[Path, str] | None) -> None:
         """Show the Scale x0.001 button for an upload (scene file, label) refused as
@@ -287,12 +436,7 @@ class LoadPanel:
                                  calibration=self.calibration_for(cmd.name),
                                  scad_timeout=float(self.scad_timeout.value),
                                  scad_backend=self.scad_backend.value)  # fmt: skip
-        label, what = f"upload: {cmd.name}", None
-        if Path(cmd.name).suffix.lower() in (".scad", ".zip"):
-            who = "OpenSCAD" if self.scad_backend.value == "cgal" else "Manifold"
-            what = (f"Rendering {cmd.name} with {who} (limit "
-                    f"{float(self.scad_timeout.value):g} s)")  # fmt: skip
-        app._load(cmd, str(path), from_upload=True, label=label, what=what)
+        app._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
 
     def _reload_with(self, app, cmd, changes: dict) -> None:
         """Change the loaded capture's settings and load it again, in the background. Its scene
@@ -304,6 +448,45 @@ class LoadPanel:
             path, label = adopt_capture_scene(path, folder), f"edited: {path.stem}"
         rewrite_capture_settings(path, changes)
         app._load(cmd, str(path), from_upload=True, label=label)
+
+    def _own(self, app, scene_path) -> tuple[Path, str]:
+        """A scene file the app may rewrite for scene_path, and its picker label: the file
+        itself when the app wrote it; else a copy (the original is never rewritten), which
+        joins the scene picker."""
+        path = Path(scene_path)
+        if path.resolve().is_relative_to(Path(app.upload_dir).resolve()):
+            label = next((k for k, (v, _) in app.files.items()
+                          if Path(v).resolve() == path.resolve()), f"upload: {path.stem}")  # fmt: skip
+            return path, label
+        folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
+        return adopt_scene(path, folder), f"edited: {path.stem}"
+
+    def _place(self, app, cmd) -> None:
+        """Load the model again at the typed position, on the typed ground plane (or none)."""
+        if self.model is None:
+            app._notify(cmd.client_id, "No model loaded",
+                        "Position and ground plane place a model (a mesh or .scad) loaded from "
+                        "a file.", error=True)  # fmt: skip
+            return
+        path, label = self._own(app, self.model.scene_path)
+        ground = float(self.ground_height.value) if self.ground_on.value else None
+        rewrite_placement(path, position=tuple(float(v) for v in self.position.value),
+                          ground=ground)  # fmt: skip
+        app._load(cmd, str(path), from_upload=True, label=label)
+
+    @staticmethod
+    def _capture_object(view: CaptureView) -> dict:
+        """The capture's terrain object in its scene file, as written ({"capture": the file}
+        for a capture file that is a scene of its own)."""
+        path = view.scene_path
+        if path.suffix.lower() not in (".yaml", ".yml"):
+            return {"capture": path.name}
+        raw = load_yaml(path.read_bytes(), path.name)
+        return next(o for o in raw["terrain"] if isinstance(o, dict) and "capture" in o)
+
+    def _capture_name(self) -> str:
+        """The loaded capture's file name (its suffix says whether Cloud units apply)."""
+        return str(self._capture_object(self.view)["capture"])
 
     def relevel_at_click(self, app, cmd, p_world) -> None:
         """Re-mesh the loaded capture with its ground through the clicked world point."""
@@ -333,9 +516,19 @@ class LoadPanel:
             changes = repose(self.view, float(self.height.value), float(self.pitch.value),
                              float(self.roll.value))  # fmt: skip
             self._reload_with(app, cmd, changes)
-        elif cmd.action == "remesh":
+        elif cmd.action in ("remesh", "up"):
             if self.view is None:
                 app._notify(cmd.client_id, "No capture loaded",
                             "Re-mesh works on a capture loaded from a file.", error=True)  # fmt: skip
                 return
-            self._reload_with(app, cmd, self.meshing_changes())
+            name = self._capture_name()
+            changes = (self.up_changes() if cmd.action == "up"
+                       else {**self.meshing_changes(), **self.units_change(name)})  # fmt: skip
+            self._reload_with(app, cmd, changes)
+        elif cmd.action == "place":
+            self._place(app, cmd)
+        elif cmd.action == "area":
+            bounds = planning_area(self.area_min.value, self.area_max.value)
+            path, label = self._own(app, app.world.scene.path)
+            rewrite_placement(path, bounds=bounds)
+            app._load(cmd, str(path), from_upload=True, label=label)

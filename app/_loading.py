@@ -14,6 +14,7 @@ from roachplan.scenes import list_scenes
 
 from ._jobs import Cmd, Job, _load_job
 from ._load_panel import needs_millimetre_scale
+from ._placement import model_view
 from ._uploads import public_message
 
 
@@ -104,12 +105,16 @@ def report_failure(app, ld: Loading) -> None:
     uploaded = ld.label.removeprefix("upload: ")
     if ld.label.startswith("upload: ") and Path(uploaded).suffix.lower() not in (".yaml", ".yml"):
         # The scene file around an uploaded model is the app's: the message names the file.
-        message = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.\w+: ", f"{uploaded}: ", message)
+        message = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\](?:\.\w+)?: ", f"{uploaded}: ", message)
     app.loading.show("")
     app.status.content = f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays."
     app.scene_picker.value = app._picker_label()
     mm = ld.from_upload and needs_millimetre_scale(ld.error)  # (the advice as scenes words it)
     app.load_panel.offer_scale((Path(ld.ref), ld.label) if mm else None)
+    # A model that did not load (under the ground plane, ...) can be placed again from here.
+    failed = model_view(ld.ref, loaded=False)
+    if failed is not None:
+        app.load_panel.show_model(failed)
     if mm and "Scale x0.001" not in message:  # (public_message words it so, as a rule)
         message += " Press Scale x0.001 (Scene folder) to load it in metres."
     app._notify(ld.client_id, f"Could not load {ld.label}", message, error=True)
@@ -138,12 +143,18 @@ def swap_in(app, ld: Loading) -> None:
     app.scene_picker.value = app._picker_label()
     app._next_seed = next_seed(app, world)
     app._show_world()
-    app.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
+    app.load_panel.show_loaded(world, view)
     took = ld.job.elapsed
     app.loading.show("")
     app.status.content = (
         f"Loaded `{world.scene.name}` ({len(world.mesh.faces)} triangles) in {took:.1f} s."
     )
-    if world.notes:
+    failure = app.markers.failure
+    if failure is not None:  # (the markers are red, on one point: say why and what to do)
+        app.status.content += " Start and goal were not picked: see Start and goal."
+        others = public_message(" ".join(world.notes[:-1]), app.upload_dir)
+        app._notify(ld.client_id, f"Loaded {ld.label}: start and goal not picked",
+                    f"{failure} {others}".strip(), error=True)  # fmt: skip
+    elif world.notes:
         notes = public_message(" ".join(world.notes), app.upload_dir)
         app._notify(ld.client_id, f"Loaded {ld.label}", notes)

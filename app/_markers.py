@@ -12,6 +12,25 @@ from roachplan.scenes import World, pose_problem
 
 from ._draw import INVALID, MARKER_COLOURS, SceneView, yaw_wxyz
 from ._jobs import MarkersCmd
+from ._uploads import PLACE_THEM
+
+
+def pick_failure(world: World) -> str | None:
+    """Why start and goal of world could not be picked automatically, or None when they were
+    (or were given). scenes/_world.py build_world (check_poses=False) leaves a failed pick as
+    start = goal at the bounds' centre, the reason its last note."""
+    sc = world.scene
+    if sc.start is None or sc.goal is None or tuple(sc.start[:2]) != tuple(sc.goal[:2]):
+        return None
+    return world.notes[-1] if world.notes else "start and goal are one point"
+
+
+def with_remedy(reason: str) -> str:
+    """The reason a pick failed, as the page says it: ending in what to do in the page (unless
+    the reason, in the page's words, says so already)."""
+    if "Click places" in reason:
+        return reason
+    return f"{reason.rstrip('. ')}; {PLACE_THEM}."
 
 
 class StartGoal:
@@ -24,11 +43,17 @@ class StartGoal:
             self.start_yaw = gui.add_slider("Start yaw [deg]", -180, 180, 1, 90)
             self.goal_yaw = gui.add_slider("Goal yaw [deg]", -180, 180, 1, 90)
             self.validity = gui.add_markdown("")
+        self.failure: str | None = None
+        """Why the world's start and goal could not be picked, in the page's words (None: they
+        were, or were given)."""
         for slider in (self.start_yaw, self.goal_yaw):
             slider.on_update(lambda ev: put(MarkersCmd(ev.client_id)))
 
-    def reset(self, world: World) -> None:
-        """The yaws of a newly shown world's start and goal (the markers are at them)."""
+    def reset(self, world: World, failure: str | None = None) -> None:
+        """The yaws of a newly shown world's start and goal (the markers are at them); failure:
+        why they could not be picked (pick_failure, in the page's words), said above the
+        markers' problems while either is invalid."""
+        self.failure = None if failure is None else with_remedy(failure)
         self.start_yaw.value = round(math.degrees(world.scene.start[2]))
         self.goal_yaw.value = round(math.degrees(world.scene.goal[2]))
 
@@ -57,6 +82,8 @@ class StartGoal:
                 self.view.controls[which].wxyz = wxyz
             if problem:
                 lines.append(f"**{which} invalid**: {problem}")
+        if lines and self.failure is not None:
+            lines.insert(0, f"**Start and goal were not picked**: {self.failure}")
         text = "  \n".join(lines) or "Start and goal are valid."
         if self.validity.content != text:
             self.validity.content = text

@@ -38,6 +38,7 @@ from ._draw import (
     framing,
     on_surface,
     robot_distance,
+    terrain_box,
     wxyz_from_xyzw,
     yaw_wxyz,
 )
@@ -65,12 +66,12 @@ from ._jobs import (
 )
 from ._load_panel import LoadPanel, PanelCmd
 from ._loading import BackgroundLoad, report_failure, swap_in
-from ._markers import StartGoal
+from ._markers import StartGoal, pick_failure
 from ._panel import energy_plot, summary_markdown, trials_csv, trials_markdown
 from ._picking import ray_hit_heightfield
 from ._relevel import CaptureView
 from ._replay import ShareCmd, share_trial
-from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
+from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, load_announcement, public_message
 from ._voxel_panel import VoxelCmd, VoxelPanel
 
 AT_ONCE = (LoadSceneCmd, UploadCmd, PanelCmd, ExportCmd, CancelCmd, ViewCmd)
@@ -134,7 +135,7 @@ class RoachApp:
                                                intensity=1.5, position=(0.0, 0.0, 1.0))  # fmt: skip
         self._build_gui()
         self._show_world()
-        self.load_panel.show_capture(view, world.mesh.bounds if view is not None else None)
+        self.load_panel.show_loaded(world, view)
         self._stop = threading.Event()
         self._loop = threading.Thread(target=self._run, name="roachplan-loop", daemon=True)
         self._loop.start()
@@ -295,7 +296,9 @@ class RoachApp:
     def _show_world(self) -> None:
         scene = self.world.scene
         self.view.show(self.world, lambda ev: self.commands.put(MarkersCmd(ev.client_id)))
-        self.markers.reset(self.world)
+        failure = pick_failure(self.world)
+        self.markers.reset(self.world, None if failure is None
+                           else public_message(failure, self.upload_dir))  # fmt: skip
         self.plan_endpoints, self._standable = None, None
         self.set_plans([])
         self.choose_panel.clear()
@@ -304,19 +307,28 @@ class RoachApp:
         self._show_robot_at_start()
         if self.show_standable.value:
             self._show_standable()
-        # The first view frames start and goal (the robot's world), not the terrain's bounds:
-        # a 10 m capture would leave the 10 cm robot a few pixels wide. Browsers already open
-        # are turned to the new world too.
-        ends = [on_surface(self.world, p) for p in (scene.start, scene.goal)]
-        position, look_at = framing(ends, self.server.initial_camera.fov)
+        self._frame_world()
+        self.title.content = f"**roachplan** — scene `{scene.name}`  \n{scene.description}"
+        self._refresh_results()
+
+    def _frame_world(self) -> None:
+        """Every view - the first view of a browser opened later, and every open browser's -
+        frames the terrain the robot plans on (terrain_box) with start and goal: after a load
+        or a re-mesh the old camera may be inside the new terrain or looking past it."""
+        scene = self.world.scene
+        points = [*terrain_box(self.world),
+                  *(on_surface(self.world, p) for p in (scene.start, scene.goal))]  # fmt: skip
+        position, look_at = framing(points, self.server.initial_camera.fov)
         self.server.initial_camera.position = tuple(position)
         self.server.initial_camera.look_at = tuple(look_at)
         for client in self.server.get_clients().values():
-            position, look_at = framing(ends, client.camera.fov or self.server.initial_camera.fov)
+            cam = client.camera
+            aspect = cam.image_width / cam.image_height if cam.image_height else 1.0
+            position, look_at = framing(points, cam.fov or self.server.initial_camera.fov,
+                                        aspect=aspect)  # fmt: skip
             with client.atomic():
-                client.camera.look_at, client.camera.position = look_at, position
-        self.title.content = f"**roachplan** — scene `{scene.name}`  \n{scene.description}"
-        self._refresh_results()
+                # Position first: viser moves the look-at along with a new position.
+                cam.position, cam.look_at = position, look_at
 
     def _marker_pose(self, which: str) -> tuple[float, float, float]:
         return self.markers.pose(which)
@@ -363,7 +375,8 @@ class RoachApp:
             offset = near * offset
             self._follow_offsets[client.client_id] = offset
         with client.atomic():
-            cam.look_at, cam.position = target, target + offset
+            # Position first: viser moves the look-at along with a new position.
+            cam.position, cam.look_at = target + offset, target
 
     def select_path(self, k: int) -> None:
         """Make path k (an index into self.plans, 0 to K - 1; the page labels it k + 1) the one
@@ -642,8 +655,9 @@ class RoachApp:
     def _load(self, cmd: Cmd, ref: str, *, from_upload: bool, label: str,
               what: str | None = None) -> None:  # fmt: skip
         """Start loading a scene in the background (replacing a load still running)."""
-        replaced = self.loading.start(cmd, ref, from_upload=from_upload, label=label,
-                                      what=what or f"Loading {label}")  # fmt: skip
+        # Said by what the scene holds, not by the file's suffix: a .zip may hold a capture.
+        what = what or load_announcement(label, ref)
+        replaced = self.loading.start(cmd, ref, from_upload=from_upload, label=label, what=what)
         if replaced is not None:
             self._notify(replaced.client_id, f"Stopped loading {replaced.label}",
                          f"{label} is loaded instead.")  # fmt: skip

@@ -196,41 +196,134 @@ def prepare_upload_scene(scene_path: Path):
     return world
 
 
+RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold"}
+"""Who renders a model, by its `backend:`, as the page names it."""
+
+
+def load_announcement(label: str, ref: str | Path) -> str:
+    """What the page says while a scene (a file or a library name) loads: what is really done
+    to each of its terrain files - a capture read and meshed, a model rendered (by whom, under
+    which limit), a mesh read - not what an uploaded file's suffix suggests (a .zip may hold a
+    capture or a model). label: the upload's or the picker's name; "Loading label" when the
+    scene does not read (its load will say why)."""
+    from roachplan.scenes import load_scene
+
+    try:
+        scene = load_scene(ref)
+    except (SceneError, OSError, ValueError):
+        return f"Loading {label}"
+    said = []
+    for obj in scene.terrain:
+        if obj.kind == "capture":
+            said.append(f"reading and meshing the capture {obj.source.name}")
+        elif obj.kind == "scad":
+            who = RENDERERS.get(obj.backend, f"OpenSCAD (backend {obj.backend})")
+            said.append(f"rendering {obj.source.name} with {who} (limit {obj.timeout:g} s)")
+        else:
+            said.append(f"reading the mesh {obj.source.name}")
+    if not said:
+        return f"Loading {label}"
+    text = "; ".join(dict.fromkeys(said))  # (each once, in order)
+    if Path(label.split(": ", 1)[-1]).name in text:  # the label's file is named already
+        return text[0].upper() + text[1:]
+    return f"{label}: {text}"
+
+
 def _pose_yaml(pose) -> list[float]:
     """(x [m], y [m], yaw [rad]) as a scene file writes it: [x, y, yaw_deg]."""
     return [round(float(pose[0]), 4), round(float(pose[1]), 4), round(math.degrees(pose[2]), 3)]
 
 
+PLACE_THEM = (
+    "place them yourself: set Start and goal → Click places to start and click the terrain "
+    "where the robot is to start, then to goal and click where it is to go; View → Show where "
+    "it can stand shows the places the robot can stand"
+)
+"""What the page offers where the command line says "give start and goal"."""
 PAGE_ADVICE = (
+    # perception: units, depth scale, disparity, intrinsics, size
     (r"pass units mm \(--units mm\), or units m \(--units m\) if it really is in metres",
-     "the page reads a point cloud in metres: save this one in metres and load it again"),
+     "set Meshing (captures) → Cloud units to mm and load the file again (or to m if it "
+     "really is in metres)"),
     (r"pass --depth-scale ([0-9.eE+-]+) \(depth_scale: [0-9.eE+-]+ in a scene\)",
      r"set Camera (next capture) → Depth scale [units/m] to \1 and load the file again"),
-    (r"check the depth scale \(--depth-scale\)",
-     "check Camera (next capture) → Depth scale [units/m] and load the file again"),
+    (r"check the depth scale(?: \(--depth-scale\))?",
+     "check Camera (next capture) → Depth scale [units/m] and Depth units, and load the file "
+     "again"),
+    (r"pass --depth-units kinect-disparity \(depth_units: kinect-disparity in a scene\)",
+     "set Camera (next capture) → Depth units to kinect-disparity and load the file again"),
+    (r"pass its depth scale \(--depth-scale N; 1000 for millimetres\)",
+     "set Camera (next capture) → Depth scale [units/m] (1000 for millimetres) and load the "
+     "file again"),
+    (r"both a depth scale \(([0-9.eE+-]+)\) and depth units \(([\w-]+)\) were given: (.*?); "
+     r"give one of them",
+     r"both Depth scale [units/m] (\1) and Depth units (\2) were set: \3; set Camera (next "
+     r"capture) → Depth scale [units/m] to 0 or Camera (next capture) → Depth units to auto"),
     (r"pass --intrinsics with a preset \(([^)]*)\) or a calibration file, or the numbers "
      r"--fx --fy --cx --cy .*? beside it",
      r"choose its camera in Camera (next capture) → Camera (\1, or numbers below: fx, fy, cx, "
      r"cy), or load its calibration file first, then the depth image again"),
     (r"crop it \(crop / --crop\) or use a larger voxel \(--voxel\)",
-     "tick Meshing (captures) → Crop and set its box, or set a larger Voxel [m], then press "
-     "Re-mesh loaded capture (or load the file again)"),
+     "tick Meshing (captures) → Crop and set its box, or set a larger Meshing (captures) → "
+     "Voxel [m], then press Re-mesh loaded capture (or load the file again)"),
+    (r"a topic \(([^;]*); --topic, `topic:` in a scene\) was given, but only a bag \(([^)]*)\) "
+     r"has topics",
+     r"the scene file gives a topic (\1), but only a bag (\2) has topics: take it out and load "
+     r"the scene again (Scene → Load file)"),
+    (r"depth units \(([^;]*); --depth-units, `depth_units:` in a scene\) were given, but only a "
+     r"depth image \(([^)]*)\) has them",
+     r"the scene file gives depth units (\1), but only a depth image (\2) has them: take them "
+     r"out and load the scene again (Scene → Load file)"),
+    # perception: the ground
+    (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
+     "set Loaded capture → Up direction and press Re-mesh with this up direction, or tick "
+     "Loaded capture → Pick ground and click the ground, or type the camera's height, pitch "
+     "and roll in Loaded capture and press Re-mesh with this camera pose"),
+    (r"check the result, or give --up or the camera pose",
+     "check the result; if it is wrong, set Loaded capture → Up direction and press Re-mesh "
+     "with this up direction, or tick Loaded capture → Pick ground and click the ground"),
+    (r"check the up direction",
+     "check Loaded capture → Up direction (then press Re-mesh with this up direction)"),
+    (r"click it in the page or give the camera pose",
+     "tick Loaded capture → Pick ground and click it, or type the camera's height, pitch and "
+     "roll in Loaded capture and press Re-mesh with this camera pose"),
+    (r"study one surface: --plane \(the dominant plane's points\), or a smaller "
+     r"--square/--region",
+     "study one surface: set Voxel study → Region to Ground plane, or a smaller Voxel study → "
+     "Square side [m]"),
+    # scenes: models
     (r"add `scale: 0\.001` to this terrain object \(or --scale 0\.001\)",
-     "press Scale x0.001 (Scene folder) to load it in metres"),
+     "press Scene → Scale x0.001 to load it in metres"),
     (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
      r"at most ([0-9.]+)",
      r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
-    (r"render this model with `backend: cgal` \(--scad-backend cgal\), the openscad binary",
-     "set Scene → OpenSCAD backend to cgal and load it again"),
-    (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
-     "tick Loaded capture → Pick ground and click the ground, or type the camera's height, "
-     "pitch and roll there"),
-    (r"check the result, or give --up or the camera pose",
-     "check the result; if it is wrong, tick Loaded capture → Pick ground and click the ground"),
-    (r"; --topic, `topic:` in a scene\)", ")"),
+    (r"(?:render this model with|use) `backend: cgal`(?: \(--scad-backend cgal\))?"
+     r"(?:, the openscad binary)?",
+     "set Scene → OpenSCAD backend to cgal (the openscad binary) and load it again"),
+    (r"raise it with `position: \[x, y, z\]`, or give `ground: null` if it has its own floor"
+     r"(?: in a scene file)?",
+     "raise it with Loaded model → Position [m], or untick Loaded model → Ground plane if it "
+     "has its own floor, and press Loaded model → Reload model with these"),
+    # scenes: the planning area, start and goal
+    (r"\(set bounds, or crop\)",
+     "(to plan elsewhere: set Planning area → Min x, y [m] and Max x, y [m] and press Plan in "
+     "this area; for a capture, also Meshing (captures) → Crop)"),
+    (r"give bounds: the scene has no terrain to take them from",
+     "the scene has no terrain to plan on: load a capture, a model or a scene with terrain "
+     "(Scene → Load file)"),
+    (r"\bbounds: ([0-9.]+ m x [0-9.]+ m) is more than",
+     r"the planning area, \1, is more than"),
+    (r"give bounds at most ([0-9.]+ m x [0-9.]+ m) around the part the robot is to cross",
+     r"set Planning area → Min x, y [m] and Max x, y [m] at most \1 apart, around the part "
+     r"the robot is to cross, and press Reload with this area"),
+    (r"check the ground found, or give start and goal",
+     f"check the ground found (for a capture, with Loaded capture → Pick ground), or "
+     f"{PLACE_THEM}"),
+    (r"give start and goal", PLACE_THEM),
 )  # fmt: skip
-"""Advice written for the command line (perception and scenes errors) -> the same advice in the
-page's own controls (folder → control)."""
+"""Advice written for the command line and scene files (perception, scenes and planning
+messages) -> the same advice in the page's own controls (folder → control). Every piece of
+advice that code can give has its entry here (tests/test_page_advice.py walks them)."""
 _PATH = re.compile(r"(?<![\w.~-])(?:/[^\s/:'\"`,;()\[\]]+)+/([^\s/:'\"`,;()\[\]]+)")
 """An absolute path of two or more parts (the server's folders mean nothing in a browser)."""
 

@@ -125,7 +125,7 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
     obj = next(o for o in scene.terrain if o.kind == "capture")
     s = obj.capture
     cap = load_capture(obj.source, intrinsics=s.intrinsics, depth_scale=s.depth_scale,
-                       topic=s.topic, units=s.units)  # fmt: skip
+                       topic=s.topic, units=s.units, depth_units=s.depth_units)  # fmt: skip
     raw = cap.finite_points()
     on_stage("read")
     wfc = np.asarray(req.world_from_camera, dtype=np.float64)

@@ -477,6 +477,7 @@ def _capture_settings(args: argparse.Namespace):
         "camera_pose": _numbers(getattr(args, "camera_pose", None), "--camera-pose", (7,)),
         "intrinsics": _intrinsics_flags(args),
         "depth_scale": args.depth_scale,
+        "depth_units": args.depth_units,
         "units": args.units,
         "topic": args.topic,
         "seed": getattr(args, "seed", None),
@@ -591,7 +592,8 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
                           inputs=(args.capture, args.intrinsics), kind="a voxel-study table",
                           replaceable=lambda head: head.startswith(header), force=args.force)  # fmt: skip
     cap = load_capture(args.capture, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
-                       topic=settings.topic, units=settings.units)  # fmt: skip
+                       topic=settings.topic, units=settings.units,
+                       depth_units=settings.depth_units)  # fmt: skip
     pts = cap.finite_points() - cap.sensor_origin
     total, where = len(pts), "the whole capture"
     if args.square is not None:
@@ -660,7 +662,7 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
 
 
 def _add_perception_parsers(sub) -> None:
-    from roachplan.perception import FRAMES, METHODS, PRESETS
+    from roachplan.perception import DEPTH_UNITS, FRAMES, METHODS, PRESETS
 
     def capture_flags(p):
         p.add_argument("--intrinsics", default=None,
@@ -674,6 +676,11 @@ def _add_perception_parsers(sub) -> None:
         p.add_argument("--depth-scale", type=float, default=None,
                        help="depth images: units per metre (default: the calibration's or "
                             "preset's, e.g. 5000 for tum-*, else 1000, i.e. mm)")  # fmt: skip
+        p.add_argument("--depth-units", choices=DEPTH_UNITS, default=None,
+                       help="depth images: kinect-disparity for a Kinect v1's raw 11-bit "
+                            "disparity (NYU Depth v2's raw dumps), converted to metres with "
+                            "NYU's model (default: depth in units of --depth-scale; raw "
+                            "disparity is recognised when plain)")  # fmt: skip
         p.add_argument("--units", choices=("m", "mm"), default=None, help="point cloud units")
         p.add_argument("--topic", default=None, help="bags: the topic to read")
 

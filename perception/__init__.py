@@ -24,6 +24,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "GroundChoice": "._ground",
         "GroundConfig": "._ground",
         "choose_ground": "._ground",
+        "DEPTH_UNITS": "._choices",
         "FRAMES": "._choices",
         "METHODS": "._choices",
         "CaptureSettings": "._pipeline",
@@ -58,6 +59,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._capture import depth_scale_advice as depth_scale_advice
     from ._capture import depth_to_points as depth_to_points
     from ._capture import load_capture as load_capture
+    from ._choices import DEPTH_UNITS as DEPTH_UNITS
     from ._choices import FRAMES as FRAMES
     from ._choices import METHODS as METHODS
     from ._errors import CaptureError as CaptureError

@@ -38,6 +38,7 @@ from ._camera import (
     is_calibration_yaml,
     load_calibration,
 )
+from ._choices import DEPTH_UNITS, DepthUnits
 from ._errors import CaptureError
 from ._headers import (
     HEAD_BYTES,
@@ -108,18 +109,23 @@ def load_capture(
     depth_scale: float | None = None,
     topic: str | None = None,
     units: Units | None = None,
+    depth_units: DepthUnits | None = None,
 ) -> Capture:
     """Read a capture file (or a ROS 2 bag's folder); CaptureError names the file and what is
     wrong with it: every reader checks its header against the file's size before allocating.
 
-    intrinsics / depth_scale: for depth images (.png, .pgm, .ppm). intrinsics: a preset name, a
-    calibration file, or numbers {fx, fy, cx, cy[, width, height]}; default: a calibration file
-    beside the image (SIDECAR_SUFFIXES; same stem, or the stem before "_depth"). depth_scale
-    [units per metre]: default the calibration's (a preset's, e.g. TUM 5000; PCL XML's z
-    factor; a JSON/YAML depth_scale), else the sidecar's, else 1000 (millimetres). topic: which
-    topic of a bag (default: the first PointCloud2, else the first depth Image). units: "mm"
-    when a point cloud is stored in millimetres, "m" in metres; None: metres unless the cloud
-    can only be millimetres (see check_capture).
+    intrinsics / depth_scale / depth_units: for depth images (.png, .pgm, .ppm). intrinsics: a
+    preset name, a calibration file, or numbers {fx, fy, cx, cy[, width, height]}; default: a
+    calibration file beside the image (SIDECAR_SUFFIXES; same stem, or the stem before
+    "_depth"). depth_scale [units per metre]: default the calibration's (a preset's, e.g. TUM
+    5000; PCL XML's z factor; a JSON/YAML depth_scale), else the sidecar's, else 1000
+    (millimetres). depth_units: "kinect-disparity" when the samples are a Kinect v1's raw
+    disparity (kinect_disparity_to_m); None: depth in units of the depth scale, unless no
+    depth scale was given and the samples plainly are raw Kinect disparity (converted, with a
+    note; refused, naming both settings, when they only may be: kinect_disparity_verdict).
+    topic: which topic of a bag (default: the first PointCloud2, else the first depth Image).
+    units: "mm" when a point cloud is stored in millimetres, "m" in metres; None: metres
+    unless the cloud can only be millimetres (see check_capture).
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -130,12 +136,18 @@ def load_capture(
                 f"{path}: a topic ({short_repr(topic)}; --topic, `topic:` in a scene) was given, "
                 f"but only a bag ({', '.join(BAG_SUFFIXES)}, or a ROS 2 bag's folder) has topics"
             )
+        if depth_units is not None and suffix not in DEPTH_SUFFIXES:
+            raise CaptureError(
+                f"{path}: depth units ({short_repr(depth_units)}; --depth-units, `depth_units:` "
+                f"in a scene) were given, but only a depth image ({', '.join(DEPTH_SUFFIXES)}) "
+                f"has them"
+            )
         if is_bag and path.is_dir():
             cap = _load_bag(path, topic, depth_scale)
         else:
             _check_file(path)
             if suffix in DEPTH_SUFFIXES:
-                cap = _load_depth_image(path, intrinsics, depth_scale)
+                cap = _load_depth_image(path, intrinsics, depth_scale, depth_units)
             elif is_bag:
                 cap = _load_bag(path, topic, depth_scale)
             else:
@@ -504,24 +516,38 @@ def _needs_intrinsics(path: Path, why: str = "a depth image needs intrinsics",
     )
 
 
-def _load_depth_image(path: Path, intrinsics, depth_scale: float | None) -> Capture:
-    reader = _read_depth_png if path.suffix.lower() == ".png" else read_netpbm_depth
-    depth = reader(path).astype(np.float64)
-    h, w = depth.shape
+def _load_depth_image(
+    path: Path, intrinsics, depth_scale: float | None, depth_units: DepthUnits | None = None
+) -> Capture:
+    _check_depth_units(path, depth_scale, depth_units)
+    if path.suffix.lower() == ".png":
+        raw, notes = _read_depth_png(path), []
+    else:
+        raw, note = _read_netpbm(path)
+        notes = [note] if note else []
+    h, w = raw.shape
     sidecar = find_sidecar(path)
     spec = intrinsics if intrinsics is not None else sidecar
     if spec is None:
         raise _needs_intrinsics(path)
     calib = load_calibration(spec, size=(w, h))
     intr = calib.intrinsics
-    if depth_scale is None:
-        depth_scale = calib.depth_scale
-    if depth_scale is None and sidecar is not None and intrinsics is not None:
-        try:  # intrinsics given, the depth scale may still be written beside the image
-            depth_scale = load_calibration(sidecar, size=(w, h)).depth_scale
-        except CaptureError:
-            pass
-    depth_scale = depth_scale or 1000.0
+    # Raw Kinect disparity is looked for only when no depth scale was given: a scale given
+    # says the samples are depth. A calibration's scale does not: it is the camera's usual
+    # one, not a statement about this file.
+    disparity = depth_units == "kinect-disparity"
+    if depth_units is None and depth_scale is None:
+        disparity = _recognise_disparity(path, raw, notes)
+    if disparity:
+        raw = _as_disparity(path, raw, notes, told=depth_units is not None)
+        depth_m, depth_scale = kinect_disparity_to_m(raw), None
+    else:
+        if depth_scale is None:
+            depth_scale = calib.depth_scale
+        if depth_scale is None and sidecar is not None and intrinsics is not None:
+            depth_scale = _sidecar_depth_scale(sidecar, (w, h))
+        depth_scale = depth_scale or 1000.0
+        depth_m = raw.astype(np.float64) / depth_scale
     if (intr.width, intr.height) != (w, h):
         if abs(intr.width / w - intr.height / h) > 1e-6:
             raise _needs_intrinsics(
@@ -529,11 +555,157 @@ def _load_depth_image(path: Path, intrinsics, depth_scale: float | None) -> Capt
                 f"{intr.height} (another aspect ratio)", size=(w, h),
             )  # fmt: skip
         intr = intr.scaled(w, h)
-    if not np.any(depth > 0):
+    if not np.any(raw > 0):
         raise CaptureError(f"{path}: every pixel is 0 (no depth measured)")
-    pts = depth_to_points(depth / depth_scale, intr)
+    if not np.any(depth_m > 0):
+        raise CaptureError(f"{path}: no pixel holds a Kinect disparity within its model (every "
+                           f"one is {KINECT_NO_READING}, 0 or beyond {KINECT_MAX_DEPTH_M:g} m)")  # fmt: skip
+    pts = depth_to_points(depth_m, intr)
     return Capture(points=pts, shape=(h, w), source=str(path), intrinsics=intr, frame="camera",
-                   base_from_camera=calib.base_from_camera, depth_scale=depth_scale)  # fmt: skip
+                   base_from_camera=calib.base_from_camera, depth_scale=depth_scale,
+                   notes=tuple(notes))  # fmt: skip
+
+
+def _sidecar_depth_scale(sidecar: Path, size: tuple[int, int]) -> float | None:
+    """Intrinsics given, the depth scale may still be written beside the image."""
+    try:
+        return load_calibration(sidecar, size=size).depth_scale
+    except CaptureError:
+        return None
+
+
+def _check_depth_units(path: Path, depth_scale: float | None, depth_units) -> None:
+    if depth_units is not None and depth_units not in DEPTH_UNITS:
+        raise CaptureError(f"{path}: depth_units {short_repr(depth_units)}: accepted: "
+                           f"{', '.join(DEPTH_UNITS)} (or none: depth in units of the depth "
+                           f"scale)")  # fmt: skip
+    if depth_units is not None and depth_scale is not None:
+        raise CaptureError(
+            f"{path}: both a depth scale ({depth_scale:g}) and depth units ({depth_units}) "
+            f"were given: a depth scale is for depth stored in units, {depth_units} is "
+            f"converted by the sensor's own model; give one of them"
+        )
+
+
+# -- raw Kinect v1 disparity ------------------------------------------------------------------
+
+KINECT_NO_READING = 2047
+"""A Kinect v1's raw 11-bit disparity for a pixel without a reading (libfreenect's
+FREENECT_DEPTH_11BIT, NYU Depth v2's raw dumps)."""
+KINECT_DISPARITY_MODEL = (351.3, 1092.5)
+"""(a, b) of depth [m] = a / (b - d) for raw disparity d: NYU Depth v2's toolbox
+(camera_params.m, depthParam1/2). Chosen over ROS/OpenKinect's 1 / (3.3309495161 - 0.0030711016
+d) because NYU's raw dumps are where raw disparity files come from, and with their own model
+the metres agree with the dataset's released depth maps; the two differ by 5 % at 1 m, 3 % at
+2 m, under 2 % at 3-4 m and 7 % at 6 m."""
+KINECT_MAX_DEPTH_M = 10.0
+"""Farthest depth taken from disparity [m] (NYU's maxDepth): beyond it the model's metres per
+disparity step exceed a quarter of a metre; such pixels, like 0, 2047 and d >= 1092.5 (no
+depth in the model), are no reading rather than NYU's clamp to 10 m (a wall that is not
+there)."""
+KINECT_NEAR_M = 0.4
+"""Nearest depth a Kinect v1 reads [m] (rated 0.8 m, 0.4 m in near mode)."""
+MARKER_SHARE = 0.001
+"""Share of pixels at 2047 from which it counts as the no-reading marker: a Kinect frame has
+its shadow band at the left edge and dropouts on dark or shiny surfaces (NYU frames: several
+%); a depth image in millimetres has only scattered pixels at 2.047 m."""
+MODEL_SHARE = 0.95
+"""Share of the other non-zero samples that must be disparities of KINECT_NEAR_M to
+KINECT_MAX_DEPTH_M for raw disparity to be taken without being told."""
+
+
+def kinect_disparity_to_m(raw: np.ndarray) -> np.ndarray:
+    """(H, W) raw Kinect v1 disparity -> depth [m] by KINECT_DISPARITY_MODEL; 0 (no reading)
+    where the sample is 0 or KINECT_NO_READING, or out of the model (d >= 1092.5, or further
+    than KINECT_MAX_DEPTH_M)."""
+    a, b = KINECT_DISPARITY_MODEL
+    d = np.asarray(raw, dtype=np.float64)
+    ok = (d > 0) & (d < KINECT_NO_READING) & (d < b)
+    depth = np.zeros_like(d)
+    depth[ok] = a / (b - d[ok])
+    depth[depth > KINECT_MAX_DEPTH_M] = 0.0
+    return depth
+
+
+def _disparity_of(depth_m: float) -> float:
+    a, b = KINECT_DISPARITY_MODEL
+    return b - a / depth_m
+
+
+def kinect_disparity_verdict(raw: np.ndarray) -> tuple[str, str]:
+    """Whether a depth image's samples are a Kinect v1's raw disparity, by what they look like:
+    ("yes" | "maybe" | "no", the evidence in words). Disparity is 11 bits (nothing above
+    2047), with 2047 marking no reading - a spike: the values just below it are no disparity
+    the model maps to a depth - on a share of the pixels (MARKER_SHARE); and nearly all the other
+    samples (MODEL_SHARE) are disparities of 0.4-10 m (214-1057), which in millimetres would be
+    a scene within 1.06 m with many pixels at exactly 2.047 m. "maybe": 11 bits with the marker,
+    but the rest not so."""
+    v = np.asarray(raw).ravel()
+    if v.size == 0 or int(v.max()) > KINECT_NO_READING:
+        return "no", ""
+    marker = int(np.count_nonzero(v == KINECT_NO_READING))
+    below = int(np.count_nonzero((v >= KINECT_NO_READING - 10) & (v < KINECT_NO_READING)))
+    if marker < MARKER_SHARE * v.size or marker < 20 * (below / 10 + 1):
+        return "no", ""
+    rest = v[(v > 0) & (v < KINECT_NO_READING)]
+    lo, hi = _disparity_of(KINECT_NEAR_M), _disparity_of(KINECT_MAX_DEPTH_M)
+    share = float(np.mean((rest >= lo) & (rest <= hi))) if rest.size else 0.0
+    evidence = (f"11-bit samples, {100 * marker / v.size:.1f} % of the pixels at "
+                f"{KINECT_NO_READING} (the Kinect's no-reading value), {100 * share:.0f} % of "
+                f"the others disparities of {KINECT_NEAR_M:g}-{KINECT_MAX_DEPTH_M:g} m "
+                f"({lo:.0f}-{hi:.0f})")  # fmt: skip
+    return ("yes" if share >= MODEL_SHARE else "maybe"), evidence
+
+
+def _swapped(raw: np.ndarray) -> np.ndarray:
+    r = np.asarray(raw, dtype=np.uint16)
+    return ((r & 0xFF) << 8) | (r >> 8)
+
+
+TELL_DISPARITY = ("pass --depth-units kinect-disparity (depth_units: kinect-disparity in a "
+                  "scene)")  # fmt: skip
+TELL_DEPTH = "pass its depth scale (--depth-scale N; 1000 for millimetres)"
+
+
+def _recognise_disparity(path: Path, raw: np.ndarray, notes: list[str]) -> bool:
+    """Whether to read a depth image given no depth scale or depth units as raw Kinect
+    disparity (a note says so); CaptureError, naming disparity and both settings, when it
+    may be disparity but is not plainly so. A netpbm file's samples are also judged
+    byte-swapped: NYU's dumps are read either way by the tools people use."""
+    verdict, evidence = kinect_disparity_verdict(raw)
+    if verdict == "no" and path.suffix.lower() != ".png":
+        verdict, evidence = kinect_disparity_verdict(_swapped(raw))
+        evidence += " once its bytes are swapped" if evidence else ""
+    if verdict == "maybe":
+        raise CaptureError(
+            f"{path}: this may be a Kinect v1's raw disparity, not depth ({evidence}), but it "
+            f"is not plainly so: if it is disparity, {TELL_DISPARITY}; if it is depth, "
+            f"{TELL_DEPTH}"
+        )
+    return verdict == "yes"
+
+
+def _as_disparity(path: Path, raw: np.ndarray, notes: list[str], *, told: bool) -> np.ndarray:
+    """raw as 11-bit disparity, byte-swapped if that is what makes it so (a netpbm file written
+    little-endian, against netpbm's rule); the note that says how it was read."""
+    a, b = KINECT_DISPARITY_MODEL
+    swapped = ""
+    if int(raw.max()) > KINECT_NO_READING:
+        if path.suffix.lower() == ".png" or int(_swapped(raw).max()) > KINECT_NO_READING:
+            raise CaptureError(
+                f"{path}: depth units kinect-disparity were given, but samples reach "
+                f"{int(raw.max())}: raw Kinect disparity has 11 bits (at most "
+                f"{KINECT_NO_READING}); if it is depth, {TELL_DEPTH}"
+            )
+        raw, swapped = _swapped(raw), " (its 16-bit samples little-endian)"
+    how = "as told" if told else "recognised by its values"
+    notes.append(
+        f"read as a Kinect v1's raw disparity, {how}{swapped}, and converted by NYU Depth v2's "
+        f"model: depth = {a:g} / ({b:g} - d) m; {KINECT_NO_READING}, 0 and disparities beyond "
+        f"{KINECT_MAX_DEPTH_M:g} m are no reading"
+        + ("" if told else f". If it is depth, {TELL_DEPTH}")
+    )
+    return raw
 
 
 def _read_depth_png(path: Path) -> np.ndarray:
@@ -557,12 +729,19 @@ def _read_depth_png(path: Path) -> np.ndarray:
 
 
 def read_netpbm_depth(path: Path) -> np.ndarray:
+    """A 16-bit netpbm image -> (H, W) uint16 raw depth units (_read_netpbm, without its note)."""
+    return _read_netpbm(path)[0]
+
+
+def _read_netpbm(path: Path) -> tuple[np.ndarray, str]:
     """A 16-bit netpbm image -> (H, W) uint16 raw depth units: PGM (P5 binary, P2 ASCII) or PPM
     (P6, P3), of which only the first channel is read (a colour pixmap has no depth; a depth
     tool that writes PPM repeats the depth in every channel). maxval > 255 means 16 bits per
     sample, big-endian (netpbm's rule); the samples are not rescaled by maxval. The header is
     checked against the file's real size before anything is allocated (parse_netpbm_header).
-    Pillow is not used: it reads 16-bit PGM but not 16-bit PPM, and trusts the header's size."""
+    Pillow is not used: it reads 16-bit PGM but not 16-bit PPM, and trusts the header's size.
+    The note: samples that exceed maxval as netpbm orders their bytes but fit it swapped were
+    written little-endian (some depth tools do), and are read so."""
     h = parse_netpbm_header(_head(path, 4096), path.stat().st_size, str(path))
     samples = h.samples
     with open(path, "rb") as f:
@@ -582,11 +761,16 @@ def read_netpbm_depth(path: Path) -> np.ndarray:
                 raise CaptureError(
                     f"{path}: a sample is over {h.maxval}, the header's maxval"
                 ) from None
+    note = ""
+    if data.max() > h.maxval and h.binary and _swapped(data).max() <= h.maxval:
+        data = _swapped(data)
+        note = (f"its 16-bit samples are little-endian (netpbm's are big-endian): as written "
+                f"they exceed the header's maxval {h.maxval}, swapped they do not")  # fmt: skip
     if data.max() > h.maxval:
         raise CaptureError(
             f"{path}: a sample is {data.max()}, above the header's maxval {h.maxval}"
         )
-    return data.reshape(h.height, h.width, h.channels)[..., 0].astype(np.uint16)
+    return data.reshape(h.height, h.width, h.channels)[..., 0].astype(np.uint16), note
 
 
 STANDARD_DEPTH_SCALES: dict[float, str] = {

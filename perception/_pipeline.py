@@ -23,7 +23,7 @@ import trimesh
 
 from ._camera import PinholeNumbers
 from ._capture import Capture, depth_scale_advice, is_georeferenced
-from ._choices import FRAMES, METHODS, Frame, Method
+from ._choices import DEPTH_UNITS, FRAMES, METHODS, DepthUnits, Frame, Method
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
 from ._surface import Surface, organized_surface, projected_surface, scattered_surface
@@ -600,15 +600,18 @@ class CaptureSettings:
     (depth images; default: a calibration file beside the image)."""
     depth_scale: float | None = None
     """Depth units per metre (depth images; default 1000 or the sidecar's)."""
+    depth_units: DepthUnits | None = None
+    """"kinect-disparity": the depth image holds a Kinect v1's raw disparity; None: depth in
+    units of the depth scale (raw disparity is still recognised when plain)."""
     units: Literal["m", "mm"] | None = None
     """Point cloud units; None: metres unless the cloud can only be millimetres."""
     topic: str | None = None
     """Bag topic."""
 
 
-SETTING_KEYS = ("voxel", "method", "intrinsics", "depth_scale", "units", "topic", "camera_pose",
-                "crop", "depth_range", "cell", "outlier_std", "ground_threshold", "seed",
-                "frame", "up", "ground_point", "recentre")  # fmt: skip
+SETTING_KEYS = ("voxel", "method", "intrinsics", "depth_scale", "depth_units", "units", "topic",
+                "camera_pose", "crop", "depth_range", "cell", "outlier_std", "ground_threshold",
+                "seed", "frame", "up", "ground_point", "recentre")  # fmt: skip
 
 
 def _num(k: str, v, lo: float = 0.0) -> float:
@@ -710,6 +713,8 @@ def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
         intrinsics=intr if intr is None or isinstance(intr, PinholeNumbers) or intr in PRESETS
         else str(resolve(intr)),
         depth_scale=_num("depth_scale", data["depth_scale"]) if "depth_scale" in data else None,
+        depth_units=_choice("depth_units", data["depth_units"], DEPTH_UNITS)  # type: ignore[arg-type]
+        if "depth_units" in data else None,
         units=_choice("units", data["units"], ("m", "mm")) if "units" in data else None,  # type: ignore[arg-type]
         topic=topic,
     )
@@ -723,7 +728,8 @@ def mesh_capture(
     from ._capture import load_capture
 
     cap = load_capture(path, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
-                       topic=settings.topic, units=settings.units)  # fmt: skip
+                       topic=settings.topic, units=settings.units,
+                       depth_units=settings.depth_units)  # fmt: skip
     if on_stage is not None:
         on_stage("read")
     return reconstruct(cap, settings.meshing, on_stage)

@@ -67,11 +67,13 @@ def test_click_the_floor_to_relevel_then_plan_and_drive(app, artifacts):
         upload(page, pcd)
         page.get_by_text(re.compile(r"Loaded `?tutorials_region_growing")).wait_for(timeout=120_000)
         before = app.world.mesh.bounds.copy()
-        page.get_by_text("Pick ground").click()
+        page.get_by_text("Pick ground", exact=True).click()
         page.wait_for_timeout(500)
         page.mouse.click(700, 455)  # just right of the view's centre: the floor (screenshot 02a)
         page.screenshot(path=artifacts / "load-02a-clicked.png")
-        page.get_by_text(re.compile(r"Loading .*tutorials_region_growing")).wait_for(timeout=30_000)
+        page.get_by_text(re.compile(r"meshing the capture tutorials_region_growing")).wait_for(
+            timeout=30_000
+        )
         page.get_by_text(re.compile(r"Loaded `?tutorials_region_growing")).wait_for(timeout=120_000)
         page.screenshot(path=artifacts / "load-02-relevelled.png")
         raw = _scene_of(app)

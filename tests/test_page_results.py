@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import trimesh
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
+from test_page_view import dropdown
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
 
@@ -136,7 +137,7 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
         page.screenshot(path=artifacts / "results-03-bad-upload.png")
         # What happened, with the file's own name, and what to do, in the page's terms.
         assert "cloud_mm.pcd" in text and "millimetres" in text
-        assert "save this one in metres" in text
+        assert "Meshing (captures) → Cloud units to mm" in text, text
         assert "--" not in text, f"a command-line flag: {text!r}"
         for internal in (str(app.upload_dir), "/tmp", "upload-", ".yaml", "terrain[0]"):
             assert internal not in text, f"{internal!r} in {text!r}"
@@ -146,6 +147,14 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
         box, size = note.bounding_box(), page.viewport_size
         assert box["x"] >= 0 and box["x"] + box["width"] <= size["width"]
         assert "double_bridge" in title(page)
+        # As the notification says: the same cloud, read in millimetres, loads.
+        page.locator(".mantine-Notification-root").filter(has_text="Could not load").locator(
+            "button").first.click()  # (closed: it covers the 3D view)  # fmt: skip
+        dropdown(page, "Cloud units", "mm")
+        upload(page, cloud)
+        page.get_by_text(re.compile(r"Loaded `?cloud_mm")).first.wait_for(timeout=120_000)
+        assert app.world.scene.terrain[0].capture.units == "mm"
+        dropdown(page, "Cloud units", "auto")
 
         # A model in millimetres: the advice names the page's button, once, and it works.
         upload(page, step)

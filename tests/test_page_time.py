@@ -168,9 +168,9 @@ def test_the_same_file_loads_again_and_a_capture_is_remeshed_with_a_crop_box(art
             first = _wait_for_world(app, app.world)
             page.get_by_text(re.compile(r"Loaded kinect_bridge_depth")).wait_for(timeout=30_000)
             upload(page, capture)  # the same file again: loaded again
-            page.get_by_text(re.compile(r"Loading upload: kinect_bridge_depth\.png")).wait_for(
-                timeout=30_000
-            )
+            page.get_by_text(
+                re.compile(r"Reading and meshing the capture kinect_bridge_depth\.png")
+            ).wait_for(timeout=30_000)
             second = _wait_for_world(app, first)
             page.get_by_text(re.compile(r"Loaded kinect_bridge_depth")).wait_for(timeout=30_000)
             assert second.scene.path != first.scene.path  # a fresh upload folder

@@ -234,3 +234,72 @@ def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts
         on_screen = robot_pixels_in_screenshot(page, artifacts / "view-09-zoomed.png")
         assert by_camera > 40 and on_screen > 40, (by_camera, on_screen)
         print(f"zoomed: robot {by_camera:.0f} px by camera, legs {on_screen:.0f} px on screen")
+
+
+def in_view(camera, points) -> np.ndarray:
+    """Whether each world point ((N, 3) [m]) is in front of a reported camera (position,
+    look_at, vertical fov [rad], aspect) and within its vertical and horizontal fields."""
+    position, look_at, fov, aspect = camera
+    forward = (look_at - position) / np.linalg.norm(look_at - position)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = np.asarray(points, dtype=float) - position
+    depth = rel @ forward
+    tan_v, tan_h = np.tan(fov / 2), aspect * np.tan(fov / 2)
+    return ((depth > 0) & (np.abs(rel @ up) <= tan_v * depth + 1e-9)
+            & (np.abs(rel @ right) <= tan_h * depth + 1e-9))  # fmt: skip
+
+
+def framed(cameras, lo, hi, points) -> bool:
+    """Whether one of the reported cameras looks at a point within the box lo..hi ((3,) [m])
+    with every point in view."""
+    for position, look_at, fov, aspect in cameras:
+        inside = np.all((lo - 1e-6 <= look_at) & (look_at <= hi + 1e-6))
+        if inside and in_view((position, look_at, fov, aspect), points).all():
+            return True
+    return False
+
+
+def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, artifacts):
+    """The camera each browser reports back (not what the server asked for) after a capture is
+    loaded and after it is re-meshed: it looks at a point within the terrain's bounds, from a
+    distance at which the terrain's corners and both markers are all in view - though the
+    camera was inside the terrain, looking away, before."""
+    from roachplan.app._draw import on_surface
+    from roachplan.scenes import LIBRARY
+    from test_app import upload
+
+    with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+        (client,) = app.server.get_clients().values()
+        reported = []
+        client.camera.on_update(lambda cam: reported.append(
+            (cam.position.copy(), cam.look_at.copy(), cam.fov, cam.image_width / cam.image_height)
+        ))  # fmt: skip
+        set_value(page, "Voxel [m]", "0.02")  # (a lighter mesh for software WebGL)
+        for k, step in enumerate(("load", "re-mesh")):
+            with client.atomic():  # inside the terrain to come, looking away from it
+                client.camera.position = (0.3, 0.2, 0.05)
+                client.camera.look_at = (40.0, -30.0, 0.05)
+            before = app.world
+            if step == "load":
+                upload(page, LIBRARY / "kinect_bridge_depth.png")
+            else:
+                set_value(page, "Grid cell [m]", "0.03")
+                page.get_by_role("button", name="Re-mesh loaded capture").click()
+            wait_until(lambda: app.world is not before, 180)  # noqa: B023 - called at once
+            world, n = app.world, len(reported)
+            assert "kinect_bridge_depth" in world.scene.name
+            lo, hi = world.mesh.bounds
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                for z in (lo[2], hi[2])])  # fmt: skip
+            markers = [on_surface(world, p) for p in (world.scene.start, world.scene.goal)]
+
+            shown = [*corners, *markers]
+            wait_until(lambda: framed(reported[n - 1:], lo, hi, shown), 30)  # noqa: B023
+            page.wait_for_timeout(1000)
+            page.screenshot(path=artifacts / f"view-10-framed-after-{step}.png")
+            assert not in_view(((0.3, 0.2, 0.05), np.array([40.0, -30.0, 0.05]), 1.0, 1.4),
+                               corners).all()  # (the camera set before did not show it) # fmt: skip
+            print(f"{step} {k + 1}: framed; camera {np.round(client.camera.position, 2)} -> "
+                  f"{np.round(client.camera.look_at, 2)}")

@@ -94,3 +94,53 @@ def test_a_zip_of_two_captures_is_refused_naming_them(tmp_path):
     png = (REAL / "rtabmap" / "depth_154.png").read_bytes()
     with pytest.raises(SceneError, match=r"one capture .*a\.png, b\.png"):
         scene_from_upload("two.zip", _zip({"a.png": png, "b.png": png}), tmp_path, {})
+
+
+def test_the_announcement_says_what_is_really_done_with_each_upload(tmp_path):
+    """A .zip of a capture is read and meshed, not "rendered with OpenSCAD"; a model is
+    rendered (by whom, under which limit); a mesh is read."""
+    from roachplan.app._uploads import load_announcement
+
+    rtab = REAL / "rtabmap"
+    capture = _zip({"depth_154.png": (rtab / "depth_154.png").read_bytes(),
+                    "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes()})  # fmt: skip
+    model = _zip({"example010.scad": (REAL / "openscad" / "example010.scad").read_bytes(),
+                  "example010.dat": (REAL / "openscad" / "example010.dat").read_bytes()})  # fmt: skip
+    cases = {
+        "room.zip": (capture, "upload: room.zip: reading and meshing the capture depth_154.png"),
+        "terrain.zip": (model, "upload: terrain.zip: rendering example010.scad with OpenSCAD "
+                               "(limit 120 s)"),
+        "depth_154.png": ((rtab / "depth_154.png").read_bytes(),
+                          "Reading and meshing the capture depth_154.png"),
+        "example010.scad": ((REAL / "openscad" / "example010.scad").read_bytes(),
+                            "Rendering example010.scad with OpenSCAD (limit 120 s)"),
+    }
+    for name, (data, said) in cases.items():
+        path = scene_from_upload(name, data, tmp_path, {}, scad_timeout=120.0)
+        assert load_announcement(f"upload: {name}", path) == said
+    import trimesh
+
+    mesh = trimesh.creation.box((1.0, 1.0, 0.1)).export(file_type="stl")
+    path = scene_from_upload("step.stl", mesh, tmp_path, {}, scad_backend="manifold")
+    assert load_announcement("upload: step.stl", path) == "Reading the mesh step.stl"
+    path = scene_from_upload("m.scad", b"cube(1);", tmp_path, {}, scad_backend="manifold")
+    assert load_announcement("upload: m.scad", path).startswith("Rendering m.scad with Manifold")
+
+
+def test_the_page_announces_a_capture_zip_as_meshing_while_it_loads(app, tmp_path):
+    """Through the app's queue, as a browser's upload arrives: the Scene folder's status line
+    while the load runs."""
+    import time
+
+    from roachplan.app._jobs import UploadCmd
+
+    rtab = REAL / "rtabmap"
+    data = _zip({"depth_154.png": (rtab / "depth_154.png").read_bytes(),
+                 "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes()})  # fmt: skip
+    app.commands.put(UploadCmd(None, "room.zip", data))
+    deadline = time.monotonic() + 60
+    while not app.loading.status.content and time.monotonic() < deadline:
+        time.sleep(0.02)
+    shown = app.loading.status.content
+    assert shown.startswith("upload: room.zip: reading and meshing the capture depth_154.png")
+    assert "OpenSCAD" not in shown
