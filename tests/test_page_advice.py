@@ -258,13 +258,14 @@ def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_are
 
 @pytestmark_browser
 def test_start_and_goal_nobody_could_pick_are_explained_with_the_pages_controls(app, artifacts):
-    """PCL's stereo table scene: no plan joins two places the robot can stand on, so the pick
-    fails (start = goal). The page says why, in its words, and which of its controls fix it."""
+    """A ROS bag of a watering can (an object, not terrain): the robot can stand nowhere, so
+    the pick fails (start = goal). The page says why, in its words, and which of its controls
+    fix it."""
     from roachplan.app._uploads import public_message
 
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         before = app.world
-        upload(page, REAL / "table_scene_mug_stereo_textured.pcd")
+        upload(page, REAL / "jsk_watercan.bag")
         _loaded(app, before)
         sc = app.world.scene
         assert tuple(sc.start[:2]) == tuple(sc.goal[:2]), "the pick failed"
