@@ -19,6 +19,13 @@ PATH_COLOURS = ((20, 20, 20), (170, 40, 200), (0, 150, 170), (230, 0, 120), (110
 """Path k's colour is PATH_COLOURS[k % 8] (none near the legs' orange, the trajectory's blue
 or the invalid red, so each stays readable over the tan terrain); labels 1..K tell them apart
 beyond 8."""
+FILLED_COLOUR = (150, 176, 210)
+"""A capture's triangles filled in from a hole's rim (the sensor saw round them, not them)."""
+UNKNOWN_COLOUR = (70, 70, 80)
+"""Where a capture's sensor saw nothing within the planning area (behind objects, beyond its
+range): drawn flat at the ground, dark; the robot cannot stand there."""
+UNKNOWN_CELL = 0.05
+"""Side of the squares the unknown area is drawn in [m]."""
 STANDABLE_COLOURS = {"region": (40, 200, 80), "other": (250, 200, 60)}
 """The standability overlay: cells of the start's region, and other cells it can stand on."""
 VIEW_DIRECTION = np.array([0.8, -1.0, 0.75]) / np.linalg.norm([0.8, -1.0, 0.75])
@@ -99,8 +106,18 @@ class SceneView:
             self.clear(root)
         s.set_up_direction("+z")
         if len(world.mesh.faces):
-            s.add_mesh_simple("/terrain/mesh", world.mesh.vertices, world.mesh.faces,
-                              color=TERRAIN_COLOUR, flat_shading=True)  # fmt: skip
+            mesh = world.mesh
+            filled = np.asarray(mesh.face_attributes.get("filled", np.zeros(len(mesh.faces))))
+            for name, faces, colour in (("mesh", mesh.faces[filled < 0.5], TERRAIN_COLOUR),
+                                        ("filled", mesh.faces[filled >= 0.5], FILLED_COLOUR)):
+                if len(faces):
+                    s.add_mesh_simple(f"/terrain/{name}", mesh.vertices, faces, color=colour,
+                                      flat_shading=True)  # fmt: skip
+        if scene.ground is None:
+            unknown = unknown_squares(world)
+            if len(unknown[1]):
+                s.add_mesh_simple("/terrain/unknown", *unknown, color=UNKNOWN_COLOUR,
+                                  opacity=0.85, side="double")  # fmt: skip
         if scene.ground is not None:
             (lo, hi) = np.asarray(scene.bounds)
             size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
@@ -205,6 +222,25 @@ class SceneView:
             self.scene.add_mesh_simple(f"/standable/{which}", vertices, faces,
                                        color=STANDABLE_COLOURS[which], opacity=0.7,
                                        side="double")  # fmt: skip
+
+
+def unknown_squares(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (4K, 3) float32, faces (2K, 3) uint32) of the UNKNOWN_CELL squares of the
+    planning area (and the margin its height field has) where the terrain has no surface at
+    all, flat 2 mm under the ground (z = 0 on a capture): what the sensor never saw."""
+    hf = world.heightfield
+    k = max(1, round(UNKNOWN_CELL / hf.resolution))
+    ny, nx = (np.asarray(hf.heights.shape) // k) * k
+    blocks = np.isnan(hf.heights[:ny, :nx]).reshape(ny // k, k, nx // k, k)
+    j, i = np.nonzero(blocks.all(axis=(1, 3)))
+    side = k * hf.resolution
+    x0, y0 = hf.x0 + i * side, hf.y0 + j * side
+    corners = np.stack([np.column_stack([x0 + dx * side, y0 + dy * side])
+                        for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)  # fmt: skip
+    vertices = np.column_stack([corners.reshape(-1, 2), np.full(4 * len(i), -0.002)])
+    first = 4 * np.arange(len(i))[:, None]
+    faces = np.concatenate([first + [0, 1, 2], first + [0, 2, 3]])
+    return vertices.astype(np.float32), faces.astype(np.uint32)
 
 
 def label_position(points: np.ndarray, k: int) -> tuple[float, float, float]:

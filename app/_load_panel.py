@@ -354,6 +354,8 @@ class LoadPanel:
         if ground:
             head += (f"  \nGround: {ground['support_points']} points "
                      f"({100 * ground['support_fraction']:.0f} %), {ground['area_m2']:.2f} m².")  # fmt: skip
+        head += ("  \nDrawn: tan where the sensor measured, blue where a small hole was filled "
+                 "from its rim, dark where it saw nothing (the robot cannot stand there).")
         warnings = "".join(f"  \n⚠ {w}" for w in rep.get("warnings", ()))
         notes = "".join(f"  \n{n}" for n in rep.get("notes", ()))
         # In the page's words (its warnings advise the command line's --up, ...); the scene's

@@ -423,13 +423,14 @@ def _crop_mask(world: np.ndarray, crop) -> np.ndarray:
 
 
 def surface_to_mesh(surface: Surface) -> trimesh.Trimesh:
-    """A Surface as a trimesh mesh whose vertices carry "height_noise" [m] and "filled"
-    (1.0 where filled in): the scene keeps them through placing and merging, and the planner's
-    height field takes the noise (scenes/_world.py)."""
+    """A Surface as a trimesh mesh whose vertices carry "height_noise" [m] and whose faces
+    carry "filled" (1.0 where a triangle fills a hole): the scene keeps them through placing
+    and merging, the planner's height field takes the noise (scenes/_world.py), and the page
+    draws filled triangles apart from measured ones."""
     return trimesh.Trimesh(
         surface.vertices, surface.faces, process=False,
-        vertex_attributes={"height_noise": surface.height_noise,
-                           "filled": surface.filled.astype(np.float64)},
+        vertex_attributes={"height_noise": surface.height_noise},
+        face_attributes={"filled": surface.filled_faces.astype(np.float64)},
     )  # fmt: skip
 
 

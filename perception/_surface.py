@@ -68,6 +68,9 @@ class Surface:
     """(V,) float64: standard deviation of each vertex's height [m]."""
     filled: np.ndarray
     """(V,) bool: the vertex was not measured but filled in from a hole's rim."""
+    filled_faces: np.ndarray
+    """(F,) bool: the triangle fills a hole (it has a filled vertex, or it spans a hole
+    between measured samples)."""
     noise_model: tuple[float, float]
     """(a [m], b [1/m]): the sensor's noise along its ray at range d is a + b d^2."""
     observed_area: float
@@ -415,7 +418,8 @@ def _finish(
         noise = np.full(len(world), model[0])
     noise = noise / np.sqrt(averaged)  # a smoothed vertex is the mean of that many samples
     return Surface(
-        vertices=world, faces=faces, height_noise=noise, filled=filled, noise_model=model,
+        vertices=world, faces=faces, height_noise=noise, filled=filled,
+        filled_faces=filled_faces, noise_model=model,
         observed_area=float(area[~filled_faces].sum()),
         filled_area=float(area[filled_faces].sum()),
     )  # fmt: skip

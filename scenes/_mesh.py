@@ -53,7 +53,8 @@ def scaled_mesh(mesh: trimesh.Trimesh, scale: tuple[float, float, float]) -> tri
     """A copy of mesh with its vertices scaled about its origin by (sx, sy, sz) (positive)."""
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
     return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False,
-                           vertex_attributes=dict(mesh.vertex_attributes))  # fmt: skip
+                           vertex_attributes=dict(mesh.vertex_attributes),
+                           face_attributes=dict(mesh.face_attributes))  # fmt: skip
 
 
 def clean_terrain_mesh(
@@ -68,12 +69,16 @@ def clean_terrain_mesh(
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     finite = np.all(np.isfinite(vertices), axis=1)
-    faces = faces[np.all(finite[faces], axis=1)]
+    keep = np.all(finite[faces], axis=1)
+    faces = faces[keep]
     if len(faces) == 0:
         raise SceneError(f"{label}: the mesh has no triangles with finite coordinates")
-    # Per-vertex values (a capture's height noise) stay with their vertices through cleaning.
+    # Per-vertex and per-face values (a capture's height noise, its filled triangles) stay
+    # with their vertices and faces through cleaning.
     out = trimesh.Trimesh(vertices, faces, process=False,
-                          vertex_attributes=dict(mesh.vertex_attributes))  # fmt: skip
+                          vertex_attributes=dict(mesh.vertex_attributes),
+                          face_attributes={k: np.asarray(v)[keep]
+                                           for k, v in mesh.face_attributes.items()})  # fmt: skip
     out.remove_unreferenced_vertices()  # drops the non-finite ones before they are compared
     out.merge_vertices()
     out.update_faces(out.nondegenerate_faces())

@@ -36,10 +36,12 @@ MAX_DEPTH_BELOW_GROUND = 1.0
 """How deep the terrain may reach under the ground plane [m] before build_world warns: a model
 sunk a little into the floor is common; metres down is most often a wrong position z, units or
 orientation."""
-VERTEX_VALUES = ("height_noise", "filled")
+VERTEX_VALUES = ("height_noise",)
 """Per-vertex values a terrain mesh may carry (a capture's, perception/_surface.py): the
-standard deviation of the vertex's height [m], and 1.0 where it was filled in from a hole's
-rim; 0 on models and mesh files."""
+standard deviation of the vertex's height [m]; 0 on models and mesh files."""
+FACE_VALUES = ("filled",)
+"""Per-face values a terrain mesh may carry: 1.0 where a capture's triangle fills a hole
+from its rim; 0 elsewhere."""
 MAX_PLANNING_AREA = 400.0
 """Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
 and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
@@ -143,10 +145,13 @@ def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
         problem = below_ground_problem(placed, scene.ground)
         if problem:
             raise SceneError(f"{scene.path}: {obj.key}: {problem}")
-    for m in meshes:  # every piece carries the same per-vertex values, or concatenate drops them
+    for m in meshes:  # every piece carries the same values, or concatenate drops them
         for key in VERTEX_VALUES:
             if key not in m.vertex_attributes:
                 m.vertex_attributes[key] = np.zeros(len(m.vertices))
+        for key in FACE_VALUES:
+            if key not in m.face_attributes:
+                m.face_attributes[key] = np.zeros(len(m.faces))
     mesh = trimesh.util.concatenate(meshes)
     mesh.merge_vertices()
     return mesh
