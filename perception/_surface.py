@@ -34,7 +34,6 @@ Frames: camera = x right, y down, z forward, the sensor at the origin; world = z
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,8 +110,9 @@ def organized_surface(
 def _angular_pitch(points: np.ndarray, valid: np.ndarray) -> float:
     """The angle between neighbouring pixels [rad]: the median of |p(i, j+1) - p(i, j)| / range
     over side-by-side valid pixels at nearly the same range (a surface facing the sensor)."""
-    a, b = points[:, :-1], points[:, 1:]
-    both = valid[:, :-1] & valid[:, 1:]
+    rows = slice(None, None, max(1, points.shape[0] // 120))  # 120 rows are plenty
+    a, b = points[rows, :-1], points[rows, 1:]
+    both = valid[rows, :-1] & valid[rows, 1:]
     ra, rb = np.linalg.norm(a[both], axis=1), np.linalg.norm(b[both], axis=1)
     same = np.abs(ra - rb) <= 0.01 * ra
     if same.sum() < 10:
@@ -134,9 +134,10 @@ def _block_average(points: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndar
     pad[: points.shape[0], : points.shape[1]] = points
     blocks = pad.reshape(h, stride, w, stride, 3).transpose(0, 2, 1, 3, 4).reshape(h, w, -1, 3)
     r = np.linalg.norm(blocks, axis=-1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: no median
-        median = np.nanmedian(r, axis=-1)
+    # The median of each block's valid ranges (NaN last when sorted; a lower median when even).
+    ranked = np.sort(r, axis=-1)
+    valid = np.isfinite(ranked).sum(axis=-1)
+    median = np.take_along_axis(ranked, np.maximum(valid - 1, 0)[..., None] // 2, axis=-1)[..., 0]
     keep = np.abs(r - median[..., None]) <= 0.03 * median[..., None] + 0.01
     count = keep.sum(axis=-1)
     total = np.where(keep[..., None], blocks, 0.0).sum(axis=-2)
@@ -219,26 +220,32 @@ def _grid_faces(
     then the shorter one; a quad with one corner missing keeps the triangle of the other three."""
     h, w = ok.shape
     idx = np.arange(h * w).reshape(h, w)
-    flat = grid.reshape(-1, 3)
-    okf = ok.ravel()
-    a, b, c, d = (idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(),
-                  idx[1:, 1:].ravel())  # fmt: skip
 
-    def joined(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        return okf[i] & okf[j] & _kept_edges(flat[i], flat[j], world_from_camera, pitch)
+    def joined(p: np.ndarray, q: np.ndarray, okp: np.ndarray, okq: np.ndarray) -> np.ndarray:
+        both = okp & okq
+        out = np.zeros(both.shape, dtype=bool)
+        out[both] = _kept_edges(p[both], q[both], world_from_camera, pitch)
+        return out
 
-    ab, ac, bd, cd, ad, bc = joined(a, b), joined(a, c), joined(b, d), joined(c, d), joined(
-        a, d), joined(b, c)  # fmt: skip
-    t_abd, t_adc = ab & bd & ad, ad & cd & ac
-    t_abc, t_bdc = ab & bc & ac, bd & cd & bc
-    n1 = t_abd.astype(int) + t_adc
-    n2 = t_abc.astype(int) + t_bdc
-    len_ad = np.linalg.norm(flat[a] - flat[d], axis=1)
-    len_bc = np.linalg.norm(flat[b] - flat[c], axis=1)
-    first = (n1 > n2) | ((n1 == n2) & ~(len_bc < len_ad))
+    # Each edge once: the quads' top and bottom sides are the same horizontal edges, one row
+    # apart, and so for the vertical ones.
+    across = joined(grid[:, :-1], grid[:, 1:], ok[:, :-1], ok[:, 1:])  # (h, w - 1)
+    down = joined(grid[:-1], grid[1:], ok[:-1], ok[1:])  # (h - 1, w)
+    diag_ad = joined(grid[:-1, :-1], grid[1:, 1:], ok[:-1, :-1], ok[1:, 1:])
+    diag_bc = joined(grid[:-1, 1:], grid[1:, :-1], ok[:-1, 1:], ok[1:, :-1])
+    ab, cd, ac, bd = across[:-1], across[1:], down[:, :-1], down[:, 1:]
+    t_abd, t_adc = ab & bd & diag_ad, diag_ad & cd & ac
+    t_abc, t_bdc = ab & diag_bc & ac, bd & cd & diag_bc
+    n1 = t_abd.astype(np.int8) + t_adc
+    n2 = t_abc.astype(np.int8) + t_bdc
+    with np.errstate(invalid="ignore"):
+        len_ad = np.linalg.norm(grid[:-1, :-1] - grid[1:, 1:], axis=-1)
+        len_bc = np.linalg.norm(grid[:-1, 1:] - grid[1:, :-1], axis=-1)
+        first = (n1 > n2) | ((n1 == n2) & ~(len_bc < len_ad))
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
     faces = [
-        np.column_stack([a, b, d])[first & t_abd], np.column_stack([a, d, c])[first & t_adc],
-        np.column_stack([a, b, c])[~first & t_abc], np.column_stack([b, d, c])[~first & t_bdc],
+        np.stack([a, b, d], -1)[first & t_abd], np.stack([a, d, c], -1)[first & t_adc],
+        np.stack([a, b, c], -1)[~first & t_abc], np.stack([b, d, c], -1)[~first & t_bdc],
     ]  # fmt: skip
     return np.concatenate(faces).astype(np.int64)
 
@@ -251,19 +258,18 @@ def _kept_edges(
     samples [rad] ((E,) or one)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         e = b - a
-        length = np.linalg.norm(e, axis=1)
-        mid = (a + b) / 2
-        ray = mid / np.linalg.norm(mid, axis=1)[:, None]
-        grazing = np.abs(np.einsum("ij,ij->i", e, ray)) > math.cos(math.radians(GRAZING_DEG)) * length
-        rot, shift = world_from_camera[:3, :3], world_from_camera[:3, 3]
-        aw, bw = a @ rot.T + shift, b @ rot.T + shift
-        rise = np.abs(aw[:, 2] - bw[:, 2])
-        run = np.linalg.norm(aw[:, :2] - bw[:, :2], axis=1)
+        length = np.sqrt(np.einsum("ij,ij->i", e, e))
+        ra, rb = np.sqrt(np.einsum("ij,ij->i", a, a)), np.sqrt(np.einsum("ij,ij->i", b, b))
+        mid = a + b
+        along = np.abs(np.einsum("ij,ij->i", e, mid)) / np.sqrt(np.einsum("ij,ij->i", mid, mid))
+        grazing = along > math.cos(math.radians(GRAZING_DEG)) * length
+        up, height = world_from_camera[2, :3], world_from_camera[2, 3]
+        za, zb = a @ up + height, b @ up + height  # world heights
+        rise = np.abs(za - zb)
+        run = np.sqrt(np.maximum(length**2 - rise**2, 0.0))
         level = rise <= LEVEL_RISE[0] + LEVEL_RISE[1] * run
-        ra, rb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
         near = np.minimum(ra, rb)
-        z_near = np.where(ra <= rb, aw[:, 2], bw[:, 2])
-        depth_below = np.maximum(shift[2] - z_near, 0.05)
+        depth_below = np.maximum(height - np.where(ra <= rb, za, zb), 0.05)
         gap = GAP_FACTOR * np.asarray(pitch) * near**2 / depth_below + 0.02
         return np.isfinite(length) & (~grazing | (level & (length <= gap)))
 
