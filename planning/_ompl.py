@@ -22,6 +22,7 @@ own path-length sampler.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -241,7 +242,9 @@ def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
     s = ob.State(space)
     s().setX(float(xyyaw[0]))
     s().setY(float(xyyaw[1]))
-    s().setYaw(float(xyyaw[2]))
+    # OMPL's SO(2) bounds are [-pi, pi): a heading of exactly pi (180 deg in a scene) is out of
+    # them, and a start or goal out of bounds is skipped, so the planner searched in vain.
+    s().setYaw((float(xyyaw[2]) + math.pi) % (2 * math.pi) - math.pi)
     return s
 
 
