@@ -61,9 +61,11 @@ def _print_trial(r: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(r))
         return
+    spins = len(r.get("spins") or ())
     print(
         f"scene {r['scene']}  seed {r['seed']}  planner {r['planner']}\n"
-        f"outcome {r['outcome']} ({r['reason']})  route {r['route'] or '-'}\n"
+        f"outcome {r['outcome']} ({r['reason']})  route {r['route'] or '-'}"
+        f"{f'  {spins} turn(s) on the spot' if spins else ''}\n"
         f"drive time {r['drive_time']:.2f} s  energy {r['energy']:.4f} J "
         f"(relative {r['relative_energy']:.3f})  "
         f"plan {r['plan_time']:.2f} s  simulate {r['drive_wall_time']:.2f} s wall"
@@ -216,6 +218,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             ),
             "states": lp.plan.states.round(5).tolist(),
             "path": lp.plan.path_xyz.round(5).tolist(),
+            # Turns on the spot: [index into path, heading rad], the driver turns there.
+            "spins": [[k, round(yaw, 5)] for k, yaw in lp.plan.spins],
+            "message": lp.plan.message,
         }
         for lp in plans
     ]
@@ -228,9 +233,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(json.dumps(out))
     else:
         for r in rows:
+            spins = f"  {len(r['spins'])} turn(s) on the spot" if r["spins"] else ""
             print(
                 f"seed {r['seed']:4d}  route {r['route']:14s} {len(r['path']):4d} waypoints  "
-                f"{r['length_m']:.2f} m  planned in {r['plan_time']:.3f} s"
+                f"{r['length_m']:.2f} m  planned in {r['plan_time']:.3f} s{spins}"
             )
     if len(rows) < args.count:
         print(
