@@ -49,7 +49,7 @@ class DriveResult:
     """success: within r_end of the goal in time; fell: dropped off the planned surface (or
     the simulation diverged); flipped: on its back; stuck: no progress for stuck_time;
     timeout: still going at time_limit; missed: went past the goal wider than r_end (tracking
-    driver: it cannot turn in place to come back)."""
+    driver: it turns on the spot only at a plan's spins, not to come back)."""
     reason: str
     """Human-readable cause of the outcome."""
     drive_time: float
