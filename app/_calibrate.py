@@ -107,9 +107,16 @@ def calibrate_turning(
                 "and drift (displacement per radian) and energy per radian of a steady spin "
                 "from rest; wander: the largest distance of the body centre from where a half "
                 "turn began, over half turns entered from a straight walk at omega0 (spin.csv)",
-                "spins": [{"omega_rad_s": t.omega, "yaw_rate_rad_s": t.yaw_rate,
-                           "drift_m_per_rad": t.drift, "wander_m": t.wander,
-                           "energy_j_per_rad": t.energy_per_radian} for t in spins],
+                "spins": [
+                    {
+                        "omega_rad_s": t.omega,
+                        "yaw_rate_rad_s": t.yaw_rate,
+                        "drift_m_per_rad": t.drift,
+                        "wander_m": t.wander,
+                        "energy_j_per_rad": t.energy_per_radian,
+                    }
+                    for t in spins
+                ],
                 "spin_speed_rad_s": driver.spin_speed,
             },
             indent=2,

@@ -561,7 +561,7 @@ def _coinciding(hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, 
             what = f"a turn on the spot of {math.degrees(turn):.0f} deg to the goal's heading"
         else:
             what += (f" (the goal's heading is {math.degrees(turn):.0f} deg away; turns on the "
-                     f"spot {'are off' if cfg.spin_margin is None else 'are not valid here'})")
+                     f"spot {'are off' if cfg.spin_margin is None else 'are not valid here'})")  # fmt: skip
     if apart > 0 or cfg.turning_radius is None:  # the goal's own state ends the path
         states.append(np.asarray(goal, dtype=float))
     xyyaw = np.array(states)
