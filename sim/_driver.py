@@ -341,8 +341,10 @@ class _Tracking:
             self.spin_error = math.remainder(self.spins[0][1] - yaw, 2 * math.pi)
             if abs(self.spin_error) < self.cfg.spin_tolerance:  # made: on with pure pursuit
                 self.spins.pop(0)
-                self.spinning, self.advanced = False, True
-                return self.update(pos, quat)
+                self.spinning = False
+                ended = self.update(pos, quat)
+                self.advanced = True  # (the update from the spin's point may not advance)
+                return ended
             if abs(self.spin_error) < self.spin_best - self.cfg.stuck_angle:
                 self.spin_best, self.advanced = abs(self.spin_error), True
             self.gap = self.total - self.s
