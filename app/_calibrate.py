@@ -1,6 +1,8 @@
 """`roachplan calibrate-turning`: the sweep of appendix A, written as CSV, a figure like 3.4,
 the fitted turning curve (what the tracking driver and drivable plans use) and the report's
-log-linear model with the P gain it implies (the reference driver's)."""
+log-linear model with the P gain it implies (the reference driver's); and turning on the spot
+(the sides in opposite directions) at a few motor speeds, as CSV and a figure: yaw rate, drift,
+wander and energy per radian (the tracking driver's spins and drivable plans' spin margin)."""
 
 from __future__ import annotations
 
@@ -12,14 +14,18 @@ import numpy as np
 from roachplan.experiments import atomic_path, atomic_write
 from roachplan.sim import (
     PLAN_HEADROOM,
+    SPIN_SPEEDS,
     DriverConfig,
     RobotConfig,
     SimConfig,
+    SpinSample,
+    SpinTurn,
     TurningFit,
     TurningModel,
     TurningSample,
     fit_turning,
     fit_turning_curve,
+    spin_calibration,
     turning_sweep,
 )
 
@@ -36,16 +42,21 @@ def calibrate_turning(
     *,
     ratios=DEFAULT_RATIOS,
     duration: float = 10.0,
+    spin_speeds=SPIN_SPEEDS,
     robot: RobotConfig | None = None,
     sim: SimConfig | None = None,
     driver: DriverConfig | None = None,
-) -> tuple[list[TurningSample], TurningModel, TurningFit]:
-    """Run the sweep on an open floor and write turning.csv, turning.png, turning_model.json.
+) -> tuple[list[TurningSample], TurningModel, TurningFit, list[SpinTurn]]:
+    """Run the sweep and the spins on an open floor and write turning.csv, turning.png,
+    turning_model.json, spin.csv and spin.png.
 
     Returns the samples, the report's log-linear model (fitted on the report's ratios when the
-    sweep has them all, else on every sample) and the turning curve fitted on every sample."""
+    sweep has them all, else on every sample), the turning curve fitted on every sample, and
+    the spin on the spot at each of spin_speeds [rad/s] (steady spins of `duration`)."""
     robot, sim, driver = robot or RobotConfig(), sim or SimConfig(), driver or DriverConfig()
     samples = turning_sweep(robot, sim, driver.omega0, ratios, duration)
+    spun = spin_calibration(robot, sim, driver.omega0, spin_speeds, duration)
+    spins = [turn for turn, _, _ in spun]
     fit = fit_turning_curve(samples)
     report = [s for s in samples if s.ratio in REPORT_RATIOS]
     model = fit_turning(report if len(report) == len(REPORT_RATIOS) else samples)
@@ -92,6 +103,21 @@ def calibrate_turning(
                 "onto the next waypoint",
                 "tracking_rule": "tracking driver: the ratio that drives curvature k is the "
                 "curve's inverse at k, capped at max_ratio",
+                "spin": "turning on the spot, left motor at -omega and right at +omega: yaw rate "
+                "and drift (displacement per radian) and energy per radian of a steady spin "
+                "from rest; wander: the largest distance of the body centre from where a half "
+                "turn began, over half turns entered from a straight walk at omega0 (spin.csv)",
+                "spins": [
+                    {
+                        "omega_rad_s": t.omega,
+                        "yaw_rate_rad_s": t.yaw_rate,
+                        "drift_m_per_rad": t.drift,
+                        "wander_m": t.wander,
+                        "energy_j_per_rad": t.energy_per_radian,
+                    }
+                    for t in spins
+                ],
+                "spin_speed_rad_s": driver.spin_speed,
             },
             indent=2,
         )
@@ -99,7 +125,43 @@ def calibrate_turning(
     )
     with atomic_path(out_dir / "turning.png") as tmp:
         _plot(tmp, samples, model, fit)
-    return samples, model, fit
+    with atomic_path(out_dir / "spin.csv") as tmp, tmp.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["omega_rad_s", "yaw_rate_rad_s", "drift_m_per_rad", "wander_m",
+                    "energy_j_per_rad", "turned_rad", "duration_s", "half_turn_time_s"])  # fmt: skip
+        for turn, steady, halves in spun:
+            w.writerow([f"{turn.omega:g}", f"{turn.yaw_rate:.6f}", f"{turn.drift:.6f}",
+                        f"{turn.wander:.6f}", f"{turn.energy_per_radian:.6f}",
+                        f"{steady.turned:.6f}", f"{steady.duration:g}",
+                        f"{np.mean([h.duration for h in halves]):.4f}"])  # fmt: skip
+    with atomic_path(out_dir / "spin.png") as tmp:
+        _plot_spins(tmp, spun, driver.spin_speed)
+    return samples, model, fit, spins
+
+
+def _plot_spins(path: Path, spun: list[tuple[SpinTurn, SpinSample, list[SpinSample]]],
+                chosen: float) -> None:  # fmt: skip
+    """Yaw rate and energy per radian against the motor speed; the driver's speed marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+
+    omega = [t.omega for t, _, _ in spun]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(7.5, 3.2), dpi=120)
+    ax1.plot(omega, [t.yaw_rate for t, _, _ in spun], "o-")
+    ax1.set_ylabel("yaw rate  [rad/s]")
+    ax2.plot(omega, [t.energy_per_radian for t, _, _ in spun], "o-", label="energy per radian")
+    ax2.set_ylabel("energy per radian  [J/rad]")
+    for ax in (ax1, ax2):
+        ax.axvline(chosen, color="0.6", ls="--", lw=1)
+        ax.set_xlabel("motor speed, one side backwards  [rad/s]")
+        ax.grid(alpha=0.3)
+    ax1.set_title("Turning on the spot", fontsize=10)
+    ax2.set_title(f"(dashed: the driver's {chosen:g} rad/s)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def _plot(path: Path, samples: list[TurningSample], model: TurningModel, fit: TurningFit) -> None:

@@ -197,6 +197,8 @@ def cmd_choose(args: argparse.Namespace) -> int:
         "ranking": choice.ranking, "validation": checked,
         "chosen_path": (choice.candidates[choice.chosen].path_xyz.tolist()
                         if choice.chosen is not None else None),
+        "chosen_spins": ([list(s) for s in choice.candidates[choice.chosen].spins]
+                         if choice.chosen is not None else None),
     })  # fmt: skip
     if out is not None:
         atomic_write(out / "choice.json", json.dumps(result, indent=1))

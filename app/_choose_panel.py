@@ -154,11 +154,14 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
                               planner=scene.planner, sim=scene.sim, driver=scene.driver,
                               uncertainty=cfg.uncertainty)  # fmt: skip
         pool = _make_pool(spec, workers, "local", None)
+        spins = {c.index: c.spins for c in candidates}  # (each candidate's turns on the spot)
         try:
             left = max(cfg.budget_s - (time.monotonic() - t0), 0.0)
             choice = race(
                 candidates, dataclass_replace(cfg, budget_s=left),
-                lambda calls: list(pool.run(("rollout", (*c, cfg.uncertainty)) for c in calls)),
+                lambda calls: list(pool.run(
+                    ("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]}) for c in calls
+                )),
                 mass=mass,
                 progress=lambda message, _: conn.send(
                     ("round", (message, [c.summary(conf, mass) for c in candidates]))

@@ -177,6 +177,7 @@ def stub_plan(trial: dict):
     return PlanResult(
         found=True, planner=trial["planner"], seed=trial["seed"], states=np.zeros((0, 3)),
         path_xyz=np.asarray(trial["path"]), plan_time=0.0, message="stored path",
+        spins=tuple(tuple(s) for s in trial.get("spins") or ()),
     )  # fmt: skip
 
 

@@ -80,7 +80,7 @@ def redrive(world: World, record: dict) -> tuple[tuple[Frame, ...], str]:
         return (), "no path was planned: nothing was driven"
     frames: list[Frame] = []
     driven = drive(world, np.asarray(record["path"], dtype=float), start=tuple(record["start"]),
-                   on_frame=frames.append)  # fmt: skip
+                   on_frame=frames.append, spins=record.get("spins") or ())  # fmt: skip
     stored = np.asarray(record.get("trajectory") or [], dtype=float).reshape(-1, 4)
     again = np.asarray(driven.trajectory, dtype=float).reshape(-1, 4)
     if len(stored) == 0:
@@ -183,8 +183,9 @@ def _choice_replay(folder: Path) -> Replay:
     world = build_world(scene)
     row = next((r for r in choice.get("ranking", []) if r.get("candidate") == chosen), {})
     path = np.asarray(choice["chosen_path"], dtype=float)
+    spins = choice.get("chosen_spins") or ()
     frames: list[Frame] = []
-    driven = drive(world, path, on_frame=frames.append)
+    driven = drive(world, path, on_frame=frames.append, spins=spins)
     record = {
         "label": f"chosen candidate {chosen}", "scene": scene.name, "seed": choice.get("seed"),
         "planner": scene.planner.name, "route": row.get("route", ""),
@@ -192,7 +193,7 @@ def _choice_replay(folder: Path) -> Replay:
         "energy": driven.energy,
         "relative_energy": driven.energy / reference_energy(world, scene.start, scene.goal),
         "start": list(scene.start), "goal": list(scene.goal), "path": path.tolist(),
-        "trajectory": [list(p) for p in driven.trajectory],
+        "spins": [list(s) for s in spins], "trajectory": [list(p) for p in driven.trajectory],
         "p_success": row.get("p_success"), "p_low": row.get("p_low"), "p_high": row.get("p_high"),
         "rollouts": row.get("rollouts"),
     }  # fmt: skip

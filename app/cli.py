@@ -61,9 +61,11 @@ def _print_trial(r: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(r))
         return
+    spins = len(r.get("spins") or ())
     print(
         f"scene {r['scene']}  seed {r['seed']}  planner {r['planner']}\n"
-        f"outcome {r['outcome']} ({r['reason']})  route {r['route'] or '-'}\n"
+        f"outcome {r['outcome']} ({r['reason']})  route {r['route'] or '-'}"
+        f"{f'  {spins} turn(s) on the spot' if spins else ''}\n"
         f"drive time {r['drive_time']:.2f} s  energy {r['energy']:.4f} J "
         f"(relative {r['relative_energy']:.3f})  "
         f"plan {r['plan_time']:.2f} s  simulate {r['drive_wall_time']:.2f} s wall"
@@ -216,6 +218,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             ),
             "states": lp.plan.states.round(5).tolist(),
             "path": lp.plan.path_xyz.round(5).tolist(),
+            # Turns on the spot: [index into path, heading rad], the driver turns there.
+            "spins": [[k, round(yaw, 5)] for k, yaw in lp.plan.spins],
+            "message": lp.plan.message,
         }
         for lp in plans
     ]
@@ -228,9 +233,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(json.dumps(out))
     else:
         for r in rows:
+            spins = f"  {len(r['spins'])} turn(s) on the spot" if r["spins"] else ""
             print(
                 f"seed {r['seed']:4d}  route {r['route']:14s} {len(r['path']):4d} waypoints  "
-                f"{r['length_m']:.2f} m  planned in {r['plan_time']:.3f} s"
+                f"{r['length_m']:.2f} m  planned in {r['plan_time']:.3f} s{spins}"
             )
     if len(rows) < args.count:
         print(
@@ -754,7 +760,7 @@ def _add_perception_parsers(sub) -> None:
     p.set_defaults(func=_cmd_synth_capture)
 
 
-CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json")
+CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json", "spin.csv", "spin.png")
 """What `calibrate-turning` writes in its --out folder."""
 
 
@@ -779,7 +785,7 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
         accepts=f"--out takes a new or empty folder, or one holding only an earlier "
         f"calibration ({', '.join(CALIBRATION_FILES)})",
     )  # fmt: skip
-    samples, model, fit = calibrate_turning(out, ratios=ratios, duration=args.duration)
+    samples, model, fit, spins = calibrate_turning(out, ratios=ratios, duration=args.duration)
     print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
     for s in samples:
         print(f"{s.ratio:6.2f} {s.distance:10.3f} {s.revolutions:7.3f} {s.curvature:13.3f}")
@@ -789,8 +795,14 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
         f"(ln {c.lock_ratio:.4f} - ln r)  (R^2 {fit.r_squared:.3f}, rms residual "
         f"{fit.rms_residual:.3f} /m)\n"
         f"report's line: curvature = {model.slope:.3f} ln(ratio) {model.intercept:+.3f}  "
-        f"(R^2 {model.r_squared:.3f})\nwrote {args.out}/turning.csv, turning.png, turning_model.json"
+        f"(R^2 {model.r_squared:.3f})"
     )
+    print(f"turning on the spot:\n{'omega rad/s':>11} {'rate rad/s':>10} {'drift mm/rad':>12} "
+          f"{'wander mm':>9} {'J/rad':>7}")  # fmt: skip
+    for t in spins:
+        print(f"{t.omega:11g} {t.yaw_rate:10.3f} {1000 * t.drift:12.2f} {1000 * t.wander:9.1f} "
+              f"{t.energy_per_radian:7.4f}")  # fmt: skip
+    print(f"wrote {args.out}/{', '.join(CALIBRATION_FILES)}")
     return 0
 
 
@@ -947,11 +959,13 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"
     )
     p.add_argument("--out", required=True,
-                   help="folder for turning.csv/.png/_model.json, created if new; an existing "
-                        "one must be empty or hold only an earlier calibration")  # fmt: skip
+                   help="folder for turning.csv/.png/_model.json and spin.csv/.png, created if "
+                        "new; an existing one must be empty or hold only an earlier "
+                        "calibration")  # fmt: skip
     p.add_argument("--ratios", default=None,
                    help="right/left speed ratios (default: every 0.1 from 1 to 3 and 1.25, 1.75)")
-    p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per ratio")
+    p.add_argument("--duration", type=float, default=10.0,
+                   help="simulated seconds per ratio and per steady spin")  # fmt: skip
     p.set_defaults(func=_cmd_calibrate_turning)
 
     def _scad_flags(q) -> None:

@@ -71,7 +71,7 @@ def _drive_all(pool, cfg, candidates, n: int, stream: int, *, paired: bool = Fal
     def seed(c, k):
         return rollout_seed(cfg.seed, 0 if paired else c.index, k, stream)
 
-    calls = [("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u))
+    calls = [("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u), {"spins": c.spins})
              for c in candidates for k in range(n)]  # fmt: skip
     out: dict[int, list[dict]] = {c.index: [] for c in candidates}
     for rec in pool.run(calls):  # (in the order they finish)
@@ -184,7 +184,7 @@ def chosen_vs_first(quick: bool, args) -> None:
         xyz = planned.path_xyz
         length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
         first = Candidate(index=0, route=world.route(xyz[:, :2]) or "-", seed=cfg.seed,
-                          path_xyz=xyz, length=length)  # fmt: skip
+                          path_xyz=xyz, length=length, spins=planned.spins)  # fmt: skip
         chosen = dataclasses.replace(picked, index=1, rollouts=[])
         pool = _pool(scene, 2)
         try:

@@ -5,7 +5,8 @@
 
 For each library spec it runs the experiment twice, `reference: true` (the report's) and
 `reference: false` (the default), and prints successes and relative energy (mean, max over
-successes). Goals: kinect_bridge (25 paths) mean <= 1.6, max <= 2.5, >= 24/25 successes;
+successes), and how many trials' plans turned on the spot (spins: drivable plans use them only
+where no arc goes on). Goals: kinect_bridge (25 paths) mean <= 1.6, max <= 2.5, >= 24/25 successes;
 bridge_rough (50 trials) >= 48/50; the rough bridge still costs more than the smooth one.
 Then planning time of PRM and RRTConnect on double_bridge, raw vs drivable (goal: <= 2x), and
 the two ways to a drivable plan on double_bridge: searching OMPL's (x, y, yaw) space and
@@ -51,6 +52,8 @@ def run(spec, trials: int, workers: int) -> dict:
         n=len(recs),
         mean=statistics.fmean(rel) if rel else float("nan"),
         max=max(rel) if rel else float("nan"),
+        spun=sum(1 for r in recs if r.get("spins")),
+        spins=sum(len(r.get("spins") or ()) for r in recs),
         wall=wall,
     )
 
@@ -204,15 +207,16 @@ def main() -> None:
         return
     scale = 5 if args.quick else 1
     print(f"{'spec':<14} {'setting':<10} {'success':>9} {'rel. energy mean':>17} {'max':>6} "
-          f"{'wall s':>7}")  # fmt: skip
+          f"{'spun':>9} {'wall s':>7}")  # fmt: skip
     means = {}
     for name, trials in (("kinect_bridge", 25), ("bridge_rough", 50), ("bridge_smooth", 50)):
         spec = load_experiment(name)
         for label, reference in (("reference", True), ("drivable", False)):
             r = run(settings(spec, reference), max(2, trials // scale), args.workers)
             means[name, label] = r["mean"]
+            spun = f"{r['spun']}/{r['n']} ({r['spins']})"  # trials with spins (spins in all)
             print(f"{name:<14} {label:<10} {r['ok']:>4}/{r['n']:<4} {r['mean']:>17.2f} "
-                  f"{r['max']:>6.2f} {r['wall']:>7.1f}", flush=True)  # fmt: skip
+                  f"{r['max']:>6.2f} {spun:>9} {r['wall']:>7.1f}", flush=True)  # fmt: skip
     for label in ("reference", "drivable"):
         rough, smooth = means["bridge_rough", label], means["bridge_smooth", label]
         print(f"{label}: rough / smooth relative energy = {rough / smooth:.2f} "

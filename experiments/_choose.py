@@ -142,6 +142,8 @@ class Candidate:
     path_xyz: np.ndarray
     length: float
     """Path length [m]."""
+    spins: tuple[tuple[int, float], ...] = ()
+    """Its turns on the spot (PlanResult.spins)."""
     rollouts: list[dict] = field(default_factory=list)
     out: str = ""
     """Why it left the race ("" while in it)."""
@@ -244,7 +246,7 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
         xyz = planned.path_xyz
         length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
         out.append(Candidate(index=i, route=route, seed=planned.seed, path_xyz=xyz,
-                             length=max(length, 1e-6)))  # fmt: skip
+                             length=max(length, 1e-6), spins=planned.spins))  # fmt: skip
     return out
 
 
@@ -280,6 +282,8 @@ def _plan_via(world, via, *, seed: int) -> PlanResult | None:
         first,
         states=np.vstack([first.states, second.states[1:]]),
         path_xyz=np.vstack([first.path_xyz, second.path_xyz[1:]]),
+        # The second leg's waypoints follow the first's, which end on its first.
+        spins=first.spins + tuple((k + len(first.path_xyz) - 1, yaw) for k, yaw in second.spins),
         plan_time=first.plan_time + second.plan_time,
         message=f"through ({via[0]:.2f}, {via[1]:.2f}): {first.message}; {second.message}",
     )
@@ -621,8 +625,11 @@ def choose(
                           uncertainty=cfg.uncertainty)  # fmt: skip
     pool = _make_pool(spec, workers, backend, address)
 
+    spins = {c.index: c.spins for c in candidates}
+
     def run_rollouts(calls: list[tuple]) -> list[dict]:
-        return list(pool.run(("rollout", (*c, cfg.uncertainty)) for c in calls))
+        return list(pool.run(("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]})
+                             for c in calls))  # fmt: skip
 
     try:
         left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)

@@ -242,7 +242,8 @@ def _best_path(spec: ExperimentSpec, store: ResultStore, workers_pool, progress:
         if i not in done:
             start = jitter_pose(tuple(best["start"]), spec.best_path_jitter,
                                 np.random.default_rng((spec.seed, i)))  # fmt: skip
-            calls.append(("redrive", (i, best["index"], best["path"], list(start))))
+            calls.append(("redrive", (i, best["index"], best["path"], list(start),
+                                      best.get("spins", []))))  # fmt: skip
     if calls:
         bar = _bar(progress, repeats, repeats - len(calls), "re-drives")
         for rec in workers_pool().run(calls):
@@ -257,7 +258,7 @@ def _best_path(spec: ExperimentSpec, store: ResultStore, workers_pool, progress:
     return {
         "index": best["index"], "seed": best["seed"], "route": best.get("target_route") or best["route"],
         "relative_energy": best["relative_energy"], "energy": best["energy"],
-        "drive_time": best["drive_time"], "path": best["path"],
+        "drive_time": best["drive_time"], "path": best["path"], "spins": best.get("spins", []),
         "repeats": len(redrives), "repeat_successes": len(ok_re),
         "repeat_success_rate": len(ok_re) / len(redrives) if redrives else float("nan"),
         "repeat_energy_mean": float(np.mean(ok_re)) if ok_re else float("nan"),

@@ -71,12 +71,16 @@ class TrialResult:
     driver: str = "reference"
     """Path follower: "tracking" (pure pursuit) or "reference" (Tong 2018, algorithms 1-2).
     Records from before drivers could be chosen were all driven by the reference one."""
+    spins: tuple[tuple[int, float], ...] = ()
+    """The plan's turns on the spot: (index into path, heading [rad]) each (PlanResult.spins);
+    records from before spins existed have none."""
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d.update(path_settings(self.turning_radius))
         d["path"] = [list(p) for p in self.path]
         d["trajectory"] = [list(p) for p in self.trajectory]
+        d["spins"] = [list(p) for p in self.spins]
         return d
 
 
@@ -175,8 +179,10 @@ def drive(
     start: tuple[float, float, float] | None = None,
     on_frame: Callable[[Frame], None] | None = None,
     sim: Simulation | None = None,
+    spins=(),
 ) -> DriveResult:
-    """Drop the robot at start (default: the scene's) and drive it along path_xyz.
+    """Drop the robot at start (default: the scene's) and drive it along path_xyz, turning on
+    the spot at `spins` ((waypoint index, heading [rad]) each: PlanResult.spins).
 
     sim: a simulation of this world to drive in (it is reset first; the caller owns it);
     default: a fresh one, which is what a reproducible trial needs: a reused client, reset,
@@ -186,18 +192,20 @@ def drive(
     x, y, yaw = start or scene.start
     if sim is None:
         with world.simulation() as fresh:
-            return drive(world, path_xyz, start=start, on_frame=on_frame, sim=fresh)
+            return drive(world, path_xyz, start=start, on_frame=on_frame, sim=fresh, spins=spins)
     sim.reset(x, y, yaw)
-    return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame)
+    return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame, spins=spins)
 
 
 def reference_energy(
     world: World, start: tuple[float, float, float], goal: tuple[float, float, float]
 ) -> float:
-    """Energy [J] of walking straight on a flat floor over the start-goal distance."""
+    """Energy [J] of walking straight on a flat floor over the start-goal distance, or over the
+    driver's goal radius r_end when they are closer (they coincide: the trial at most turns on
+    the spot, and its energy against a walk of ~0 m would mean nothing)."""
     scene = world.scene
     per_metre = reference_energy_per_metre(world.robot, scene.sim, scene.driver.omega0)
-    return per_metre * max(math.dist(start[:2], goal[:2]), 1e-6)
+    return per_metre * max(math.dist(start[:2], goal[:2]), scene.driver.r_end)
 
 
 def run_trial(
@@ -237,6 +245,7 @@ def finish_trial(
         goal=tuple(goal),
         turning_radius=planned.turning_radius,
         driver=world.scene.driver.kind,
+        spins=planned.spins,
     )
     if not planned.found:
         return TrialResult(
@@ -244,7 +253,8 @@ def finish_trial(
             energy=0.0, relative_energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
         )  # fmt: skip
     t0 = time.perf_counter()
-    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim)
+    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim,
+                   spins=planned.spins)  # fmt: skip
     return TrialResult(
         **common,
         outcome=driven.outcome,

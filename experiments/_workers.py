@@ -64,10 +64,11 @@ class TrialWorker:
         result = finish_trial(self.world, planned, start=start, goal=goal)  # a fresh world
         return {"kind": TRIAL, "index": index, "target_route": target_route, **result.to_json()}
 
-    def redrive(self, index: int, of_trial: int, path: list, start: list) -> dict:
-        """Repeat `index` of the best path: drive the stored path from a jittered start."""
+    def redrive(self, index: int, of_trial: int, path: list, start: list, spins=()) -> dict:
+        """Repeat `index` of the best path: drive the stored path (and its turns on the spot)
+        from a jittered start."""
         scene = self.world.scene
-        driven = drive(self.world, np.asarray(path), start=tuple(start))  # a fresh world
+        driven = drive(self.world, np.asarray(path), start=tuple(start), spins=spins)  # fresh
         return {
             "kind": REDRIVE, "index": index, "of_trial": of_trial, "start": list(start),
             "outcome": driven.outcome, "reason": driven.reason,
@@ -76,9 +77,10 @@ class TrialWorker:
             "trajectory": [list(p) for p in driven.trajectory],
         }  # fmt: skip
 
-    def rollout(self, candidate: int, path: list, seed: int, uncertainty) -> dict:
-        """One of `choose`'s rollouts: drive candidate `candidate`'s path in the world drawn
-        from `uncertainty` with `seed` (experiments/_uncertainty.py); a rollout record."""
+    def rollout(self, candidate: int, path: list, seed: int, uncertainty, spins=()) -> dict:
+        """One of `choose`'s rollouts: drive candidate `candidate`'s path (and its turns on the
+        spot, `spins`) in the world drawn from `uncertainty` with `seed`
+        (experiments/_uncertainty.py); a rollout record."""
         scene = self.world.scene
         w = draw(uncertainty, seed)
         start = tuple(float(a + b) for a, b in zip(scene.start, w.start_offset, strict=True))
@@ -98,7 +100,7 @@ class TrialWorker:
         with world_sim as sim:
             sim.perturb(friction=scene.sim.friction * w.friction_scale,
                         mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
-            driven = drive(self.world, np.asarray(path), start=start, sim=sim)
+            driven = drive(self.world, np.asarray(path), start=start, sim=sim, spins=spins)
         return {
             "candidate": candidate, "seed": seed,
             "world": {**w.to_json(), "terrain_height": sigma},

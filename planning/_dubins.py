@@ -1,8 +1,9 @@
 """Dubins curves: the shortest forward-only path between two poses for a vehicle whose turns
 are arcs of radius at least R (Dubins 1957; the six words LSL, RSR, LSR, RSL, RLR, LRL as in
-Shkel & Lumelsky 2001). The roach drives like this: both sides always walk forward, so it turns
-on arcs whose tightest radius is set by the largest motor ratio (sim/_calibration.py), and it
-cannot turn in place.
+Shkel & Lumelsky 2001). The roach drives like this while both sides walk forward: it turns on
+arcs whose tightest radius is set by the largest motor ratio (sim/_calibration.py). It can also
+turn on the spot, one side backwards, which drivable plans use only where no arc goes on
+(planning/_drivable.py).
 
 Pure numpy, scalar per pose pair: OMPL's DubinsStateSpace gives the same lengths (tested), but
 its Python states must be freed by hand and each call crosses into C++ for one number.

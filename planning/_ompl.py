@@ -31,7 +31,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ._drivable import drivable_path
+from ._drivable import drivable_path, spin_states
 from ._heightfield import HeightField
 from ._isolated import Method, run_isolated
 from ._names import PLANNER_NAMES, PlannerName, PlanningError
@@ -98,6 +98,18 @@ class PlannerConfig:
     1 / (0.75 * 10.3) = 0.129 m, so the tracking driver keeps a third more to correct with
     (tests/test_robot.py re-derives it). None: the planner's raw path, as the report drove it
     (`reference: true`)."""
+    spin_margin: float | None = 0.03
+    """Drivable plans: where no arc of turning_radius goes on, the robot may turn on the spot
+    (its sides in opposite directions), every heading of the turn checked at the spin's point
+    and round it within this distance [m]: how far the body centre wanders in a spin, 2.1 cm in
+    the spin calibration (sim/_turning.py CALIBRATED_SPIN, half turns entered from a walk) plus
+    1 cm for where the tracking driver begins it (measured on the floor: up to 2.4 cm in all).
+    None: arcs only, no turns on the spot."""
+    goal_radius: float = 0.05
+    """Start and goal closer than this [m] coincide: the plan is trivial (the robot stands where
+    the driver counts the goal as reached; a drivable plan turns on the spot to the goal's
+    heading when it differs and the turn is valid). The tracking and reference drivers' goal
+    radius r_end, 5 cm (Tong 2018, chapter 7)."""
     keep_roadmap: bool = False
     """Return the planner's graph (roadmap or tree) with the plan, for display."""
     validity: ValidityConfig = field(default_factory=ValidityConfig)
@@ -137,6 +149,11 @@ class PlanResult:
     turning_radius: float | None = None
     """The path is drivable: arcs of this radius [m] and straight lines (None: the planner's
     raw path, straight motions in (x, y, yaw))."""
+    spins: tuple[tuple[int, float], ...] = ()
+    """Turns on the spot, (index k into path_xyz, heading [rad]) each, in path order: at
+    waypoint k the robot turns on the spot to that heading before it goes on (states[k + 1] and
+    path_xyz[k + 1] repeat the position, with that heading). The tracking driver makes them
+    (drive_path's spins)."""
 
 
 class _TerrainSampler(ob.StateSampler):
@@ -242,10 +259,9 @@ def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
     s = ob.State(space)
     s().setX(float(xyyaw[0]))
     s().setY(float(xyyaw[1]))
-    # OMPL's SO(2) bounds are [-pi, pi): a start or goal heading exactly 180 deg was out of
-    # them, and PRM said "There are no valid initial states!".
-    yaw = math.remainder(float(xyyaw[2]), 2 * math.pi)
-    s().setYaw(-math.pi if yaw >= math.pi else yaw)
+    # OMPL's SO(2) bounds are [-pi, pi): a heading of exactly pi (180 deg in a scene) is out of
+    # them, and a start or goal out of bounds is skipped ("There are no valid initial states!").
+    s().setYaw((float(xyyaw[2]) + math.pi) % (2 * math.pi) - math.pi)
     return s
 
 
@@ -382,6 +398,15 @@ def _plan_here(
     check = _Checker(hf, fp, cfg.validity)
     if regions is None:
         regions = standable_map(hf, fp, cfg.validity, bounds, start[:2])
+
+    def inside_and_valid(st: np.ndarray) -> np.ndarray:
+        # OMPL keeps its own states within the bounds; a Dubins curve must be kept there.
+        inside = np.all((st[:, :2] >= lo) & (st[:, :2] <= hi), axis=1)
+        return inside & check(st) if inside.all() else np.zeros(len(st), dtype=bool)
+
+    if np.hypot(goal[0] - start[0], goal[1] - start[1]) < cfg.goal_radius:
+        return _coinciding(hf, fp, start=start, goal=goal, cfg=cfg, seed=seed, regions=regions,
+                           is_valid=inside_and_valid, t0=t0)  # fmt: skip
     # Sample where the robot can stand, one cell of margin round it (the map is coarse).
     cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
     if len(cells) == 0:
@@ -426,11 +451,6 @@ def _plan_here(
     planner.setup()
     deadline = t0 + cfg.time_limit
 
-    def inside_and_valid(st: np.ndarray) -> np.ndarray:
-        # OMPL keeps its own states within the bounds; a Dubins curve must be kept there.
-        inside = np.all((st[:, :2] >= lo) & (st[:, :2] <= hi), axis=1)
-        return inside & check(st) if inside.all() else np.zeros(len(st), dtype=bool)
-
     undrivable = 0  # routes found that no drivable path follows
     while True:
         if cfg.name in ("prm", "prmstar") and not cfg.optimize:
@@ -444,8 +464,9 @@ def _plan_here(
         if cfg.turning_radius is None:
             break
         drivable = drivable_path(
-            xyyaw[:, :2], start[2], cfg.turning_radius, inside_and_valid, cfg.check_resolution
-        )
+            xyyaw[:, :2], start[2], cfg.turning_radius, inside_and_valid, cfg.check_resolution,
+            spin_margin=cfg.spin_margin, spin_step=_spin_step(fp, cfg),
+        )  # fmt: skip
         if drivable is not None:
             break
         # A route with a turn too tight for the space round it: search again from scratch
@@ -473,13 +494,18 @@ def _plan_here(
             path_xyz=np.zeros((0, 3)), plan_time=time.perf_counter() - t0,
             message=message, **stats,
         )  # fmt: skip
-    path_xyz = None
+    path_xyz, spins = None, ()
     if cfg.turning_radius is not None:
-        # The curve is sampled every check_resolution; the driver gets every waypoint_spacing.
+        # The curve is sampled every check_resolution; the driver gets every waypoint_spacing,
+        # and both states of every spin (where it begins and the heading it ends at).
         every = max(1, round(cfg.waypoint_spacing / cfg.check_resolution))
-        keep = np.unique(np.r_[np.arange(0, len(drivable), every), len(drivable) - 1])
-        xyyaw = drivable[keep]
+        at = np.asarray(drivable.spins, dtype=int)
+        keep = np.unique(np.r_[np.arange(0, len(drivable.states), every),
+                               len(drivable.states) - 1, at, at + 1])  # fmt: skip
+        xyyaw = drivable.states[keep]
         path_xyz = np.column_stack([xyyaw[:, :2], hf.sample(xyyaw[:, :2])])
+        k = np.searchsorted(keep, at)
+        spins = tuple((int(i), float(xyyaw[i + 1, 2])) for i in k)
     return PlanResult(
         found=True,
         planner=cfg.name,
@@ -490,11 +516,64 @@ def _plan_here(
         plan_time=time.perf_counter() - t0,
         message=f"{len(xyyaw)} states" + (
             f", drivable with turns of radius {cfg.turning_radius:g} m"
-            if cfg.turning_radius is not None else ""),
+            if cfg.turning_radius is not None else "") + _spins_note(spins),
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
         turning_radius=cfg.turning_radius,
+        spins=spins,
         **stats,
     )
+
+
+def _spins_note(spins) -> str:
+    """How many turns on the spot a plan has, for its message ("" for none)."""
+    if not spins:
+        return ""
+    return f" and {len(spins)} turn{'s' if len(spins) > 1 else ''} on the spot"
+
+
+def _spin_step(fp: Footprint, cfg: PlannerConfig) -> float:
+    """Heading step of a spin's validity checks [rad]: the footprint's outermost point moves
+    at most check_resolution, as along a motion (_BatchMotionValidator)."""
+    reach = float(np.max(np.hypot(fp.feet_xy[:, 0], fp.feet_xy[:, 1])))
+    corner = float(np.hypot(fp.body_length, fp.body_width)) / 2
+    return cfg.check_resolution / max(reach, corner)
+
+
+def _coinciding(hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, is_valid,
+                t0: float) -> PlanResult:  # fmt: skip
+    """The trivial plan between a start and goal closer than goal_radius: the robot stands
+    where the goal counts as reached. A drivable plan (turning_radius and spin_margin set)
+    turns on the spot to the goal's heading first when it differs and every heading of the
+    turn is valid, checked as drivable_path checks a spin. The raw plan is OMPL's for it: the
+    start and the goal states."""
+    apart = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
+    turn = math.remainder(goal[2] - start[2], 2 * math.pi)
+    states = [np.asarray(start, dtype=float)]
+    spins: tuple[tuple[int, float], ...] = ()
+    what = "nothing to drive"
+    if cfg.turning_radius is not None and abs(turn) > 1e-9:
+        turnable = cfg.spin_margin is not None and bool(np.all(is_valid(spin_states(
+            np.asarray(start[:2], dtype=float), start[2], goal[2], cfg.spin_margin,
+            _spin_step(fp, cfg)))))  # fmt: skip
+        if turnable:
+            states.append(np.array([start[0], start[1], goal[2]]))
+            spins = ((0, float(goal[2])),)
+            what = f"a turn on the spot of {math.degrees(turn):.0f} deg to the goal's heading"
+        else:
+            what += (f" (the goal's heading is {math.degrees(turn):.0f} deg away; turns on the "
+                     f"spot {'are off' if cfg.spin_margin is None else 'are not valid here'})")  # fmt: skip
+    if apart > 0 or cfg.turning_radius is None:  # the goal's own state ends the path
+        states.append(np.asarray(goal, dtype=float))
+    xyyaw = np.array(states)
+    return PlanResult(
+        found=True, planner=cfg.name, seed=seed, states=xyyaw,
+        path_xyz=np.column_stack([xyyaw[:, :2], hf.sample(xyyaw[:, :2])]),
+        plan_time=time.perf_counter() - t0,
+        message=(f"start and goal coincide ({apart:.3f} m apart, within the goal radius "
+                 f"{cfg.goal_radius:g} m): {what}"),
+        signature=homology_signature(regions.holes, xyyaw[:, :2]),
+        turning_radius=cfg.turning_radius, spins=spins,
+    )  # fmt: skip
 
 
 def _graph_segments(si, planner) -> tuple[np.ndarray, int]:

@@ -53,7 +53,8 @@ def plan(
 ) -> PlanResult:
     """One OMPL plan from start to goal (default: the scene's) with the scene's planner, or the
     one named ("prm", "rrtconnect", ...; roachplan.planning.PLANNER_NAMES) or configured.
-    `result.found`, `result.path_xyz` ((N, 3) world frame [m]), `result.plan_time` [s]."""
+    `result.found`, `result.path_xyz` ((N, 3) world frame [m]), `result.spins` (turns on the
+    spot: waypoint index, heading [rad]), `result.plan_time` [s]."""
     from roachplan.experiments import plan as plan_trial
 
     scene = world.scene

@@ -15,6 +15,12 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "PLAN_HEADROOM": "._turning",
         "TurningCurve": "._turning",
         "TurningSample": "._calibration",
+        "SPIN_SPEEDS": "._calibration",
+        "SpinSample": "._calibration",
+        "spin_calibration": "._calibration",
+        "CALIBRATED_SPIN": "._turning",
+        "CALIBRATED_SPINS": "._turning",
+        "SpinTurn": "._turning",
         "fit_turning": "._calibration",
         "reference_energy_per_metre": "._calibration",
         "turning_sweep": "._calibration",
@@ -39,12 +45,15 @@ __getattr__, __dir__, __all__ = lazy_exports(
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._calibration import SPIN_SPEEDS as SPIN_SPEEDS
+    from ._calibration import SpinSample as SpinSample
     from ._calibration import TurningFit as TurningFit
     from ._calibration import TurningModel as TurningModel
     from ._calibration import TurningSample as TurningSample
     from ._calibration import fit_turning as fit_turning
     from ._calibration import fit_turning_curve as fit_turning_curve
     from ._calibration import reference_energy_per_metre as reference_energy_per_metre
+    from ._calibration import spin_calibration as spin_calibration
     from ._calibration import turning_sweep as turning_sweep
     from ._config import DriverConfig as DriverConfig
     from ._config import SimConfig as SimConfig
@@ -60,8 +69,11 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._robot import RobotConfig as RobotConfig
     from ._simulation import SimError as SimError
     from ._simulation import Simulation as Simulation
+    from ._turning import CALIBRATED_SPIN as CALIBRATED_SPIN
+    from ._turning import CALIBRATED_SPINS as CALIBRATED_SPINS
     from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING
     from ._turning import PLAN_HEADROOM as PLAN_HEADROOM
+    from ._turning import SpinTurn as SpinTurn
     from ._turning import TurningCurve as TurningCurve
     from ._uncertainty import UNCERTAINTY_RANGES as UNCERTAINTY_RANGES
     from ._uncertainty import UncertaintyConfig as UncertaintyConfig

@@ -1,7 +1,9 @@
-"""Turning calibration (Tong 2018, appendix A, figure 3.4) and the reference walk for energy.
+"""Turning calibration (Tong 2018, appendix A, figure 3.4), turning on the spot, and the
+reference walk for energy.
 
-Both drive the roach on an open floor with fixed motor speeds and measure what it did, so the
-controller gain and the energy unit come from the simulated robot itself.
+All drive the roach on an open floor with fixed motor speeds and measure what it did, so the
+controller gain, the spins of drivable plans and the energy unit come from the simulated robot
+itself.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from ._config import SimConfig
 from ._robot import RobotConfig
 from ._simulation import SimError, Simulation
-from ._turning import TurningCurve
+from ._turning import SpinTurn, TurningCurve
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -174,6 +176,105 @@ def fit_turning_curve(samples: list[TurningSample]) -> TurningFit:
         max_residual=float(np.max(np.abs(res))),
         residuals=tuple(res.tolist()),
     )
+
+
+@dataclass(frozen=True, kw_only=True)
+class SpinSample:
+    """One spin on the spot: the left motor at -omega, the right at +omega (a left turn),
+    measured from the moment the motors were set so."""
+
+    omega: float
+    """Speed of each side's motor [rad/s]."""
+    turned: float
+    """Heading change, summed along the way [rad] (positive = to the left)."""
+    displacement: float
+    """Horizontal distance of the body centre from where the spin began to where it ended [m]."""
+    wander: float
+    """Largest horizontal distance of the body centre from where the spin began [m]."""
+    energy: float
+    """Energy the leg motors spent during the spin [J]."""
+    duration: float
+    """Simulated time of the spin [s]."""
+
+    @property
+    def yaw_rate(self) -> float:
+        """Mean yaw rate [rad/s]."""
+        return self.turned / self.duration
+
+    @property
+    def drift(self) -> float:
+        """Displacement per radian turned [m/rad]."""
+        return self.displacement / abs(self.turned)
+
+    @property
+    def energy_per_radian(self) -> float:
+        """Energy per radian turned [J/rad]."""
+        return self.energy / abs(self.turned)
+
+
+def spin(
+    robot: RobotConfig, cfg: SimConfig, omega: float, duration: float, *,
+    lead_in: float = 0.0, walk_speed: float = 0.0, until: float = math.inf,
+) -> SpinSample:  # fmt: skip
+    """Spin on an open floor with the left motor at -omega and the right at +omega [rad/s] for
+    `duration` [s], or until `until` [rad] is turned; first walk straight for `lead_in` [s]
+    at `walk_speed` [rad/s] (0: the spin starts from rest, legs in tripod stance)."""
+    with Simulation.open_floor(robot, cfg) as sim:
+        sim.reset(0.0, 0.0, 0.0)
+        if lead_in > 0:
+            sim.set_leg_speeds(walk_speed, walk_speed)
+            sim.advance(max(1, round(lead_in / cfg.timestep)))
+        sim.set_leg_speeds(-omega, omega)
+        steps = max(1, round(0.005 / cfg.timestep))  # every 5 ms: the yaw moves < 0.1 rad
+        (x0, y0, _), quat = sim.pose()
+        yaw, t0, e0 = _yaw(quat), sim.time, sim.energy
+        turned = wander = 0.0
+        x, y = x0, y0
+        while sim.time - t0 < duration - 1e-9 and abs(turned) < until:
+            sim.advance(steps)
+            (x, y, _), quat = sim.pose()
+            new_yaw = _yaw(quat)
+            turned += (new_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
+            yaw = new_yaw
+            wander = max(wander, math.hypot(x - x0, y - y0))
+        return SpinSample(
+            omega=omega, turned=turned, displacement=math.hypot(x - x0, y - y0), wander=wander,
+            energy=sim.energy - e0, duration=sim.time - t0,
+        )  # fmt: skip
+
+
+SPIN_SPEEDS = (5.0, 10.0, 20.0, 30.0)
+"""Motor speeds of the spin calibration [rad/s]: up to half the motor's limit; from 20 rad/s
+on the feet slip and the yaw rate stops growing."""
+SPIN_LEAD_INS = tuple(0.05 * k for k in range(1, 9))
+"""Walks before the half-turn spins that measure the wander [s]: 0.05 to 0.4 s, so the spins
+begin at phases spread over more than a stride (at 20 rad/s a motor revolution takes 0.31 s)
+and with the walk's momentum, as the driver begins them."""
+
+
+def spin_calibration(
+    robot: RobotConfig, cfg: SimConfig, walk_speed: float, speeds=SPIN_SPEEDS,
+    duration: float = 10.0,
+) -> list[tuple[SpinTurn, SpinSample, list[SpinSample]]]:  # fmt: skip
+    """Turning on the spot at each motor speed of `speeds` [rad/s]: a steady spin from rest for
+    `duration` [s] (yaw rate, drift, energy per radian) and half turns (pi rad) entered from a
+    straight walk at walk_speed [rad/s] after each of SPIN_LEAD_INS (wander: the largest
+    distance of the body centre from where any of them began). Returns, per speed, the
+    SpinTurn with the steady spin and the half turns it came from."""
+    out = []
+    for omega in speeds:
+        steady = spin(robot, cfg, omega, duration)
+        halves = [spin(robot, cfg, omega, duration, lead_in=t, walk_speed=walk_speed,
+                       until=math.pi) for t in SPIN_LEAD_INS]  # fmt: skip
+        if abs(steady.turned) < 1e-6:
+            raise SimError(f"the robot did not turn on the spot at motor speeds -{omega:g} and "
+                           f"+{omega:g} rad/s (turned {steady.turned:.2g} rad in {duration:g} s)")  # fmt: skip
+        turn = SpinTurn(
+            omega=omega, yaw_rate=steady.yaw_rate, drift=steady.drift,
+            wander=max(h.wander for h in halves), energy_per_radian=steady.energy_per_radian,
+        )  # fmt: skip
+        out.append((turn, steady, halves))
+    return out
 
 
 @functools.cache

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from ._turning import CALIBRATED_TURNING, TurningCurve
+from ._turning import CALIBRATED_SPIN, CALIBRATED_TURNING, TurningCurve
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -69,5 +69,18 @@ class DriverConfig:
     """A drive that makes no progress for this long is stuck [s]."""
     stuck_distance: float = 0.02
     """Progress: the next waypoint reached, or this much closer to it [m]."""
+    spin_speed: float = CALIBRATED_SPIN.omega
+    """tracking: speed of each side's motor while the robot turns on the spot at a plan's spin,
+    one side backwards [rad/s]. 10 rad/s turns at 1.44 rad/s for 0.0123 J/rad (the spin
+    calibration, sim/_turning.py CALIBRATED_SPIN; 20 rad/s: twice the rate, a third more energy
+    per radian, more wander). The reference driver makes no spins."""
+    spin_tolerance: float = 0.05
+    """tracking: a spin ends when the heading is within this of the spin's [rad]; pure pursuit
+    corrects what is left. The gait sways the heading by up to 0.12 rad about its mean within a
+    spin (measured at 10 and 20 rad/s), so a tighter tolerance mostly turns back and forth
+    longer."""
+    stuck_angle: float = 0.1
+    """Progress during a spin: this much closer to the spin's heading [rad] (a spin making
+    angular progress is never stuck)."""
     frame_period: float = 1.0 / 30.0
     """Simulated time between two recorded trajectory samples [s]."""

@@ -6,7 +6,11 @@ kept exactly as the report gives them for tables 7.1-7.3; and `tracking` (the de
 18), pure pursuit on the path's arc length: the robot's progress along the path only grows, so
 a waypoint it has passed is never chased back (algorithm 1 circles one it keeps overshooting),
 and the turn it is asked for is converted to a motor ratio through the calibrated turning
-model instead of a tuned gain."""
+model instead of a tuned gain. Where a plan turns on the spot (a spin: a waypoint and the
+heading to turn to there), the tracking driver's progress stops at the spin's waypoint; it
+runs the two sides in opposite directions until the heading is within spin_tolerance of the
+spin's, then goes on with pure pursuit. The reference driver has no spins (the report's
+algorithms turn only on arcs) and ignores them."""
 
 from __future__ import annotations
 
@@ -45,7 +49,7 @@ class DriveResult:
     """success: within r_end of the goal in time; fell: dropped off the planned surface (or
     the simulation diverged); flipped: on its back; stuck: no progress for stuck_time;
     timeout: still going at time_limit; missed: went past the goal wider than r_end (tracking
-    driver: it cannot turn in place to come back)."""
+    driver: it turns on the spot only at a plan's spins, not to come back)."""
     reason: str
     """Human-readable cause of the outcome."""
     drive_time: float
@@ -123,25 +127,55 @@ def _failure(pos, quat, path: np.ndarray, standing: float, fall_drop: float):
     return None
 
 
+Spin = tuple[int, float]
+"""A turn on the spot: (index of the waypoint where it is made, heading to turn to there [rad],
+world frame, counter-clockwise from +x)."""
+
+
+def check_spins(spins, n_waypoints: int) -> tuple[Spin, ...]:
+    """The spins as (int, float) pairs sorted by waypoint; ValueError naming the spin when an
+    index is not a waypoint of the n_waypoints or a heading is not a finite number."""
+    out = []
+    for k, item in enumerate(spins):
+        try:
+            index, yaw = item
+            ok = float(index).is_integer() and 0 <= index < n_waypoints and math.isfinite(yaw)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"spin {k} {item!r}: expected (waypoint index from 0 to "
+                             f"{n_waypoints - 1}, finite heading [rad])")  # fmt: skip
+        out.append((int(index), float(yaw)))
+    return tuple(sorted(out))
+
+
 def drive_path(
     sim: Simulation,
     path_xyz: np.ndarray,
     cfg: DriverConfig,
     on_frame: Callable[[Frame], None] | None = None,
+    *,
+    spins=(),
 ) -> DriveResult:
     """Drive the (already reset) robot along path_xyz ((N, 3) world frame [m], z on the terrain
-    surface) until it arrives, falls, flips, gets stuck or runs out of time.
+    surface; one waypoint: stand at it) until it arrives, falls, flips, gets stuck or runs out
+    of time. spins: the plan's turns on the spot, (waypoint index, heading [rad]) each (Spin);
+    the tracking driver makes them, the reference driver ignores them.
 
     Every control_period the controller reads the body pose, checks the outcome, lets the
     follower (cfg.kind) advance along the path and set the motor speeds; in between, the
     simulation steps with nothing of ours but the leg targets and the energy meter.
     """
     path = np.asarray(path_xyz, dtype=float)
-    if path.ndim != 2 or path.shape[1] != 3 or len(path) < 2:
-        raise ValueError(f"path must be (N>=2, 3), got {path.shape}")
+    if path.ndim != 2 or path.shape[1] != 3 or len(path) < 1:
+        raise ValueError(f"path must be (N>=1, 3), got {path.shape}")
+    spins = check_spins(spins, len(path))
+    if len(path) == 1:  # a path to stand on: its goal is its start (both followers need two)
+        path = np.vstack([path, path])
     steps_per_control = max(1, round(cfg.control_period / sim.cfg.timestep))
     omega_max = min(sim.robot.max_motor_speed, cfg.max_ratio * cfg.omega0)
-    follower = _Reference(path, cfg) if cfg.kind == "reference" else _Tracking(path, cfg)
+    follower = (_Reference(path, cfg) if cfg.kind == "reference"
+                else _Tracking(path, cfg, spins))  # fmt: skip
     standing = sim.robot.standing_height
     trajectory: list[tuple[float, float, float, float]] = []
     next_frame = 0.0
@@ -165,7 +199,7 @@ def drive_path(
         if failure is not None:
             outcome, reason = failure
             break
-        ended = follower.update(pos)
+        ended = follower.update(pos, quat)
         if ended is not None:
             outcome, reason = ended
             break
@@ -204,7 +238,8 @@ class _Reference:
         self.advanced = False
         self.gap = math.inf
 
-    def update(self, pos) -> tuple[Outcome, str] | None:
+    def update(self, pos, quat=None) -> tuple[Outcome, str] | None:
+        # (quat, the body's orientation, is the tracking driver's: algorithm 1 needs only pos)
         i_before = self.i
         self.i, arrived = next_waypoint(self.path_xy, self.i, pos[:2], self.cfg.r_path, self.cfg.r_end)
         if arrived:
@@ -222,31 +257,47 @@ class _Reference:
 
 
 class _Tracking:
-    """Pure pursuit on the path's arc length (see the module docstring)."""
+    """Pure pursuit on the path's arc length, stopping to turn on the spot at the plan's spins
+    (see the module docstring)."""
 
-    def __init__(self, path: np.ndarray, cfg: DriverConfig) -> None:
+    def __init__(self, path: np.ndarray, cfg: DriverConfig, spins: tuple[Spin, ...] = ()) -> None:
         self.xy = path[:, :2]
         seg = np.diff(self.xy, axis=0)
         self.seg_len = np.linalg.norm(seg, axis=1)
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
         self.total = float(self.cum[-1])
-        last = np.nonzero(self.seg_len > 1e-9)[0]
-        d = seg[last[-1]] / self.seg_len[last[-1]] if len(last) else np.array([1.0, 0.0])
-        self.end, self.end_dir = self.xy[-1], d
+        self.end, self.end_dir = self.xy[-1], self._direction_into(len(self.xy) - 1)
         self.cfg = cfg
         self.s = 0.0
         """Progress: arc length of the robot's nearest point on the path, never decreasing [m]."""
         self.advanced = False
         self.gap = self.total
+        self.spins = list(spins)
+        """Spins not yet made, in path order: (waypoint index, heading [rad])."""
+        self.spinning = False
+        """The robot is turning on the spot at self.spins[0]."""
+        self.spin_error = 0.0
+        """Heading of the spin minus the robot's, in (-pi, pi] [rad] (while spinning)."""
+        self.spin_best = math.inf
+        """Smallest |spin_error| of this spin so far [rad]: progress for stuck detection."""
 
-    def _project(self, p: np.ndarray) -> float:
+    def _direction_into(self, k: int) -> np.ndarray:
+        """Unit direction of the last segment of non-zero length that ends at or before
+        waypoint k ((1, 0) when there is none)."""
+        moving = np.nonzero(self.seg_len[:k] > 1e-9)[0]
+        if not len(moving):
+            return np.array([1.0, 0.0])
+        j = moving[-1]
+        return (self.xy[j + 1] - self.xy[j]) / self.seg_len[j]
+
+    def _project(self, p: np.ndarray, upto: int) -> float:
         """Arc length of the point of the path nearest p among the segments from the progress
         to a lookahead and a bit beyond (not the whole path: a path that comes back near
-        itself must not pull the progress forward or back)."""
+        itself must not pull the progress forward or back), and not past waypoint `upto`."""
         last = len(self.seg_len) - 1  # at the path's end the window is its last segment
-        k0 = min(max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1), last)
+        k0 = min(max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1), last, upto - 1)
         k1 = int(np.searchsorted(self.cum, self.s + 2 * self.cfg.lookahead + 0.1, side="right"))
-        k1 = min(max(k1, k0 + 1), len(self.seg_len))
+        k1 = min(max(k1, k0 + 1), len(self.seg_len), upto)
         a, length = self.xy[k0:k1], self.seg_len[k0:k1]
         d = self.xy[k0 + 1 : k1 + 1] - a
         u = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(length**2, 1e-18), 0.0, 1.0)
@@ -254,23 +305,55 @@ class _Tracking:
         k = int(np.argmin(dist))
         return float(self.cum[k0 + k] + u[k] * length[k])
 
-    def _point_at(self, s: float) -> np.ndarray:
-        if s >= self.total:  # past the end: on the straight line on through the goal
-            return self.end + self.end_dir * (s - self.total)
+    def _point_at(self, s: float, upto: int) -> np.ndarray:
+        """The path's point at arc length s [m]; past waypoint `upto` (the end, or a spin not
+        yet made), on the straight line on through it."""
+        if s >= self.cum[upto]:
+            direction = self.end_dir if upto == len(self.xy) - 1 else self._direction_into(upto)
+            return self.xy[upto] + direction * (s - self.cum[upto])
         k = min(int(np.searchsorted(self.cum, s, side="right")) - 1, len(self.seg_len) - 1)
         u = (s - self.cum[k]) / max(self.seg_len[k], 1e-18)
         return self.xy[k] + (self.xy[k + 1] - self.xy[k]) * u
 
-    def update(self, pos) -> tuple[Outcome, str] | None:
+    @property
+    def _hold(self) -> int:
+        """The waypoint the progress may not pass: the next spin's, else the last."""
+        return self.spins[0][0] if self.spins else len(self.xy) - 1
+
+    def update(self, pos, quat=None) -> tuple[Outcome, str] | None:
+        """Advance the progress from the body position pos (x, y, z) [m] and, at a spin, its
+        orientation quat (xyzw); the outcome when the drive has ended, else None."""
         p = np.asarray(pos[:2], dtype=float)
         off = float(np.linalg.norm(p - self.end))
-        if off < self.cfg.r_end:
+        if off < self.cfg.r_end and not self.spins:  # the goal, once every spin is made
             return "success", "reached the goal"
-        s = max(self.s, self._project(p))
-        self.advanced, self.s = False, s
-        self.gap = self.total - s
+        self.advanced = False
+        hold = self._hold
+        if self.spins and not self.spinning:
+            at = float(self.cum[hold])
+            self.s = at if hold == 0 or self.s >= at else max(self.s, self._project(p, hold))
+            self.spinning = self.s >= at - 1e-9
+            if self.spinning:
+                self.advanced, self.spin_best = True, math.inf
+        if self.spinning:
+            x, y, z, w = quat  # the heading of the body's forward axis, horizontally
+            yaw = math.atan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
+            self.spin_error = math.remainder(self.spins[0][1] - yaw, 2 * math.pi)
+            if abs(self.spin_error) < self.cfg.spin_tolerance:  # made: on with pure pursuit
+                self.spins.pop(0)
+                self.spinning = False
+                ended = self.update(pos, quat)
+                self.advanced = True  # (the update from the spin's point may not advance)
+                return ended
+            if abs(self.spin_error) < self.spin_best - self.cfg.stuck_angle:
+                self.spin_best, self.advanced = abs(self.spin_error), True
+            self.gap = self.total - self.s
+            return None
+        if not self.spins:
+            self.s = max(self.s, self._project(p, hold))
+        self.gap = self.total - self.s
         past = float(np.dot(p - self.end, self.end_dir))
-        if s >= self.total and past > self.cfg.r_end:
+        if self.s >= self.total and past > self.cfg.r_end:
             return "missed", (
                 f"passed the goal {off:.2f} m from it (success is within {self.cfg.r_end:g} m) "
                 f"at ({pos[0]:.2f}, {pos[1]:.2f})"
@@ -278,11 +361,16 @@ class _Tracking:
         return None
 
     def where(self) -> str:
-        return f"{self.s:.2f} m along the {self.total:.2f} m path"
+        spin = (f", turning on the spot {abs(self.spin_error):.2f} rad from the heading of its "
+                f"spin" if self.spinning else "")  # fmt: skip
+        return f"{self.s:.2f} m along the {self.total:.2f} m path{spin}"
 
     def speeds(self, pos, quat, omega_max: float) -> tuple[float, float]:
         cfg = self.cfg
-        target = self._point_at(self.s + cfg.lookahead)
+        if self.spinning:  # the sides in opposite directions: left backwards turns left
+            w = min(cfg.spin_speed, omega_max)
+            return (-w, w) if self.spin_error > 0 else (w, -w)
+        target = self._point_at(self.s + cfg.lookahead, self._hold)
         theta = heading_error(pos, quat, target)
         reach = max(math.dist(pos[:2], target), 1e-6)
         # The arc through the target (pure pursuit); a target behind asks for the tightest turn.

@@ -83,3 +83,46 @@ CALIBRATED_TURNING = TurningCurve()
 sweep: 23 ratios from 1 to 3, 10 s each, slow side at 20 rad/s, flat floor, friction 0.9):
 R^2 0.989, residuals rms 0.21 /m, at most 0.49 /m (at ratio 1.5); 10.3 /m at ratio 3.
 tests/test_robot.py re-runs the calibration and checks these numbers."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SpinTurn:
+    """Turning on the spot: the two sides' motors run at -omega and +omega (left -omega turns
+    left, mirrored for a right turn), so the tripods push the body round its centre. Measured
+    on flat ground by `spin_calibration` (sim/_calibration.py); body frame: positive yaw is to
+    the left."""
+
+    omega: float
+    """Speed of each side's motor [rad/s], one side backwards."""
+    yaw_rate: float
+    """Mean yaw rate of a steady spin from rest [rad/s]."""
+    drift: float
+    """Net horizontal displacement of the body centre per radian turned over that steady spin
+    [m/rad]: the spin's slow creep."""
+    wander: float
+    """Largest horizontal distance of the body centre from where a half-turn spin began, over
+    half turns entered from a straight walk at the driver's omega0 (each from another phase of
+    the gait) [m]: the walk's momentum and the gait's sway, what drivable plans leave room for
+    round a spin (planner.spin_margin)."""
+    energy_per_radian: float
+    """Energy the leg motors spend per radian turned in that steady spin [J/rad]."""
+
+
+CALIBRATED_SPINS = (
+    SpinTurn(omega=5.0, yaw_rate=0.7378, drift=0.00037, wander=0.0209, energy_per_radian=0.01122),
+    SpinTurn(omega=10.0, yaw_rate=1.441, drift=0.00045, wander=0.0209, energy_per_radian=0.01227),
+    SpinTurn(omega=20.0, yaw_rate=2.828, drift=0.00097, wander=0.0289, energy_per_radian=0.01614),
+    SpinTurn(omega=30.0, yaw_rate=2.804, drift=0.00069, wander=0.0682, energy_per_radian=0.03494),
+)
+"""Turning on the spot as `roachplan calibrate-turning` measures it (sim/_calibration.py,
+`spin_calibration`; flat floor, friction 0.9): per motor speed, a 10 s spin from rest gives the
+yaw rate, the drift and the energy per radian, and 8 half turns entered from a straight walk at
+20 rad/s (after 0.05-0.4 s of walking) give the wander. The yaw rate grows in proportion to the
+speed up to 20 rad/s (0.144 rad/s per rad/s) and stops there (at 30 rad/s the feet slip: twice
+the energy per radian and 7 cm of wander). A right turn (left +omega, right -omega) is the exact
+mirror. tests/test_robot.py re-runs the calibration and checks these numbers."""
+
+CALIBRATED_SPIN = CALIBRATED_SPINS[1]
+"""The spin the tracking driver makes (DriverConfig.spin_speed, 10 rad/s): 1.44 rad/s, within
+4 % of the cheapest energy per radian (5 rad/s: 0.0112 J/rad) at twice its rate; 20 rad/s turns
+twice as fast for a third more energy per radian and wanders 2.9 cm instead of 2.1 cm."""

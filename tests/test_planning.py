@@ -270,3 +270,11 @@ def test_keep_roadmap_returns_the_planners_graph(world, name):
     assert np.all((pts[:, 1] >= ya - 1e-9) & (pts[:, 1] <= yb + 1e-9))
     assert np.min(np.linalg.norm(pts - np.array(world.scene.start[:2]), axis=1)) < 1e-9
     assert len(plan(world, seed=2).roadmap) == 0  # only when asked
+
+
+def test_a_heading_of_180_degrees_is_planned_for(world):
+    # OMPL's SO(2) bounds are [-pi, pi): a goal at exactly pi used to be skipped as out of
+    # bounds, and the planner searched until its time limit.
+    x, y, _ = world.scene.goal
+    planned = plan(world, seed=0, goal=(x, y, math.pi))
+    assert planned.found, planned.message

@@ -146,6 +146,53 @@ def test_a_curve_from_too_few_ratios_is_refused(tmp_path):
     assert "--ratios '1,2,2,3'" in out.stderr and "5 or more distinct" in out.stderr
 
 
+def test_calibrate_turning_measures_the_spins_on_the_spot_the_driver_and_the_plans_use(tmp_path):
+    """Re-runs the spin calibration (through the command line, with a short ratio sweep) and
+    checks the recorded numbers (sim/_turning.py CALIBRATED_SPINS) and what follows from them:
+    the driver's spin speed and drivable plans' spin margin."""
+    from roachplan.planning import PlannerConfig
+    from roachplan.sim import CALIBRATED_SPIN, CALIBRATED_SPINS
+
+    out = roachplan("calibrate-turning", "--out", str(tmp_path), "--ratios", "1,1.5,2,2.5,3")
+    assert out.returncode == 0, out.stderr
+    assert "turning on the spot" in out.stdout
+    with (tmp_path / "spin.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [float(r["omega_rad_s"]) for r in rows] == [t.omega for t in CALIBRATED_SPINS]
+    for row, recorded in zip(rows, CALIBRATED_SPINS, strict=True):
+        # The simulation is deterministic: the recorded numbers to their printed digits.
+        assert float(row["yaw_rate_rad_s"]) == pytest.approx(recorded.yaw_rate, rel=2e-3)
+        assert float(row["energy_j_per_rad"]) == pytest.approx(recorded.energy_per_radian, rel=2e-3)
+        assert float(row["wander_m"]) == pytest.approx(recorded.wander, abs=1e-4)
+        assert float(row["drift_m_per_rad"]) == pytest.approx(recorded.drift, abs=1e-5)
+        # It turns on the spot, left (the backward side's way), not round a circle: 10 s of
+        # spinning moved the body less than a millimetre per radian.
+        assert float(row["turned_rad"]) > 5.0 and recorded.drift < 1e-3
+    below_slip = [t for t in CALIBRATED_SPINS if t.omega <= 20]
+    assert all(t.wander < 0.03 for t in below_slip)
+    # The yaw rate is proportional to the speed until the feet slip (above 20 rad/s).
+    rates = [t.yaw_rate / t.omega for t in below_slip]
+    assert max(rates) / min(rates) < 1.05
+    model = json.loads((tmp_path / "turning_model.json").read_text())
+    assert [s["omega_rad_s"] for s in model["spins"]] == [t.omega for t in CALIBRATED_SPINS]
+    assert (tmp_path / "spin.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The driver spins at the calibrated speed; plans leave room for its wander.
+    assert DriverConfig().spin_speed == CALIBRATED_SPIN.omega
+    assert CALIBRATED_SPIN.wander < PlannerConfig().spin_margin < CALIBRATED_SPIN.wander + 0.015
+
+
+def test_a_right_spin_mirrors_a_left_one():
+    from roachplan.sim._calibration import spin
+
+    cfg, robot = SimConfig(), RobotConfig()
+    left = spin(robot, cfg, 10.0, 2.0)
+    right = spin(robot, cfg, -10.0, 2.0)  # left motor at +10, right at -10
+    assert left.turned > 2.0
+    # A mirror image, to the solver's rounding (measured 0.02 %).
+    assert right.turned == pytest.approx(-left.turned, rel=1e-3)
+    assert right.energy == pytest.approx(left.energy, rel=1e-3)
+
+
 STRAIGHT = np.array([[0.0, y, 0.0] for y in np.linspace(0.0, 1.0, 21)])
 
 
