@@ -228,7 +228,7 @@ class _BatchMotionValidator(ob.MotionValidator):
         super().__init__(si)
         self._check, self._res = check, resolution
         # A yaw change moves the outermost body point by radius * dyaw.
-        self._radius = float(np.max(np.hypot(fp.feet_xy[:, 0], fp.feet_xy[:, 1])))
+        self._radius = fp.radius
 
     def checkMotion(self, s1, s2, *_last_valid) -> bool:
         a = np.array([s1.getX(), s1.getY(), s1.getYaw()])
@@ -534,9 +534,7 @@ def _spins_note(spins) -> str:
 def _spin_step(fp: Footprint, cfg: PlannerConfig) -> float:
     """Heading step of a spin's validity checks [rad]: the footprint's outermost point moves
     at most check_resolution, as along a motion (_BatchMotionValidator)."""
-    reach = float(np.max(np.hypot(fp.feet_xy[:, 0], fp.feet_xy[:, 1])))
-    corner = float(np.hypot(fp.body_length, fp.body_width)) / 2
-    return cfg.check_resolution / max(reach, corner)
+    return cfg.check_resolution / fp.radius
 
 
 def _coinciding(hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, is_valid,

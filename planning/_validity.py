@@ -48,6 +48,13 @@ class Footprint:
     """How far a foot's tip reaches from its hip [m]: the legs sweep the ground this far in
     front of and behind the hips, beside the body (0: the legs are not checked)."""
 
+    @property
+    def radius(self) -> float:
+        """Distance from the body centre to the farthest point the checks sample [m]: how far
+        a turn moves the footprint's outermost point."""
+        local = _footprint_terms(self)[0]
+        return float(np.max(np.hypot(local[:, 0], local[:, 1])))
+
 
 @dataclass(frozen=True, kw_only=True)
 class ValidityConfig:
