@@ -193,7 +193,7 @@ def drive(
     if sim is None:
         with world.simulation() as fresh:
             return drive(world, path_xyz, start=start, on_frame=on_frame, sim=fresh, spins=spins)
-    sim.reset(x, y, yaw)
+    sim.reset(x, y, yaw, surface=float(world.heightfield.sample(np.array([x, y]))))
     return drive_path(sim, path_xyz, scene.driver, on_frame=on_frame, spins=spins)
 
 

@@ -92,6 +92,7 @@ def heightfield_from_mesh(
     resolution: float,
     ground_height: float | None,
     vertex_noise: np.ndarray | None = None,
+    overhead: float | None = None,
 ) -> HeightField:
     """Rasterise the upward-facing triangles of a mesh into a top-surface height field.
 
@@ -100,6 +101,9 @@ def heightfield_from_mesh(
     Exact for the piecewise-planar surface, and cheaper than one ray per cell.
     vertex_noise: (V,) standard deviation of each vertex's height [m] (a capture's), or None;
     each grid point takes the largest noise of the triangles above it (interpolated).
+    overhead [m]: a surface more than this above the lowest one at a grid point is overhead,
+    not ground (a table top over the floor the camera saw under it): the point takes the
+    highest surface within overhead of its lowest. None: the highest surface.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -132,6 +136,7 @@ def heightfield_from_mesh(
     # points per triangle, side the next power of two of its triangles' bounding boxes.
     side = 1 << np.ceil(np.log2(np.maximum(span, 1))).astype(np.int64)
     flat = top.reshape(-1)
+    hits: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []  # (cells, z, noise)
     for b in np.unique(side[on_grid]):
         idx = np.flatnonzero(on_grid & (side == b))
         off = np.stack(np.meshgrid(np.arange(b), np.arange(b)), axis=-1).reshape(-1, 2)  # (b*b, 2)
@@ -151,12 +156,25 @@ def heightfield_from_mesh(
             inside &= np.all(cell <= hi[sel, None, :], axis=-1)
             z = o[..., 2] + a * e1[..., 2] + c * e2[..., 2]
             at = (cell[..., 1] * nx + cell[..., 0])[inside]
-            np.maximum.at(flat, at, z[inside])
+            sn = None
             if noise is not None:
                 tn = tri_noise[sel]  # (n, 3): the noise at the corners, interpolated alike
-                sn = tn[:, None, 0] + a * (tn[:, None, 1] - tn[:, None, 0]) + c * (
-                    tn[:, None, 2] - tn[:, None, 0])  # fmt: skip
-                np.maximum.at(noise.reshape(-1), at, sn[inside])
+                sn = (tn[:, None, 0] + a * (tn[:, None, 1] - tn[:, None, 0])
+                      + c * (tn[:, None, 2] - tn[:, None, 0]))[inside]  # fmt: skip
+            hits.append((at, z[inside], sn))
+    if hits:
+        at = np.concatenate([h[0] for h in hits])
+        z = np.concatenate([h[1] for h in hits])
+        if overhead is not None:  # keep each point's surfaces within overhead of its lowest
+            lowest = np.full(ny * nx, np.inf)
+            np.minimum.at(lowest, at, z)
+            keep = z <= lowest[at] + overhead
+            at, z = at[keep], z[keep]
+            hits = [(at, z, np.concatenate([h[2] for h in hits])[keep] if noise is not None
+                     else None)]  # fmt: skip
+        np.maximum.at(flat, at, z)
+        if noise is not None:
+            np.maximum.at(noise.reshape(-1), at, np.concatenate([h[2] for h in hits]))
     if ground_height is not None:
         top = np.maximum(top, ground_height)
     top[~np.isfinite(top)] = np.nan

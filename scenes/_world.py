@@ -42,6 +42,12 @@ standard deviation of the vertex's height [m]; 0 on models and mesh files."""
 FACE_VALUES = ("filled",)
 """Per-face values a terrain mesh may carry: 1.0 where a capture's triangle fills a hole
 from its rim; 0 elsewhere."""
+OVERHEAD = 0.3
+"""A surface more than this above a lower one at the same place is overhead, not ground [m]:
+a table top or a chair's seat over the floor a camera saw under it. The robot (3.5 cm tall)
+walks under it; a step that high it could not climb anyway. Levels closer than this (a
+bridge 20 cm over the floor) stay the top surface, as a solid's top does (no upward
+surface under it)."""
 MAX_PLANNING_AREA = 400.0
 """Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
 and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
@@ -235,6 +241,7 @@ def build_world(
         resolution=HEIGHTFIELD_RESOLUTION,
         ground_height=scene.ground,
         vertex_noise=mesh.vertex_attributes.get("height_noise"),
+        overhead=OVERHEAD,
     )
     world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
     if scene.start is None:

@@ -169,28 +169,41 @@ class Simulation:
 
     # -- state ----------------------------------------------------------------------------------
 
-    def surface_height(self, x: float, y: float) -> float:
-        """Height of the highest terrain or ground surface at (x, y) [m], -inf if none."""
-        hit = self._bc.rayTest((x, y, 50.0), (x, y, -50.0))[0]
+    def surface_height(self, x: float, y: float, below: float = 50.0) -> float:
+        """Height of the highest terrain or ground surface at (x, y) [m] under z = below [m],
+        -inf if none."""
+        hit = self._bc.rayTest((x, y, below), (x, y, -50.0))[0]
         return hit[3][2] if hit[0] >= 0 else -np.inf
 
-    def reset(self, x: float, y: float, yaw: float) -> None:
-        """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle."""
+    def _ground_height(self, x: float, y: float, surface: float | None) -> float:
+        """The surface the robot stands on at (x, y) [m]: the highest, unless the planner's
+        surface [m] there lies more than 10 cm under it (a table over the floor): then the
+        highest just above the planner's (cast from the top first, so that a start with
+        nothing over it is placed exactly as without a surface given)."""
+        z = self.surface_height(x, y)
+        if surface is not None and np.isfinite(surface) and z > surface + 0.1:
+            z = self.surface_height(x, y, surface + 0.1)
+        return z
+
+    def reset(self, x: float, y: float, yaw: float, surface: float | None = None) -> None:
+        """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle.
+        surface: the height the planner stands it on there [m]; the ground is then looked for
+        just above it (under a table, the floor the plan is on, not the table top)."""
         bc, r = self._bc, self.robot
         # Park the robot out of the ray's way before looking for the ground under the start.
         bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
-        z0 = self.surface_height(x, y)
+        z0 = self._ground_height(x, y, surface)
         if not np.isfinite(z0):
             # A capture's mesh may have a sensor dropout under the centre alone: the highest
             # surface under the feet then (the planner checked that the feet stand).
             c, s = np.cos(yaw), np.sin(yaw)
             feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-            z0 = max(self.surface_height(*f) for f in feet)
+            z0 = max(self._ground_height(*f, surface) for f in feet)
         if not np.isfinite(z0):
             raise SimError(f"no terrain under the start position ({x:.3f}, {y:.3f})")
         quat = bc.getQuaternionFromEuler((0.0, 0.0, yaw))
         position = (x, y, z0 + r.standing_height + 0.004)
-        tilted = self._on_support_plane(x, y, yaw)
+        tilted = self._on_support_plane(x, y, yaw, surface)
         if tilted is not None:
             position, quat = tilted
         bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
@@ -204,16 +217,17 @@ class Simulation:
         self.time = 0.0
         self.energy_per_leg[:] = 0.0
 
-    def _on_support_plane(self, x: float, y: float, yaw: float):
+    def _on_support_plane(self, x: float, y: float, yaw: float, surface: float | None):
         """(position (3,), quaternion xyzw) of the body standing on the plane fitted to the
-        terrain under its feet at (x, y) [m], heading yaw [rad], 4 mm above its stance: on a
+        terrain under its feet (_ground_height, surface [m] the planner's) at (x, y) [m],
+        heading yaw [rad], 4 mm above its stance: on a
         slope a level body would put its uphill feet into the ground (an 11 deg lidar slope
         flipped it within 0.2 s). None when the ground under the feet is level (the body is
         then placed exactly as on flat ground) or a foot has no ground."""
         r = self.robot
         c, s = np.cos(yaw), np.sin(yaw)
         feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-        z = np.array([self.surface_height(*f) for f in feet])
+        z = np.array([self._ground_height(*f, surface) for f in feet])
         if not np.all(np.isfinite(z)) or np.ptp(z) < 1e-6:
             return None
         a, b, cy = np.linalg.lstsq(np.column_stack([np.ones(6), feet]), z, rcond=None)[0]

@@ -229,3 +229,35 @@ def test_a_model_on_the_ground_is_crossed_from_the_ground(tmp_path):
         assert world.heightfield.sample(np.array(pose[:2])) == pytest.approx(0.0, abs=1e-6)
     assert world.scene.start[0] * world.scene.goal[0] < 0  # on either side
     assert any("either end of the model" in n for n in world.notes)
+
+
+def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
+    """A synthetic Kinect capture, from 0.4 m up, of a table (top 0.7 m up, four legs) on a
+    floor: the camera sees the floor under the table top, so there the robot stands on the
+    floor (the top is overhead), and a drive under the table starts on the floor."""
+    from roachplan.experiments._trial import drive
+
+    floor = trimesh.creation.box((8.0, 8.0, 0.02))
+    floor.apply_translation((0, 0, -0.01))
+    parts = [floor, trimesh.creation.box((1.0, 0.8, 0.03))]
+    parts[1].apply_translation((0.0, 2.0, 0.715))
+    for dx in (-0.45, 0.45):
+        for dy in (-0.35, 0.35):
+            leg = trimesh.creation.box((0.04, 0.04, 0.7))
+            leg.apply_translation((dx, 2.0 + dy, 0.35))
+            parts.append(leg)
+    intr, pose = PRESETS["kinect2-qhd"], look_at((0.0, 0.0, 0.4), (0.0, 2.0, 0.2))
+    depth = render_depth(trimesh.util.concatenate(parts), intr, pose, NoiseModel(),
+                         np.random.default_rng(4))  # fmt: skip
+    save_depth(tmp_path / "table.png", depth, intr)
+    world = _capture_world(tmp_path / "table.png")
+    rec = mesh_capture(tmp_path / "table.png")
+    to_world = rec.world_from_camera @ np.linalg.inv(pose)
+    under = (to_world @ np.array([0.0, 1.9, 0.0, 1.0]))[:2]  # under the top's middle
+    assert world.heightfield.sample(under) == pytest.approx(0.0, abs=0.02)
+    fp, vcfg = world.footprint, world.scene.planner.validity
+    yaw = math.atan2(*(to_world[:2, 1])[::-1])  # along the scene's +y
+    assert check_states(world.heightfield, fp, vcfg, np.array([[*under, yaw]])).valid[0]
+    path = np.array([[*(under + t * to_world[:2, 1]), 0.0] for t in np.linspace(0, 0.2, 9)])
+    result = drive(world, path, start=(*under, yaw))
+    assert result.trajectory[0][3] < 0.1, "placed on the table top, not the floor"
