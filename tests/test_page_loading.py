@@ -58,7 +58,7 @@ def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
     from roachplan.app._load_panel import DEFAULTS
 
     page_settings = {}  # the load panel passes only what differs from DEFAULTS
-    assert DEFAULTS.voxel[0] == pytest.approx(0.01) and DEFAULTS.method == "grid"
+    assert DEFAULTS.voxel[0] == pytest.approx(0.01) and DEFAULTS.method == "sensor"
     path = scene_from_upload("depth_154.png", (RTAB / "depth_154.png").read_bytes(), tmp_path,
                              page_settings, calibration=RTAB / "calib_154.yaml")  # fmt: skip
     page = prepare_upload_scene(path)
