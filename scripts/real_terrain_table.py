@@ -29,6 +29,8 @@ FILES = {
     "frame_20121214T142255.814212_depth_mm.png": {},
     "terrain_samp11-utm.pcd": {},
     "jsk_watercan.bag": {},
+    "office_desk_160x120.pcd": {},
+    "rough_ground_ouster_4x4m.pcd": {},
 }
 
 
