@@ -2,7 +2,7 @@
 and range, a calibration file uploaded before its depth image), re-meshing the loaded capture
 with other settings (voxel, cell, method, depth range, a crop box) or re-levelling it (click its
 ground, or type the camera's height, pitch and roll) without uploading it again, the OpenSCAD
-time limit, and reloading a model in millimetres scaled by 0.001. Callbacks only put a PanelCmd
+time limit and backend, and reloading a model in millimetres scaled by 0.001. Callbacks only put a PanelCmd
 on the app's queue; the app's loop calls `handle` (and `upload`, `relevel_at_click`), which
 start a load in the background (`app._load`).
 """
@@ -23,7 +23,7 @@ from roachplan.perception import (
     load_calibration,
     load_yaml,
 )
-from roachplan.scenes import BACKENDS, DEFAULT_TIMEOUT, MAX_TIMEOUT
+from roachplan.scenes import BACKENDS, DEFAULT_BACKEND, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
 from ._relevel import (
     CaptureView,
@@ -98,10 +98,11 @@ class LoadPanel:
             hint="An uploaded .scad (or .zip) render is stopped after this long",
         )  # fmt: skip
         self.scad_backend = gui.add_dropdown(
-            "OpenSCAD backend", BACKENDS, initial_value="cgal",
-            hint="cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
-            "several times faster on CSG-heavy models; refuses text(), surface() and other "
-            "constructs it renders differently",
+            "OpenSCAD backend", BACKENDS, initial_value=DEFAULT_BACKEND,
+            hint="auto: manifold unless the model uses something it renders differently "
+            "(surface()), then the openscad binary; the load's notification says which and "
+            "why. cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
+            "several times faster on CSG-heavy and text() models; refuses surface()",
         )  # fmt: skip
         with gui.add_folder("Meshing (captures)"):
             self.mesh_method = gui.add_dropdown("Capture meshing", METHODS,
@@ -289,7 +290,8 @@ class LoadPanel:
                                  scad_backend=self.scad_backend.value)  # fmt: skip
         label, what = f"upload: {cmd.name}", None
         if Path(cmd.name).suffix.lower() in (".scad", ".zip"):
-            who = "OpenSCAD" if self.scad_backend.value == "cgal" else "Manifold"
+            who = {"cgal": "OpenSCAD", "manifold": "Manifold"}.get(
+                self.scad_backend.value, "Manifold (or OpenSCAD where it must)")
             what = (f"Rendering {cmd.name} with {who} (limit "
                     f"{float(self.scad_timeout.value):g} s)")  # fmt: skip
         app._load(cmd, str(path), from_upload=True, label=label, what=what)
