@@ -54,6 +54,9 @@ class World:
     notes: tuple[str, ...] = ()
     """What was chosen for the user (who rendered each OpenSCAD model and why; bounds, start
     and goal picked automatically)."""
+    renders: tuple[str, ...] = ()
+    """Of the notes, one per OpenSCAD object: who rendered it, why, and what that may change
+    (ScadRender.note), for the page's status line."""
 
     @functools.cached_property
     def footprint(self) -> Footprint:
@@ -240,7 +243,7 @@ def build_world(
         resolution=HEIGHTFIELD_RESOLUTION,
         ground_height=scene.ground,
     )
-    world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
+    world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot, renders=terrain.notes)
     if scene.start is None:
         try:
             picked = pick_start_goal(world, seed=scene.seed)

@@ -617,7 +617,9 @@ def _dropdown(page, label: str, option: str) -> None:
 
 
 @needs_jail
-def test_the_page_renders_with_the_backend_chosen_and_says_why_it_refuses(tmp_path, artifacts):
+def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, artifacts):
+    import zipfile
+
     from test_app import CHROMIUM, browser_pages, title, upload
 
     if CHROMIUM is None:
@@ -628,31 +630,45 @@ def test_the_page_renders_with_the_backend_chosen_and_says_why_it_refuses(tmp_pa
 
     app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
     try:
-        text_model = tmp_path / "label.scad"
-        text_model.write_text('cube([1, 1, 0.02]);\nlinear_extrude(0.01) text("R", size = 0.5);\n')
-        platform = tmp_path / "platform.scad"
-        platform.write_text(PLATFORM)
+        label = tmp_path / "label.scad"  # metres: a plate with a letter on it
+        label.write_text('cube([1, 1, 0.02]);\n'
+                         'translate([0.2, 0.2, 0.02]) linear_extrude(0.01) text("R", size = 0.5);\n')
+        heights = tmp_path / "heights.zip"
+        with zipfile.ZipFile(heights, "w") as z:
+            z.writestr("heights.scad", 'cube([1, 1, 0.02]);\nsurface(file = "h.dat");\n')
+            z.writestr("h.dat", "0 0.01\n0.01 0\n")
         with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+            # auto, the default: manifold draws the label, and the page says so.
+            upload(page, label)
+            # In the notification, and in the status, which stays.
+            rendered_by = page.get_by_test_id("floating-panel").get_by_text(re.compile(
+                r"label\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
+                r"3\.5\.4\) in"))  # fmt: skip
+            rendered_by.wait_for(timeout=120_000)
+            page.get_by_text(re.compile(r"text\(\): glyphs may sit up to 0\.0006 model units "
+                                        r"from OpenSCAD's")).first.wait_for()  # fmt: skip
+            page.screenshot(path=artifacts / "backend-01-auto-manifold-text.png")
+            assert "label" in title(page)
+            # manifold asked for, on a model using surface(): refused, and the page names auto.
             _dropdown(page, "OpenSCAD backend", "manifold")
-            upload(page, text_model)
-            page.get_by_text(re.compile(r"line 2: text\(\) is not rendered alike by backend "
+            upload(page, heights)
+            page.get_by_text(re.compile(r"line 2: surface\(\) is not rendered alike by backend "
                                         r"manifold")).wait_for(timeout=60_000)  # fmt: skip
-            page.get_by_text(re.compile(r"set Scene → OpenSCAD backend to cgal")).first.wait_for()
-            page.screenshot(path=artifacts / "backend-01-text-refused.png")
-            assert "double_bridge" in title(page)
-            upload(page, platform)
-            page.get_by_text(re.compile(r"Loaded `?platform")).wait_for(timeout=120_000)
-            page.screenshot(path=artifacts / "backend-02-manifold-loaded.png")
-            assert "platform" in title(page)
+            page.get_by_text(re.compile(r"set Scene → OpenSCAD backend to auto \(or cgal\)"))\
+                .first.wait_for()  # fmt: skip
+            page.screenshot(path=artifacts / "backend-02-manifold-refuses-surface.png")
+            assert "label" in title(page)  # the scene loaded before stays
         raw = yaml.safe_load(app.world.scene.path.read_text())
-        assert raw["terrain"][0]["backend"] == "manifold"
+        assert "backend" not in raw["terrain"][0]  # auto, the default: not written
         # The page's load ran in a child of the app's fork server, which may have started
         # before this test's render cache was set: the same render (cached by content) here.
-        rendered = render_scad(platform, backend="manifold")
-        # The page's terrain is that render, and it agrees with the binary's.
-        reference = trimesh.load(render_scad(platform, backend="cgal"))
-        err = disagreement(reference, trimesh.load(rendered))
-        assert err["hausdorff"] <= AGREE, err
+        rendered = render_scad_result(label)
+        assert rendered.backend == "manifold" and rendered.text_size == pytest.approx(0.5)
+        # The page's terrain is that render, within the text bound of the binary's.
+        reference = trimesh.load(render_scad(label, backend="cgal"))
+        fast = trimesh.load(rendered.path)
+        d = np.concatenate([surface_distances(reference, fast), surface_distances(fast, reference)])
+        assert d.max() <= TEXT_DEVIATION * 0.5
         assert np.allclose(app.world.mesh.bounds[1][2], reference.bounds[1][2], atol=1e-4)
     finally:
         app.stop()
