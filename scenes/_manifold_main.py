@@ -295,8 +295,9 @@ def openscad_quad_diagonal(quad) -> tuple[int, int]:
     libtess2 (GeometryUtils::tessellatePolygonWithHoles, constrained Delaunay) on the face as
     OpenSCAD stores it (reversed), projected along the longest axis of its normal, oriented
     counter-clockwise; the monotone sweep's diagonal, flipped when it is not Delaunay.
-    Checked against Debian's binary on 223 random quads, convex and not, near-ties included
-    (tests/test_scad_backend.py keeps a sample)."""
+    Checked against Debian's binary on 472 random quadrilaterals (corners out of plane by up
+    to their own size; convex, concave and self-crossing in projection; near-ties included):
+    all alike (tests/test_scad_backend.py keeps a sample)."""
     p = [[_f32(c) for c in q] for q in reversed(quad)]
     n = _libtess_normal(p)
     i = 0
@@ -306,6 +307,18 @@ def openscad_quad_diagonal(quad) -> tuple[int, int]:
     st = [(q[(i + 1) % 3], q[(i + 2) % 3] * sign) for q in p]
     if sum((st[k][0] - st[k - 3][0]) * (st[k][1] + st[k - 3][1]) for k in range(4)) < 0:
         st = [(s, -t) for s, t in st]  # CheckOrientation: counter-clockwise
+
+    def cross(u, v, w):
+        return (st[v][0] - st[u][0]) * (st[w][1] - st[u][1]) - (st[v][1] - st[u][1]) * (
+            st[w][0] - st[u][0]
+        )
+
+    if any(cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0
+           for a, b, c, d in ((0, 1, 2, 3), (1, 2, 3, 0))):  # fmt: skip
+        # So twisted that it crosses itself seen along that axis: the binary then joins the
+        # call's first and third corners (measured: a public terrain's cell, each of its
+        # corners listed first, and random twisted quads).
+        return (0, 2)
 
     def leq(u, v):  # VertLeq
         return st[u][0] < st[v][0] or (st[u][0] == st[v][0] and st[u][1] <= st[v][1])
@@ -349,11 +362,6 @@ def openscad_quad_diagonal(quad) -> tuple[int, int]:
         )
         den = math.hypot(ax, ay) * math.hypot(bx, by)
         return math.acos(max(-1.0, min(1.0, (ax * bx + ay * by) / den if den > 0 else 0.0)))
-
-    def cross(u, v, w):
-        return (st[v][0] - st[u][0]) * (st[w][1] - st[u][1]) - (st[v][1] - st[u][1]) * (
-            st[w][0] - st[u][0]
-        )
 
     if (
         angle(a, c, b) + angle(a, d, b) >= math.pi + DELAUNAY_SLACK

@@ -378,6 +378,12 @@ def test_the_quad_rule_picks_the_binarys_diagonal_on_recorded_faces():
     assert cut(kite) == [(10, -2), (10, 2)]  # the short one
     skew = [[-1, 9, 7], [11, 10, 5], [10, -1, 7], [0, 0, 5]]  # opposite angles 178 deg
     assert cut(skew) == [(0, 0), (11, 10)]
+    # A public fractal terrain's cell, twisted so far that it crosses itself seen along x,
+    # libtess2's axis for it: the binary joins the first and third corners listed.
+    twisted = [[-43.75, 31.25, 36.284], [-43.75, 37.5, 38.475], [-37.5, 37.5, 32.163],
+               [-37.5, 31.25, 37.078]]  # fmt: skip
+    assert cut(twisted) == [(-43.75, 31.25), (-37.5, 37.5)]
+    assert cut(twisted[1:] + twisted[:1]) == [(-43.75, 37.5), (-37.5, 31.25)]
 
 
 @needs_jail
