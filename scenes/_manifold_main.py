@@ -109,9 +109,9 @@ DEFAULT_FONT = "Liberation Sans:style=Regular"
 POSITION_SCALE = 1000 / 1024
 """OpenSCAD 2021.01 scales glyph outlines by 1/1000 of FreeType's 26.6 units but HarfBuzz's
 advances and offsets, and the glyph boxes valign uses, by 1/64/16 (FreetypeRenderer.cc,
-GlyphData): its glyphs stand at
-1000/1024 of where their advances put them (measured: "HH" at size 10, the second H 10.199
-apart there, 10.444 in the evaluator; 10.444 * 1000 / 1024 = 10.199)."""
+GlyphData): its glyphs stand at 1000/1024 of where their advances put them (measured: "HH" at
+size 10, the second H 10.199 apart there, 10.444 in the evaluator; 10.444 * 1000 / 1024 =
+10.199)."""
 FACTS = {"text_size": 0.0, "face_spread": 0.0}
 """What the render found that its caller reports (written beside the mesh as FACTS_SUFFIX):
 the largest size given to text() [model units], 0 without text(); the largest spread across

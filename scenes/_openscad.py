@@ -60,8 +60,9 @@ BACKENDS: tuple[Backend, ...] = ("auto", "cgal", "manifold")
 reference); "manifold", the Python evaluator `openscad-evaluator` on the Manifold library
 (scenes/_manifold_main.py), 3-11x faster on CSG-heavy and text() models
 (benchmarks/bench_openscad.py) and refused on the constructs where its mesh differs
-(MANIFOLD_DIFFERS); "auto" (the default), manifold unless the model uses one of those or the
-evaluator refuses or fails, then the binary (render_scad_result says which, and why)."""
+(MANIFOLD_DIFFERS); "auto" (the default), manifold unless the model uses one of those, or the
+evaluator refuses it, fails on it or leaves solids touching face to face apart: then the
+binary (render_scad_result says which, and why)."""
 DEFAULT_BACKEND: Backend = "auto"
 MANIFOLD_DIFFERS = {
     "surface": "its base is at z = 0, not 1 below the lowest height as in OpenSCAD",
@@ -848,9 +849,9 @@ def manifold_problem(scad_file: Path) -> str:
 def _manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
     """Why the evaluator's mesh of the model cannot stand for the binary's, or "" if it can:
     solids that touch face to face kept apart (Manifold treats touching as not overlapping,
-    so two walls stay back to back inside the solid; the binary's CGAL merges them:
-    measured on plywood_bridge, whose blocks, plank and ramps touch, 6.7 cm of wall 151 of
-    20,000 surface samples away from the binary's surface); and, for a model calling a
+    so two walls stay back to back inside the solid; the binary's CGAL merges them: on
+    plywood_bridge, whose blocks, plank and ramps touch, 151 of 20,000 surface samples lay on
+    such walls, up to 6.7 cm from the binary's surface); and, for a model calling a
     MANIFOLD_CHECKED construct, a mesh that is not closed and outward. Openness alone is not
     checked elsewhere: the binary's own mesh of solids touching along an edge is open too
     (voxel_wall)."""
@@ -878,8 +879,8 @@ def _manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
 
 
 def _touching_walls(mesh) -> tuple[float, float, float] | None:
-    """A point [model units] where two faces of mesh lie on one another back to back, with an
-    area between them (solids touching face to face, kept apart), or None if none do.
+    """A point [model units] where faces of mesh lie on one another back to back over some
+    area (solids touching face to face, kept apart), or None if none do.
     Faces are grouped by their plane (normal and offset, rounded); a plane met from both
     sides is checked for overlap in 2D. Faces merely meeting at an edge do not count."""
     import numpy as np
@@ -1092,7 +1093,8 @@ class ScadRender:
     cached: bool = False
     """Taken from the render cache (seconds is then the first render's)."""
     text_size: float = 0.0
-    """Largest size given to text() [model units] when manifold drew text, else 0."""
+    """Largest size given to text() [model units] when manifold drew text, else 0 (a model
+    that scale()s its text moves glyphs by that much more than text_deviation says)."""
     face_spread: float = 0.0
     """Largest spread across its plane [model units] of a polyhedron face of more than four
     corners that is not flat, when manifold cut it into triangles (maybe otherwise than the
