@@ -3,10 +3,10 @@ depth units and range, cloud units, a calibration file uploaded before its depth
 re-meshing the loaded capture with other settings (voxel, cell, method, depth range, a crop box)
 or re-levelling it (click its ground, type the camera's height, pitch and roll, or choose its up
 direction) without uploading it again, placing a loaded model again (position, ground plane),
-the planning area of the loaded scene, the OpenSCAD time limit, and reloading a model in
-millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the app's loop
-calls `handle` (and `upload`, `relevel_at_click`), which start a load in the background
-(`app._load`).
+the planning area of the loaded scene, the OpenSCAD time limit and backend, and reloading a
+model in millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the
+app's loop calls `handle` (and `upload`, `relevel_at_click`), which start a load in the
+background (`app._load`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from roachplan.perception import (
     load_calibration,
     load_yaml,
 )
-from roachplan.scenes import BACKENDS, DEFAULT_TIMEOUT, MAX_TIMEOUT
+from roachplan.scenes import BACKENDS, DEFAULT_BACKEND, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
 from ._placement import (
     ModelView,
@@ -123,10 +123,11 @@ class LoadPanel:
             hint="An uploaded .scad (or .zip) render is stopped after this long",
         )  # fmt: skip
         self.scad_backend = gui.add_dropdown(
-            "OpenSCAD backend", BACKENDS, initial_value="cgal",
-            hint="cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
-            "several times faster on CSG-heavy models; refuses text(), surface() and other "
-            "constructs it renders differently",
+            "OpenSCAD backend", BACKENDS, initial_value=DEFAULT_BACKEND,
+            hint="auto: manifold unless the model uses something it renders differently "
+            "(surface()), then the openscad binary; the load's notification says which and "
+            "why. cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
+            "several times faster on CSG-heavy and text() models; refuses surface()",
         )  # fmt: skip
         with gui.add_folder("Meshing (captures)"):
             self.mesh_method = gui.add_dropdown("Capture meshing", METHODS,

@@ -146,8 +146,12 @@ def swap_in(app, ld: Loading) -> None:
     app.load_panel.show_loaded(world, view)
     took = ld.job.elapsed
     app.loading.show("")
+    # Who rendered an OpenSCAD terrain stays in the status; the notification closes itself.
+    renders = "".join(  # markdown: a file name's underscores are no emphasis
+        "\n\n" + public_message(r, app.upload_dir).replace("_", "\\_") for r in world.renders
+    )
     app.status.content = (
-        f"Loaded `{world.scene.name}` ({len(world.mesh.faces)} triangles) in {took:.1f} s."
+        f"Loaded `{world.scene.name}` ({len(world.mesh.faces)} triangles) in {took:.1f} s.{renders}"
     )
     failure = app.markers.failure
     if failure is not None:  # (the markers are red, on one point: say why and what to do)
@@ -156,5 +160,5 @@ def swap_in(app, ld: Loading) -> None:
         app._notify(ld.client_id, f"Loaded {ld.label}: start and goal not picked",
                     f"{failure} {others}".strip(), error=True)  # fmt: skip
     elif world.notes:
-        notes = public_message(" ".join(world.notes), app.upload_dir)
-        app._notify(ld.client_id, f"Loaded {ld.label}", notes)
+        notes = " ".join(n if n.endswith(".") else f"{n}." for n in world.notes)
+        app._notify(ld.client_id, f"Loaded {ld.label}", public_message(notes, app.upload_dir))

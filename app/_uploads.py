@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
-from roachplan.scenes import DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
+from roachplan.scenes import DEFAULT_BACKEND, DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
@@ -40,13 +40,14 @@ def safe_name(name: str) -> str:
 
 def scene_from_upload(
     name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None,
-    scad_timeout: float = SCAD_TIMEOUT, scad_backend: str = "cgal",
+    scad_timeout: float = SCAD_TIMEOUT, scad_backend: str = DEFAULT_BACKEND,
 ) -> Path:  # fmt: skip
     """Write an uploaded file into a fresh folder under root and return the scene .yaml that
     uses it. capture: perception settings for captures (method, voxel, intrinsics, ...).
     calibration: a calibration file uploaded before a depth image (copied beside it and used as
     its intrinsics). scad_timeout: the OpenSCAD time limit of a .scad or .zip [s];
-    scad_backend: who renders it (a scad object's `backend:`, written only when not cgal).
+    scad_backend: who renders it (a scad object's `backend:`, written only when not the default,
+    auto).
 
     A .yaml is the scene itself; a .scad or mesh becomes a terrain object on a ground plane; a
     .zip holds a .scad (at its top level) with its includes and data files, or a capture with
@@ -88,7 +89,7 @@ def scene_from_upload(
             obj = {"capture": fname, **({"perception": capture} if capture else {})}
         else:
             obj = {"scad": scad_model(name, paths, folder), "timeout": scad_timeout}
-            obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
+            obj.update({"backend": scad_backend} if scad_backend != DEFAULT_BACKEND else {})
     elif suffix == ".ply" and _ply_has_faces(data):
         obj = {"mesh": fname}
     elif suffix in CAPTURE_SUFFIXES:
@@ -102,7 +103,7 @@ def scene_from_upload(
         obj = {"capture": fname, **({"perception": capture} if capture else {})}
     elif suffix == ".scad":
         obj = {"scad": fname, "timeout": scad_timeout}
-        obj.update({"backend": scad_backend} if scad_backend != "cgal" else {})
+        obj.update({"backend": scad_backend} if scad_backend != DEFAULT_BACKEND else {})
     else:
         obj = {"mesh": fname}
     is_capture = "capture" in obj
@@ -175,13 +176,13 @@ def prepare_upload_scene(scene_path: Path):
     plan; both at the centre, with the reason in world.notes, when none is found) and written
     back into the file, so batch workers and `roachplan trial` rebuild the same world without
     picking again. Returns the World (its notes say what was picked)."""
-    from roachplan.scenes import build_terrain_mesh, build_world, load_scene
+    from roachplan.scenes import build_terrain, build_world, load_scene
 
     raw = load_yaml(scene_path.read_bytes(), scene_path.name, SceneError)
     scene = load_scene(scene_path)
     # The same picking as the command line's: a model on a ground plane gets the ground round
     # it and start and goal at either end of it (scenes/_autopose.py).
-    world = build_world(scene, check_poses=False, mesh=build_terrain_mesh(scene))
+    world = build_world(scene, check_poses=False, terrain=build_terrain(scene))
     sc = world.scene
     filled = {}
     if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:
@@ -196,7 +197,8 @@ def prepare_upload_scene(scene_path: Path):
     return world
 
 
-RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold"}
+RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold",
+             "auto": "Manifold (or OpenSCAD where it must)"}
 """Who renders a model, by its `backend:`, as the page names it."""
 
 
@@ -297,6 +299,9 @@ PAGE_ADVICE = (
     (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
      r"at most ([0-9.]+)",
      r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
+    (r"render this model with `backend: cgal` \(--scad-backend cgal\), the openscad binary, or "
+     r"`backend: auto`, which picks it",
+     "set Scene → OpenSCAD backend to auto (or cgal) and load it again"),
     (r"(?:render this model with|use) `backend: cgal`(?: \(--scad-backend cgal\))?"
      r"(?:, the openscad binary)?",
      "set Scene → OpenSCAD backend to cgal (the openscad binary) and load it again"),

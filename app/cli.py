@@ -53,7 +53,8 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     result = run_trial(world, seed=seed, planner=planner)
-    _print_trial(result.to_json(), args.json)
+    # The notes (who rendered an OpenSCAD terrain, start and goal picked) go in the JSON too.
+    _print_trial({**result.to_json(), "notes": list(world.notes)}, args.json)
     return 0
 
 
@@ -226,7 +227,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     ]
     if args.json:
         out = {"scene": scene.name, "planner": planner.name, "seed": seed,
-               **path_settings(planner.turning_radius)}
+               **path_settings(planner.turning_radius), "notes": list(world.notes)}
         if args.count == 1 and rows:
             out.update(rows[0])
         out["paths"] = rows
@@ -368,6 +369,8 @@ def _cmd_scene_check(args: argparse.Namespace) -> int:
             print(f"FAIL {name}: {exc}")
             failed += 1
             continue
+        for note in world.notes:
+            print(f"roachplan: {name}: {note}", file=sys.stderr)
         m, sc = world.mesh, world.scene
         size = "x".join(f"{v:.2f}" for v in m.extents) if len(m.faces) else "-"
         print(
@@ -414,12 +417,15 @@ def _scene_inputs(scene) -> list:
 
 
 def _cmd_scene_build(args: argparse.Namespace) -> int:
-    from roachplan.scenes import build_terrain_mesh, load_scene
+    from roachplan.scenes import build_terrain, load_scene
 
     scene = load_scene(args.scene)
     out = check_output_file(args.output, suffixes=(".stl", ".obj", ".ply", ".glb"),
                             inputs=_scene_inputs(scene), kind=MESH_WRITTEN, force=args.force)  # fmt: skip
-    mesh = build_terrain_mesh(_scene_options(scene, args))
+    terrain = build_terrain(_scene_options(scene, args))
+    for note in terrain.notes:
+        print(f"roachplan: {note}", file=sys.stderr)
+    mesh = terrain.mesh
     if len(mesh.faces) == 0:
         raise SceneError(f"scene {args.scene!r} has no terrain objects, only a ground plane")
     _export_mesh(mesh, out)
@@ -972,10 +978,12 @@ def build_parser() -> argparse.ArgumentParser:
         """The OpenSCAD render's time limit and backend, as every command that renders takes."""
         q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
                        help="time limit of each OpenSCAD render (default: the scene's, else 600)")
-        q.add_argument("--scad-backend", choices=("cgal", "manifold"), default=None,
-                       help="who renders each OpenSCAD model: cgal (the openscad binary) or "
-                            "manifold (openscad-evaluator, faster on CSG-heavy models; refuses "
-                            "text() and surface()) (default: the scene's, else cgal)")  # fmt: skip
+        q.add_argument("--scad-backend", choices=("auto", "cgal", "manifold"), default=None,
+                       help="who renders each OpenSCAD model: auto (manifold unless the model "
+                            "uses something it renders differently, such as surface(), then "
+                            "the binary; a note says which and why), cgal (the openscad "
+                            "binary) or manifold (openscad-evaluator, faster on CSG-heavy "
+                            "models; refuses surface()) (default: the scene's, else auto)")  # fmt: skip
 
     p = sub.add_parser("scene", help="the scene library")
     scene_sub = p.add_subparsers(dest="scene_command", required=True)

@@ -161,7 +161,9 @@ def check_same_world(manifest: dict, world: World, where: Path) -> None:
         raise ExperimentError(
             f"{where}: the scene {manifest['scene']['file']} now builds a different terrain "
             f"mesh (sha256 {now[:12]}..., recorded {recorded[:12]}...): results would not be "
-            f"comparable; restore the scene's files or start a new --out folder"
+            f"comparable; restore the scene's files or start a new --out folder (an experiment "
+            f"started before OpenSCAD's default backend became auto ran on the openscad "
+            f"binary's meshes: its scad objects continue with `backend: cgal`)"
         )
 
 

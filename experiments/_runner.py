@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from roachplan.scenes import build_world
+from roachplan.scenes import build_world, with_scad_backend
 
 from ._errors import ExperimentError, OutputError
 from ._manifest import (
@@ -29,6 +29,7 @@ from ._manifest import (
     check_same_spec,
     check_same_world,
     is_experiment,
+    mesh_hash,
     new_manifest,
     read_manifest,
     write_manifest,
@@ -326,6 +327,11 @@ def rerun_trial(out: Path, index: int) -> tuple[dict, dict | None, list[str]]:
         )  # fmt: skip
     spec = spec_from_manifest(manifest, out / MANIFEST)
     world = build_world(spec.scene_with_settings())
+    if mesh_hash(world) != manifest["scene"]["mesh_sha256"]:
+        # Experiments from before OpenSCAD's default backend was auto ran on the binary's
+        # meshes: the same surface in other triangles, which a bit-for-bit re-run follows.
+        binary = build_world(with_scad_backend(spec.scene_with_settings(), "cgal"))
+        world = binary if mesh_hash(binary) == manifest["scene"]["mesh_sha256"] else world
     check_same_world(manifest, world, out)
     entry = entries[index]
     result = run_trial(world, seed=entry["seed"])

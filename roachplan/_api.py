@@ -29,16 +29,23 @@ Pose = tuple[float, float, float]
 """(x [m], y [m], yaw [rad]) in the world frame."""
 
 
-def load(scene: str | os.PathLike, *, scale: float | None = None) -> World:
+def load(
+    scene: str | os.PathLike, *, scale: float | None = None, scad_backend: str | None = None
+) -> World:
     """A world ready to plan and drive on: a library scene's name ("double_bridge"), a scene
     .yaml, or any terrain file (a capture: .pcd .ply .xyz .npy, a 16-bit depth PNG, a ROS bag;
     a mesh; a .scad). A terrain file's start and goal are picked where the robot can stand
-    (`world.notes` says how). scale: multiplies the terrain (0.001 for a model in millimetres)."""
-    from roachplan.scenes import build_world, load_scene, scaled_scene
+    (`world.notes` says how, and who rendered an OpenSCAD model). scale: multiplies the
+    terrain (0.001 for a model in millimetres). scad_backend: who renders every OpenSCAD
+    model, `--scad-backend` ("auto", "cgal" or "manifold"; default: each object's `backend:`,
+    else "auto")."""
+    from roachplan.scenes import build_world, load_scene, scaled_scene, with_scad_backend
 
     loaded = load_scene(os.fspath(scene))
     if scale is not None:
         loaded = scaled_scene(loaded, scale)
+    if scad_backend is not None:
+        loaded = with_scad_backend(loaded, scad_backend)
     return build_world(loaded)
 
 

@@ -14,9 +14,12 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "SceneError": "._errors",
         "looks_like_millimetres": "._mesh",
         "BACKENDS": "._openscad",
+        "DEFAULT_BACKEND": "._openscad",
         "DEFAULT_TIMEOUT": "._openscad",
         "MAX_TIMEOUT": "._openscad",
         "render_scad": "._openscad",
+        "render_scad_result": "._openscad",
+        "ScadRender": "._openscad",
         "LIBRARY": "._library",
         "MAX_SEED": "._library",
         "MESH_SUFFIXES": "._scene",
@@ -32,6 +35,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "resolve_in_library": "._scene",
         "resolve_scene": "._scene",
         "World": "._world",
+        "Terrain": "._world",
+        "build_terrain": "._world",
         "build_terrain_mesh": "._world",
         "build_world": "._world",
         "footprint_of": "._world",
@@ -51,9 +56,12 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._library import list_scenes as list_scenes
     from ._mesh import looks_like_millimetres as looks_like_millimetres
     from ._openscad import BACKENDS as BACKENDS
+    from ._openscad import DEFAULT_BACKEND as DEFAULT_BACKEND
     from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
     from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
+    from ._openscad import ScadRender as ScadRender
     from ._openscad import render_scad as render_scad
+    from ._openscad import render_scad_result as render_scad_result
     from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
     from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
     from ._scene import Scene as Scene
@@ -64,7 +72,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._scene import resolve_in_library as resolve_in_library
     from ._scene import resolve_scene as resolve_scene
     from ._scene import terrain_file_scene as terrain_file_scene
+    from ._world import Terrain as Terrain
     from ._world import World as World
+    from ._world import build_terrain as build_terrain
     from ._world import build_terrain_mesh as build_terrain_mesh
     from ._world import build_world as build_world
     from ._world import footprint_of as footprint_of

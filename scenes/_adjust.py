@@ -38,7 +38,8 @@ def with_scad_timeout(scene: Scene, timeout: float) -> Scene:
 
 
 def with_scad_backend(scene: Scene, backend: str) -> Scene:
-    """The scene with every OpenSCAD object rendered by backend ("cgal" or "manifold")."""
+    """The scene with every OpenSCAD object rendered by backend ("auto", "cgal" or
+    "manifold")."""
     return _every_scad(scene, "--scad-backend", backend_problem(backend), backend=backend)
 
 

@@ -1,4 +1,6 @@
-"""Render OpenSCAD models with the real `openscad` binary: confined, time-limited, cached.
+"""Render OpenSCAD models: confined, time-limited, cached; by the real `openscad` binary or by
+openscad-evaluator on Manifold (BACKENDS: by default `auto`, the evaluator where it renders the
+model as the binary does, else the binary; render_scad_result says which, and why).
 
 A model may only read files in its own folder. Before OpenSCAD runs, the model and everything it
 includes are scanned: `include <f>`, `use <f>` and every file-reading call (`import`, `surface`,
@@ -13,6 +15,7 @@ Where the system cannot make the jail, rendering is refused unless $ROACHPLAN_UN
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import json
@@ -36,6 +39,7 @@ from roachplan.perception import short_repr
 
 from . import _jail
 from ._errors import SceneError
+from ._manifold_main import FACTS_SUFFIX
 
 RENDER_PROGRESS: ContextVar[Callable[[str, float, float], None] | None] = ContextVar(
     "RENDER_PROGRESS", default=None
@@ -50,26 +54,42 @@ DEFAULT_TIMEOUT = 600.0
 """Wall-time limit of one OpenSCAD render [s] unless a scene sets its own: ordinary public
 models (text(), includes, a few hundred CSG operations) take 2-4 minutes in OpenSCAD 2021.01's
 CGAL, so a minute stopped most of them."""
-Backend = Literal["cgal", "manifold"]
-BACKENDS: tuple[Backend, ...] = ("cgal", "manifold")
+Backend = Literal["auto", "cgal", "manifold"]
+BACKENDS: tuple[Backend, ...] = ("auto", "cgal", "manifold")
 """Who renders a model: "cgal", the real `openscad` binary (Debian's 2021.01, CGAL: the
-reference, and the default); "manifold", the Python evaluator `openscad-evaluator` on the
-Manifold library, 8-11x faster on CSG-heavy models (benchmarks/bench_openscad.py) but refused
-on the constructs where its mesh differs (MANIFOLD_DIFFERS)."""
+reference); "manifold", the Python evaluator `openscad-evaluator` on the Manifold library
+(scenes/_manifold_main.py), 3-11x faster on CSG-heavy and text() models
+(benchmarks/bench_openscad.py) and refused on the constructs where its mesh differs
+(MANIFOLD_DIFFERS); "auto" (the default), manifold unless the model uses one of those, or the
+evaluator refuses it, fails on it or leaves solids touching face to face apart: then the
+binary (render_scad_result says which, and why)."""
+DEFAULT_BACKEND: Backend = "auto"
 MANIFOLD_DIFFERS = {
-    "text": "its glyphs are placed up to 1.6 mm apart from OpenSCAD's",
     "surface": "its base is at z = 0, not 1 below the lowest height as in OpenSCAD",
 }
 """Constructs whose mesh under backend manifold differs from the reference binary's, measured
-by benchmarks/bench_openscad.py (construct -> how): a model calling one is refused."""
+by benchmarks/bench_openscad.py (construct -> how): a model calling one renders with the
+binary under auto, and is refused under manifold."""
 MANIFOLD_CHECKED = {
-    "polyhedron": "a polyhedron with its faces wound the other way (counter-clockwise seen "
-    "from outside) stays an open shell there, where OpenSCAD makes a solid of it",
+    "polyhedron": "a polyhedron that is open, or wound both ways, is no solid there, while "
+    "the binary may still export it as it is",
 }
 """Constructs that differ only sometimes: allowed, but a model calling one must come out
-closed and outward (a polyhedron wound as OpenSCAD asks agrees; one wound the other way does
-not). Found by the scan, not evaluated: a model whose polyhedra are all solid but that also
-makes open geometry (touching solids) is refused too, and renders with backend cgal."""
+closed and outward (a polyhedron wound either way throughout agrees: _manifold_main.py turns
+one wound the other way outward). Found by the scan, not evaluated: a model whose polyhedra
+are all solid but that also makes open geometry (touching solids) fails the check too, and
+renders with the binary (auto) or is refused (manifold)."""
+TEXT_DEVIATION = 1.5e-3
+"""How far a text() glyph drawn by backend manifold may sit from the binary's, per unit of
+the size given to text() [model units per model unit]. Measured: benchmarks/bench_openscad.py
+--text (2 strings of 15 and 54 glyphs, sizes 1 to 100, every halign and valign, DejaVu Sans -
+fontconfig's answer to OpenSCAD's Liberation Sans here - and stand-ins for DejaVu Sans Mono
+Bold, Futura Bold and Liberation Serif): at most 1.01e-3 x size (0.10 at size 100), not growing
+with the string's length; a public tile's labels (size 3, spacing 1.1, a bold stand-in),
+1.1e-3 x size; the limit leaves a third more. What is left is FreeType's hinting in the
+binary, which the evaluator does not reproduce; before _manifold_main.py's text patch (the
+evaluator's own Liberation Sans, HarfBuzz's positions unscaled) 14 glyphs at size 10 sat up to
+2.5 apart, more the longer the string."""
 MAX_TIMEOUT = 24 * 3600.0
 """Largest render time limit accepted [s]; past it the OS timer overflows, and no render that
 long is meant."""
@@ -780,7 +800,8 @@ def backend_problem(backend: object) -> str:
     """Why backend is not a render backend, or "" if it is."""
     if backend not in BACKENDS:
         return (
-            f"expected one of {', '.join(BACKENDS)} (cgal: the openscad binary, the reference; "
+            f"expected one of {', '.join(BACKENDS)} (auto: manifold where it renders the model "
+            f"as the binary does, else the binary; cgal: the openscad binary, the reference; "
             f"manifold: openscad-evaluator, faster on CSG-heavy models), got {short_repr(backend)}"
         )
     return ""
@@ -800,6 +821,17 @@ def _first_call(scad_file: Path, names) -> tuple[Path, int, str] | None:
     return None
 
 
+def _manifold_differs(scad_file: Path) -> str:
+    """What in the model (or a file it includes or uses) backend manifold renders differently
+    from the binary (MANIFOLD_DIFFERS), where and how; "" if nothing."""
+    found = _first_call(scad_file, MANIFOLD_DIFFERS)
+    if found is None:
+        return ""
+    path, line, name = found
+    return f"{name}() ({path.name}, line {line}) is rendered differently by manifold " \
+           f"({MANIFOLD_DIFFERS[name]})"  # fmt: skip
+
+
 def manifold_problem(scad_file: Path) -> str:
     """Why backend manifold must not render this model, or "" if it may: the model, or a file
     it includes or uses, calls a construct of MANIFOLD_DIFFERS."""
@@ -810,29 +842,88 @@ def manifold_problem(scad_file: Path) -> str:
     return (
         f"{path}, line {line}: {name}() is not rendered alike by backend manifold "
         f"({MANIFOLD_DIFFERS[name]}); render this model with `backend: cgal` "
-        f"(--scad-backend cgal), the openscad binary"
+        f"(--scad-backend cgal), the openscad binary, or `backend: auto`, which picks it"
     )
 
 
 def _manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
-    """Why the evaluator's mesh of a model calling a MANIFOLD_CHECKED construct cannot stand
-    for the binary's, or "" if it can: a polyhedron the binary turns into a solid must come out
-    closed and outward. Other models are not checked: the binary's own mesh of touching solids
-    is open too (voxel_wall), so openness alone is no disagreement."""
-    found = _first_call(scad_file, MANIFOLD_CHECKED)
-    if found is None:
-        return ""
+    """Why the evaluator's mesh of the model cannot stand for the binary's, or "" if it can:
+    solids that touch face to face kept apart (Manifold treats touching as not overlapping,
+    so two walls stay back to back inside the solid; the binary's CGAL merges them: on
+    plywood_bridge, whose blocks, plank and ramps touch, 151 of 20,000 surface samples lay on
+    such walls, up to 6.7 cm from the binary's surface); and, for a model calling a
+    MANIFOLD_CHECKED construct, a mesh that is not closed and outward. Openness alone is not
+    checked elsewhere: the binary's own mesh of solids touching along an edge is open too
+    (voxel_wall)."""
     import trimesh
 
     m = trimesh.load(mesh, force="mesh")
-    if m.is_watertight and m.is_winding_consistent and m.volume > 0:
+    where = _touching_walls(m)
+    if where is not None:
+        x, y, z = (f"{c:.4g}" for c in where)
+        return (
+            f"{scad_file}: solids that touch face to face (near [{x}, {y}, {z}]) stay apart "
+            f"in backend manifold, walls inside the solid, where the binary merges them; "
+            f"render this model with `backend: cgal` (--scad-backend cgal), the openscad "
+            f"binary, or `backend: auto`, which picks it"
+        )
+    found = _first_call(scad_file, MANIFOLD_CHECKED)
+    if found is None or (m.is_watertight and m.is_winding_consistent and m.volume > 0):
         return ""
     path, line, name = found
     return (
         f"{path}, line {line}: {name}(): backend manifold made an open or inside-out mesh "
-        f"({MANIFOLD_CHECKED[name]}), unlike OpenSCAD; render this model with `backend: cgal` "
-        f"(--scad-backend cgal), the openscad binary"
+        f"({MANIFOLD_CHECKED[name]}); render this model with `backend: cgal` "
+        f"(--scad-backend cgal), the openscad binary, or `backend: auto`, which picks it"
     )
+
+
+def _touching_walls(mesh) -> tuple[float, float, float] | None:
+    """A point [model units] where faces of mesh lie on one another back to back over some
+    area (solids touching face to face, kept apart), or None if none do.
+    Faces are grouped by their plane (normal and offset, rounded); a plane met from both
+    sides is checked for overlap in 2D. Faces merely meeting at an edge do not count."""
+    import numpy as np
+
+    if len(mesh.faces) == 0:
+        return None
+    size = float(max(mesh.extents)) or 1.0
+    n, c = mesh.face_normals, mesh.triangles_center
+    d = np.einsum("ij,ij->i", n, c)
+    keys = np.column_stack([np.round(n * 1e4), np.round(d / (1e-6 * size))]).astype(np.int64)
+    groups: dict[tuple, list[int]] = {}
+    for k, key in enumerate(map(tuple, keys)):
+        groups.setdefault(key, []).append(k)
+    for key, faces in groups.items():
+        other = groups.get(tuple(-v for v in key))
+        if other is None or key < tuple(-v for v in key):
+            continue
+        where = _overlap(mesh, n[faces[0]], faces, other, min_area=1e-8 * size * size)
+        if where is not None:
+            return where
+    return None
+
+
+def _overlap(mesh, normal, faces: list[int], other: list[int], min_area: float):
+    """Where two sets of coplanar faces overlap by more than min_area [model units^2], in 3D,
+    or None."""
+    import numpy as np
+    from shapely import Polygon, unary_union
+
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+
+    def region(ids):
+        tris = mesh.triangles[ids]
+        return unary_union([Polygon(np.column_stack([t @ u, t @ w])).buffer(0) for t in tris])
+
+    common = region(faces).intersection(region(other))
+    if common.area <= min_area:
+        return None
+    p = common.representative_point()
+    offset = float(mesh.triangles[faces[0]][0] @ normal)
+    return tuple(float(v) for v in p.x * u + p.y * w + offset * np.asarray(normal))
 
 
 def _manifold_distributions() -> list:
@@ -875,7 +966,9 @@ def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
     evaluator in the jail: the base Python program (not the venv's link to it) with its
     libraries and standard library, and, of site-packages, only the files of the evaluator's
     distributions (each package folder or module, read-only) and the system libraries their
-    compiled modules load."""
+    compiled modules load; and, for text(), fontconfig's `fc-match` with its libraries and
+    the fonts and font settings the binary's jail shows (_RUNTIME_DATA), so that the evaluator
+    asks for a font where the binary does and gets the same one (_manifold_main.py)."""
     python = os.path.realpath(getattr(sys, "_base_executable", sys.executable))
     # The base interpreter's standard library (its lib-dynload inside), not a venv's folders.
     stdlib = os.path.realpath(os.path.dirname(os.__file__))
@@ -899,10 +992,12 @@ def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
             out = ""
         # A module that ldd cannot read (not dynamic) only makes it exit 1; the rest is listed.
         libraries |= set(re.findall(r"(?:=>\s*|^\s*)(/\S+)\s+\(0x", out, re.M))
+    fc_match = shutil.which("fc-match")
+    fonts = [fc_match, *_program_libraries(fc_match), *_RUNTIME_DATA] if fc_match else []
     ro: dict[str, str] = {}
     links: dict[str, str] = {}
     for path in [python, *sorted(libraries), stdlib, *sorted(shown), str(_MANIFOLD_MAIN),
-                 "/dev/null", "/etc/ld.so.cache"]:  # fmt: skip
+                 "/dev/null", "/etc/ld.so.cache", *fonts]:  # fmt: skip
         _show(path, ro, links)
     folders = [p for p in ro if os.path.isdir(p)]
 
@@ -926,25 +1021,17 @@ def _manifold_argv(model: str, target: str) -> tuple[list[str], tuple[dict, dict
             target, "--export-format", "binstl"], (ro, links)  # fmt: skip
 
 
-def _check_backend(scad_file: Path, backend: str, mesh: Path | None = None) -> None:
-    """Raise SceneError if backend is no backend, or if backend manifold must not render this
-    model (manifold_problem) or, given its mesh, made one unlike the binary's
-    (_manifold_mesh_problem)."""
-    if backend_problem(backend):
-        raise SceneError(f"{scad_file}: backend: {backend_problem(backend)}")
-    if backend == "manifold":
-        problem = manifold_problem(scad_file) if mesh is None else _manifold_mesh_problem(
-            scad_file, mesh
-        )
-        if problem:
-            raise SceneError(problem)
+def _main_digest() -> str:
+    """A digest of the evaluator's entry point, whose patches shape its meshes: a changed
+    patch renders again rather than reuse a mesh the old one made."""
+    return hashlib.sha256(_MANIFOLD_MAIN.read_bytes()).hexdigest()[:16]
 
 
 def _backend_key(backend: str, defines: list[str]) -> bytes:
     """The cache key's part that names who renders, with which overrides."""
     if backend == "cgal":  # the key as before backends existed: cached renders stay valid
         return json.dumps([defines, openscad_version()]).encode()
-    return json.dumps([defines, manifold_version(), backend]).encode()
+    return json.dumps([defines, manifold_version(), backend, _main_digest()]).encode()
 
 
 def _render_argv(
@@ -984,26 +1071,212 @@ def _manifold_input(scad_file: Path, params: Mapping[str, ScadValue], work: Path
     return f"{JAIL_OUT}/{wrapper.name}" if jail else str(wrapper)
 
 
-def render_scad(
+# -- rendering: one backend, or auto -------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScadRender:
+    """One render of an OpenSCAD model: its mesh and who made it, for the note a user reads."""
+
+    model: Path
+    """The .scad file rendered."""
+    path: Path
+    """The rendered mesh in the render cache: a binary STL [model units]."""
+    backend: Literal["cgal", "manifold"]
+    """Who rendered it: the openscad binary or openscad-evaluator."""
+    asked: Backend
+    """The backend asked for ("auto" chooses one of the two)."""
+    why: str = ""
+    """Why auto left manifold for the binary ("" otherwise)."""
+    seconds: float | None = None
+    """Wall time of the render [s], process start included; None if not recorded."""
+    cached: bool = False
+    """Taken from the render cache (seconds is then the first render's)."""
+    text_size: float = 0.0
+    """Largest size given to text() [model units] when manifold drew text, else 0 (a model
+    that scale()s its text moves glyphs by that much more than text_deviation says)."""
+    face_spread: float = 0.0
+    """Largest spread across its plane [model units] of a polyhedron face of more than four
+    corners that is not flat, when manifold cut it into triangles (maybe otherwise than the
+    binary: the two surfaces lie within it), else 0."""
+
+    @property
+    def text_deviation(self) -> float:
+        """How far a glyph may sit from the binary's [model units] (TEXT_DEVIATION)."""
+        return TEXT_DEVIATION * self.text_size if self.backend == "manifold" else 0.0
+
+    def note(self, scale: float = 1.0) -> str:
+        """Who rendered the model, why, in how long, and what that may change: e.g.
+        "tile.scad: rendered with manifold (openscad-evaluator 1.8.1, manifold3d 3.5.4) in
+        12 s". scale: the object's largest scale factor [m per model unit], to say a text()
+        deviation in metres of terrain."""
+        took = "" if self.seconds is None else f" in {_seconds_text(self.seconds)}"
+        took += " (cached)" if self.cached else ""
+        if self.backend == "cgal":
+            why = self.why or ("backend: cgal asked for" if self.asked == "cgal" else "")
+            return f"{self.model.name}: rendered with the openscad binary{took}" + (
+                f": {why}" if why else "")  # fmt: skip
+        text = f"{self.model.name}: rendered with manifold ({manifold_version()}){took}"
+        if self.text_size > 0:
+            dev = self.text_deviation
+            text += (
+                f"; text(): glyphs may sit up to {dev:.2g} model units from OpenSCAD's "
+                f"({TEXT_DEVIATION:.2%} of their size, up to {self.text_size:.3g} here), "
+                f"{dev * scale * 1000:.2g} mm of terrain at scale {scale:g}"
+            )
+        if self.face_spread > 0:
+            text += (
+                f"; polyhedron(): a face of more than 4 corners, up to {self.face_spread:.2g} "
+                f"model units out of its plane, may be cut into triangles otherwise than by "
+                f"OpenSCAD: up to {self.face_spread * scale * 1000:.2g} mm of terrain"
+            )
+        return text
+
+
+def _seconds_text(seconds: float) -> str:
+    return f"{seconds:.1f} s" if seconds < 10 else f"{seconds:.0f} s"
+
+
+class _BackendFailed(SceneError):
+    """A render that left no usable mesh. fallback: auto may let the binary try after backend
+    manifold (the evaluator refused the model, failed on it or made a mesh unlike the
+    binary's), not after the time limit (nothing left of it) or when no jail can be made (the
+    binary needs one too). remember: the failure is the model's own, so auto goes straight to
+    the binary next time (until the model, its files or the evaluator change). why: the short
+    reason auto's note gives."""
+
+    def __init__(self, message: str, *, fallback: bool = False, remember: bool = False,
+                 why: str = "") -> None:  # fmt: skip
+        super().__init__(message)
+        self.fallback, self.remember, self.why = fallback, remember, why
+
+
+def _cache_path(backend: str, scad_file: Path, params: Mapping[str, ScadValue],
+                deps: list[Path]) -> Path:  # fmt: skip
+    """Where backend's mesh of the model is cached: a key made of the model's text, every file
+    it reads, the overrides and who renders (program and versions)."""
+    root = scad_file.parent
+    defines = [f"{k}={_scad_literal(v)}" for k, v in sorted(params.items())]
+    digest = hashlib.sha256()
+    for f in (scad_file, *deps):
+        digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    digest.update(_backend_key(backend, defines))
+    tag = "" if backend == "cgal" else f"-{backend}"
+    return cache_dir() / f"{scad_file.stem}{tag}-{digest.hexdigest()[:32]}.stl"
+
+
+_FACTS = ".json"
+"""Beside a cached mesh: how long its render took and what it found (_manifold_main.FACTS)."""
+_REFUSED = ".refused"
+"""Beside where backend manifold's mesh would be cached: why it could not render the model,
+so that auto goes straight to the binary."""
+
+
+def _render_with(
+    backend: Literal["cgal", "manifold"], scad_file: Path, params: Mapping[str, ScadValue],
+    deps: list[Path], *, timeout: float, memory: int, limit: float,
+) -> ScadRender:  # fmt: skip
+    """backend's render of the model, from the cache or run now in the jail (raises
+    _BackendFailed). timeout: seconds this run may take; limit: the object's time limit, for
+    the message when it is hit."""
+    out = _cache_path(backend, scad_file, params, deps)
+    if out.is_file():
+        facts = _read_facts(out.with_suffix(_FACTS))
+        return ScadRender(model=scad_file, path=out, backend=backend, asked=backend,
+                          seconds=facts.get("seconds"), cached=True, **_found(facts))  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
+    who = "OpenSCAD" if backend == "cgal" else "backend manifold"
+    # Render into a fresh folder beside the cache and rename: a killed render leaves no
+    # half-written mesh behind under the final name.
+    work = Path(tempfile.mkdtemp(dir=out.parent, prefix=".render-"))
+    try:
+        (work / "out").mkdir()
+        jail = _jail_wanted()
+        argv, layout = _render_argv(backend, scad_file, params, work, jail)
+        cmd = confined(argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail,
+                       layout=layout)  # fmt: skip
+        t0 = time.monotonic()
+        try:
+            proc = _run(cmd, cwd=scad_file.parent, timeout=timeout, name=scad_file.name)
+        except subprocess.TimeoutExpired:
+            raise _BackendFailed(
+                f"{scad_file}: {who} did not finish within its time limit of {limit:g} s "
+                f"and was stopped; a slow model may take more: give this terrain object "
+                f"`timeout: SECONDS` (or --scad-timeout SECONDS), at most {MAX_TIMEOUT:.0f}"
+            ) from None
+        seconds = time.monotonic() - t0
+        mesh = work / "out" / "mesh.stl"
+        if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
+            why = _failure(scad_file, proc, memory=memory, timeout=limit, jail=jail)
+            own = proc.returncode != _jail.SETUP_FAILED and not _limit_hit(
+                proc.returncode, proc.stderr, memory=memory, timeout=limit)  # fmt: skip
+            raise _BackendFailed(f"{scad_file}: {_named(why, backend)}", fallback=own,
+                                 remember=own, why=_short_failure(proc.stderr, why))  # fmt: skip
+        if backend == "manifold":
+            problem = _manifold_mesh_problem(scad_file, mesh)
+            if problem:
+                raise _BackendFailed(problem, fallback=True, remember=True,
+                                     why=problem.split(": ", 1)[1].split(";")[0])  # fmt: skip
+        facts = _read_facts(mesh.with_name(mesh.name + FACTS_SUFFIX))
+        facts["seconds"] = round(seconds, 3)
+        # The facts first: a mesh under its final name always has them beside it.
+        out.with_suffix(_FACTS).write_text(json.dumps(facts))
+        mesh.replace(out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return ScadRender(model=scad_file, path=out, backend=backend, asked=backend,
+                      seconds=seconds, **_found(facts))  # fmt: skip
+
+
+def _read_facts(path: Path) -> dict:
+    try:
+        facts = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return facts if isinstance(facts, dict) else {}
+
+
+def _found(facts: dict) -> dict[str, float]:
+    """ScadRender's fields from what the evaluator found (_manifold_main.FACTS)."""
+    out = {}
+    for key in ("text_size", "face_spread"):
+        value = facts.get(key, 0.0)
+        out[key] = float(value) if isinstance(value, int | float) and math.isfinite(value) else 0.0
+    return out
+
+
+def _short_failure(stderr: str, why: str) -> str:
+    """The first error line of a failed render, without its advice, for auto's note."""
+    lines = [line for line in stderr.splitlines() if "ERROR" in line] or why.splitlines()[-1:]
+    line = re.sub(r"^.*?ERROR:\s*", "", lines[0] if lines else "it failed")
+    line = line.split("; render this")[0].replace(f"{JAIL_MODEL}/", "")
+    return line if len(line) <= 200 else line[:197] + "..."
+
+
+def render_scad_result(
     scad_file: Path,
     params: Mapping[str, ScadValue] | None = None,
     *,
     timeout: float = DEFAULT_TIMEOUT,
     memory: int | None = None,
-    backend: Backend = "cgal",
-) -> Path:
-    """Render scad_file with `-D name=value` overrides to an STL and return its cached path.
+    backend: Backend = DEFAULT_BACKEND,
+) -> ScadRender:
+    """Render scad_file with `-D name=value` overrides to an STL (cached) and say who did it.
 
-    The cache key covers the model text, the files it reads, the overrides and the OpenSCAD
-    version, so a changed parameter or height map renders again and an unchanged model never
-    does. OpenSCAD runs in the jail (module docstring); a render past `timeout` seconds, or
-    past `memory` bytes of memory (default: memory_limit()), is stopped with a SceneError
-    that says how to allow more. OpenSCAD's own error text is passed through when the model
-    is wrong.
+    The cache key covers the model text, the files it reads, the overrides and the program that
+    renders (backend and versions), so a changed parameter or height map renders again and an
+    unchanged model never does. Every render runs in the jail (module docstring); one past
+    `timeout` seconds, or past `memory` bytes of memory (default: memory_limit()), is stopped
+    with a SceneError that says how to allow more. OpenSCAD's own error text is passed through
+    when the model is wrong.
 
     backend (BACKENDS): "cgal" runs the openscad binary; "manifold" runs openscad-evaluator in
-    the same jail, under the same limits and cache (the backend and its versions in the key),
-    and refuses a model that uses a construct it renders differently (manifold_problem).
+    the same jail, under the same limits, and refuses a model that uses a construct it renders
+    differently (manifold_problem); "auto" runs manifold unless the model uses such a
+    construct, and the binary then, or when the evaluator refuses the model, fails on it or
+    makes a mesh unlike the binary's (the binary gets what is left of the time limit); a model
+    the evaluator could not render goes straight to the binary next time. Only the time limit
+    and a missing jail are not retried with the binary.
     """
     scad_file = Path(scad_file).resolve()
     if not scad_file.is_file():
@@ -1011,6 +1284,8 @@ def render_scad(
     problem = timeout_problem(timeout)
     if problem:
         raise SceneError(f"{scad_file}: render time limit: {problem}")
+    if backend_problem(backend):
+        raise SceneError(f"{scad_file}: backend: {backend_problem(backend)}")
     memory = memory_limit() if memory is None else memory
     params = dict(params or {})
     known = scad_variables(scad_file)
@@ -1019,40 +1294,58 @@ def render_scad(
         if problem:
             raise SceneError(f"{scad_file}: parameter {problem}")
     deps = scad_dependencies(scad_file)
-    _check_backend(scad_file, backend)
-    root = scad_file.parent
-    defines = [f"{k}={_scad_literal(v)}" for k, v in sorted(params.items())]
-    digest = hashlib.sha256()
-    for f in (scad_file, *deps):
-        digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
-    digest.update(_backend_key(backend, defines))
-    tag = "" if backend == "cgal" else f"-{backend}"
-    out = cache_dir() / f"{scad_file.stem}{tag}-{digest.hexdigest()[:32]}.stl"
-    if out.is_file():
-        return out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    # Render into a fresh folder beside the cache and rename: a killed render leaves no
-    # half-written mesh behind under the final name.
-    work = Path(tempfile.mkdtemp(dir=out.parent, prefix=".render-"))
-    try:
-        (work / "out").mkdir()
-        jail = _jail_wanted()
-        argv, layout = _render_argv(backend, scad_file, params, work, jail)
-        cmd = confined(argv, root, work, memory=memory, cpu=timeout, jail=jail, layout=layout)
+    if backend == "manifold" and manifold_problem(scad_file):
+        raise SceneError(manifold_problem(scad_file))
+    job = {"scad_file": scad_file, "params": params, "deps": deps, "memory": memory,
+           "limit": timeout}  # fmt: skip
+    if backend != "auto":
+        return _render_with(backend, timeout=timeout, **job)
+    return _render_auto(job, timeout)
+
+
+def _render_auto(job: dict, timeout: float) -> ScadRender:
+    """Backend auto (render_scad_result): manifold, else the binary, saying why."""
+    why = _manifold_differs(job["scad_file"])
+    refused = None
+    if not why:
         try:
-            proc = _run(cmd, cwd=root, timeout=timeout, name=scad_file.name)
-        except subprocess.TimeoutExpired:
-            raise SceneError(
-                f"{scad_file}: OpenSCAD did not finish within its time limit of {timeout:g} s "
-                f"and was stopped; a slow model may take more: give this terrain object "
-                f"`timeout: SECONDS` (or --scad-timeout SECONDS), at most {MAX_TIMEOUT:.0f}"
-            ) from None
-        mesh = work / "out" / "mesh.stl"
-        if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
-            why = _failure(scad_file, proc, memory=memory, timeout=timeout, jail=jail)
-            raise SceneError(f"{scad_file}: {_named(why, backend)}")
-        _check_backend(scad_file, backend, mesh)
-        mesh.replace(out)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return out
+            refused = _cache_path("manifold", job["scad_file"], job["params"], job["deps"])
+        except SceneError as exc:  # the evaluator's packages are not installed
+            why = f"backend manifold is not available ({exc})"
+    if refused is not None:
+        refused = refused.with_suffix(_REFUSED)
+        if refused.is_file():
+            why = refused.read_text().strip() or "backend manifold could not render it before"
+    if not why:
+        t0 = time.monotonic()
+        try:
+            return dataclasses.replace(_render_with("manifold", timeout=timeout, **job),
+                                       asked="auto")  # fmt: skip
+        except _BackendFailed as exc:
+            if not exc.fallback:
+                raise
+            why = f"backend manifold could not render it alike: {exc.why}"
+            if exc.remember:
+                _write_atomic(refused, why)
+        timeout = max(timeout - (time.monotonic() - t0), 1.0)
+    return dataclasses.replace(_render_with("cgal", timeout=timeout, **job), asked="auto",
+                               why=why)  # fmt: skip
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def render_scad(
+    scad_file: Path,
+    params: Mapping[str, ScadValue] | None = None,
+    *,
+    timeout: float = DEFAULT_TIMEOUT,
+    memory: int | None = None,
+    backend: Backend = DEFAULT_BACKEND,
+) -> Path:
+    """The cached STL of render_scad_result (same arguments): the mesh alone."""
+    return render_scad_result(scad_file, params, timeout=timeout, memory=memory,
+                              backend=backend).path  # fmt: skip

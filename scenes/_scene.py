@@ -30,6 +30,7 @@ from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig, uncertaint
 from ._errors import SceneError
 from ._library import LIBRARY, MAX_SEED, library_names
 from ._openscad import (
+    DEFAULT_BACKEND,
     DEFAULT_TIMEOUT,
     Backend,
     backend_problem,
@@ -65,9 +66,10 @@ class TerrainObject:
     turns a model in millimetres into metres)."""
     timeout: float = DEFAULT_TIMEOUT
     """Time limit of the OpenSCAD render [s] (scad only)."""
-    backend: Backend = "cgal"
-    """Who renders the model (scad only): "cgal", the openscad binary (the reference), or
-    "manifold", openscad-evaluator (faster on CSG-heavy models; see _openscad.BACKENDS)."""
+    backend: Backend = DEFAULT_BACKEND
+    """Who renders the model (scad only): "auto" (manifold where it renders the model as the
+    binary does, else the binary), "cgal", the openscad binary (the reference), or "manifold",
+    openscad-evaluator (faster on CSG-heavy models; see _openscad.BACKENDS)."""
     key: str = "terrain[0]"
     """Where the object sits in its scene file, for error messages."""
     capture: CaptureSettings | None = None
@@ -414,7 +416,7 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     timeout = data.get("timeout", DEFAULT_TIMEOUT)
     if timeout_problem(timeout):
         raise ctx.fail(f"{key}.timeout", timeout_problem(timeout))
-    backend = data.get("backend", "cgal")
+    backend = data.get("backend", DEFAULT_BACKEND)
     if backend_problem(backend):
         raise ctx.fail(f"{key}.backend", backend_problem(backend))
     scale = _scale(ctx, data.get("scale", 1.0), f"{key}.scale")

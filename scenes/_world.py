@@ -27,7 +27,7 @@ from roachplan.sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
 from ._autopose import auto_bounds, pick_start_goal
 from ._errors import SceneError
 from ._mesh import clean_terrain_mesh, read_mesh, scaled_mesh
-from ._openscad import render_scad
+from ._openscad import render_scad_result
 from ._scene import Scene, TerrainObject
 
 HEIGHTFIELD_RESOLUTION = 0.01
@@ -64,7 +64,11 @@ class World:
     heightfield: HeightField
     robot: RobotConfig
     notes: tuple[str, ...] = ()
-    """What was chosen for the user (bounds, start and goal picked automatically)."""
+    """What was chosen for the user (who rendered each OpenSCAD model and why; bounds, start
+    and goal picked automatically)."""
+    renders: tuple[str, ...] = ()
+    """Of the notes, one per OpenSCAD object: who rendered it, why, and what that may change
+    (ScadRender.note), for the page's status line."""
 
     @functools.cached_property
     def footprint(self) -> Footprint:
@@ -112,16 +116,18 @@ def footprint_of(robot: RobotConfig) -> Footprint:
     )
 
 
-def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
-    """One terrain object's mesh, cleaned and placed in the world frame [m]."""
+def load_terrain_object(obj: TerrainObject, scene_path) -> tuple[trimesh.Trimesh, str]:
+    """One terrain object's mesh, cleaned and placed in the world frame [m], and for a .scad
+    object the note of who rendered it (ScadRender.note, at the object's scale), else ""."""
     label = f"{scene_path}: {obj.key}.{obj.kind}"
-    source = obj.source
+    source, note = obj.source, ""
     if obj.kind == "scad":
         try:
-            source = render_scad(source, dict(obj.params), timeout=obj.timeout,
-                                 backend=obj.backend)  # fmt: skip
+            rendered = render_scad_result(source, dict(obj.params), timeout=obj.timeout,
+                                          backend=obj.backend)  # fmt: skip
         except SceneError as exc:
             raise SceneError(f"{label}: {exc}") from None
+        source, note = rendered.path, rendered.note(scale=max(obj.scale))
     if obj.kind == "capture":
         try:
             raw = mesh_capture(source, obj.capture).mesh
@@ -139,28 +145,44 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> trimesh.Trimesh:
     transform[:3, :3] = quat_to_matrix(np.asarray(obj.orientation))
     transform[:3, 3] = obj.position
     mesh.apply_transform(transform)
-    return mesh
+    return mesh, note
 
 
-def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
-    """All terrain objects of a scene merged into one mesh, world frame [m] (maybe empty)."""
+@dataclass(frozen=True, eq=False)
+class Terrain:
+    """A scene's terrain objects built into one mesh, with what the user is told about it."""
+
+    mesh: trimesh.Trimesh
+    """Every terrain object, world frame [m] (maybe empty)."""
+    notes: tuple[str, ...] = ()
+    """One line per OpenSCAD object: who rendered it, why, and what that may change."""
+
+
+def build_terrain(scene: Scene) -> Terrain:
+    """All terrain objects of a scene merged into one mesh, world frame [m], with the notes of
+    their OpenSCAD renders."""
     if not scene.terrain:
-        return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-    meshes = [load_terrain_object(o, scene.path) for o in scene.terrain]
-    for obj, placed in zip(scene.terrain, meshes):
+        return Terrain(trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)))
+    built = [load_terrain_object(o, scene.path) for o in scene.terrain]
+    for obj, (placed, _) in zip(scene.terrain, built):
         problem = below_ground_problem(placed, scene.ground)
         if problem:
             raise SceneError(f"{scene.path}: {obj.key}: {problem}")
-    for m in meshes:  # every piece carries the same values, or concatenate drops them
+    for m, _ in built:  # every piece carries the same values, or concatenate drops them
         for key in VERTEX_VALUES:
             if key not in m.vertex_attributes:
                 m.vertex_attributes[key] = np.zeros(len(m.vertices))
         for key in FACE_VALUES:
             if key not in m.face_attributes:
                 m.face_attributes[key] = np.zeros(len(m.faces))
-    mesh = trimesh.util.concatenate(meshes)
+    mesh = trimesh.util.concatenate([m for m, _ in built])
     mesh.merge_vertices()
-    return mesh
+    return Terrain(mesh, tuple(note for _, note in built if note))
+
+
+def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
+    """All terrain objects of a scene merged into one mesh, world frame [m] (maybe empty)."""
+    return build_terrain(scene).mesh
 
 
 _RAISE_IT = "raise it with `position: [x, y, z]`, or give `ground: null` if it has its own floor"
@@ -203,15 +225,18 @@ def build_world(
     robot: RobotConfig | None = None,
     *,
     check_poses: bool = True,
-    mesh: trimesh.Trimesh | None = None,
+    terrain: Terrain | None = None,
 ) -> World:
     """Render/load the terrain and rasterise the planner's height field around the bounds;
     SceneError when the start or goal is not a place the robot can stand (unless check_poses
     is False: the app shows such a scene and says what is wrong with its markers).
-    mesh: the scene's terrain if already built (build_terrain_mesh), not to build it twice."""
+    terrain: the scene's terrain if already built (build_terrain), not to build it twice; its
+    notes (who rendered each OpenSCAD model) come first in the world's."""
     robot = robot or RobotConfig()
-    mesh = build_terrain_mesh(scene) if mesh is None else mesh
-    notes = [note] if (note := below_ground_note(mesh, scene.ground)) else []
+    terrain = build_terrain(scene) if terrain is None else terrain
+    mesh = terrain.mesh
+    notes = list(terrain.notes)
+    notes += [note] if (note := below_ground_note(mesh, scene.ground)) else []
     if scene.bounds is None:
         if len(mesh.faces) == 0:
             raise SceneError(f"{scene.path}: give bounds: the scene has no terrain to take them from")
@@ -243,7 +268,7 @@ def build_world(
         vertex_noise=mesh.vertex_attributes.get("height_noise"),
         overhead=OVERHEAD,
     )
-    world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot)
+    world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot, renders=terrain.notes)
     if scene.start is None:
         try:
             picked = pick_start_goal(world, seed=scene.seed)

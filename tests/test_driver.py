@@ -81,14 +81,16 @@ REFERENCE_DRIVES = Path(__file__).parent / "data" / "reference_drives.json"
 def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
     """Two raw PRM paths on double_bridge_rough driven by algorithms 1-2, recorded with the
     code from before the tracking driver existed (a scad scene: its terrain does not move when
-    perception changes, as a capture's does)."""
+    perception changes, as a capture's does). Recorded on the openscad binary's mesh, so
+    rendered by the binary: backend auto's manifold cuts the same surface into other
+    triangles, and a bit-for-bit drive follows the triangles."""
     import dataclasses
 
     from roachplan.experiments._trial import drive
-    from roachplan.scenes import build_world, load_scene
+    from roachplan.scenes import build_world, load_scene, with_scad_backend
 
     rec = json.loads(REFERENCE_DRIVES.read_text())["drives"][k]
-    world = build_world(load_scene(rec["scene"]))
+    world = build_world(with_scad_backend(load_scene(rec["scene"]), "cgal"))
     scene = world.scene
     world = dataclasses.replace(
         world, scene=dataclasses.replace(scene, driver=dataclasses.replace(scene.driver, kind="reference"))

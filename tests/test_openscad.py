@@ -39,7 +39,10 @@ def peaks(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
 
 
 def test_rough_bridge_bumps_follow_appendix_c2():
-    mesh = trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params()))
+    # The binary, the reference (test_scad_backend.py checks the default backend against it).
+    mesh = trimesh.load(
+        render_scad(LIBRARY / "double_bridge.scad", rough_params(), backend="cgal")
+    )
     assert mesh.is_watertight
     bumps = peaks(mesh)
     for side, max_height in (("left", 0.015), ("right", 0.010)):
@@ -61,9 +64,9 @@ def test_rough_bridge_renders_the_same_for_a_seed_and_differently_for_another(
     meshes = []
     for run, seed in enumerate((0, 0, 7)):
         monkeypatch.setenv("ROACHPLAN_CACHE", str(tmp_path / f"cache{run}"))
-        meshes.append(
-            trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed)))
-        )
+        meshes.append(trimesh.load(render_scad(
+            LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed), backend="cgal"
+        )))  # fmt: skip
     same, other = peaks(meshes[1]), peaks(meshes[2])
     first = peaks(meshes[0])
     for side in ("left", "right"):
@@ -150,13 +153,15 @@ def test_a_model_may_not_read_outside_its_folder(tmp_path, fresh_cache, files, e
     assert not list(fresh_cache.glob("*.stl"))
 
 
-def test_openscad_errors_are_passed_through(tmp_path, fresh_cache):
+@pytest.mark.parametrize("backend", ["cgal", "auto"])
+def test_openscad_errors_are_passed_through(tmp_path, fresh_cache, backend):
+    # auto: the evaluator fails on it too, and the binary's own words are the ones given.
     (tmp_path / "bad.scad").write_text("cube(1);\nsphere(;\n")
     with pytest.raises(
         SceneError,
         match=r"bad\.scad: OpenSCAD failed:\nERROR: Parser error: syntax error in file bad\.scad, line 2",
     ):
-        render_scad(tmp_path / "bad.scad")
+        render_scad(tmp_path / "bad.scad", backend=backend)
 
 
 def test_an_unknown_parameter_names_the_models_variables():
@@ -176,7 +181,7 @@ def test_a_render_past_its_time_limit_is_killed(tmp_path, fresh_cache):
     with pytest.raises(
         SceneError, match=r"slow\.scad: OpenSCAD did not finish within its time limit of 1 s"
     ):
-        render_scad(scad, timeout=1.0)
+        render_scad(scad, timeout=1.0, backend="cgal")
     running = subprocess.run(
         ["pgrep", "-f", str(scad)], capture_output=True, text=True, check=False
     )
