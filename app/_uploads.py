@@ -198,7 +198,7 @@ def prepare_upload_scene(scene_path: Path):
 
 
 RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold",
-             "auto": "Manifold (or OpenSCAD where it must)"}
+             "auto": "Manifold or, where it must, OpenSCAD"}
 """Who renders a model, by its `backend:`, as the page names it."""
 
 

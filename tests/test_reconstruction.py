@@ -13,7 +13,6 @@ import pytest
 import trimesh
 from roachplan.perception import (
     PRESETS,
-    MeshingConfig,
     NoiseModel,
     capture_settings,
     load_capture,

@@ -108,12 +108,13 @@ def test_the_announcement_says_what_is_really_done_with_each_upload(tmp_path):
                   "example010.dat": (REAL / "openscad" / "example010.dat").read_bytes()})  # fmt: skip
     cases = {
         "room.zip": (capture, "upload: room.zip: reading and meshing the capture depth_154.png"),
-        "terrain.zip": (model, "upload: terrain.zip: rendering example010.scad with OpenSCAD "
-                               "(limit 120 s)"),
+        "terrain.zip": (model, "upload: terrain.zip: rendering example010.scad with Manifold or, "
+                               "where it must, OpenSCAD (limit 120 s)"),
         "depth_154.png": ((rtab / "depth_154.png").read_bytes(),
                           "Reading and meshing the capture depth_154.png"),
         "example010.scad": ((REAL / "openscad" / "example010.scad").read_bytes(),
-                            "Rendering example010.scad with OpenSCAD (limit 120 s)"),
+                            "Rendering example010.scad with Manifold or, where it must, OpenSCAD "
+                            "(limit 120 s)"),
     }
     for name, (data, said) in cases.items():
         path = scene_from_upload(name, data, tmp_path, {}, scad_timeout=120.0)
