@@ -260,3 +260,33 @@ def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
     path = np.array([[*(under + t * to_world[:2, 1]), 0.0] for t in np.linspace(0, 0.2, 9)])
     result = drive(world, path, start=(*under, yaw))
     assert result.trajectory[0][3] < 0.1, "placed on the table top, not the floor"
+
+
+def test_a_public_style_model_in_millimetres_is_crossed_from_the_ground(tmp_path):
+    """A tile model as public ones are written (an include, a use, text(), a polyhedron wound
+    the other way, millimetres) at `scale: 0.02` on `ground: 0`: rendered by the default
+    backend (which says who rendered it), start and goal picked on the ground on either side
+    of it along its long axis, and `roachplan trial` plans and drives between them."""
+    import json
+    import shutil
+
+    import yaml
+    from conftest import ROOT, roachplan
+
+    shutil.copytree(ROOT / "tests" / "data" / "public_tile", tmp_path / "tile")
+    scene = tmp_path / "tile" / "tile.yaml"
+    scene.write_text(yaml.safe_dump({"terrain": [{"scad": "tile.scad", "scale": 0.02}],
+                                     "ground": 0.0}))  # fmt: skip
+    done = roachplan("trial", "--scene", str(scene), "--json", timeout=600)
+    assert done.returncode == 0, done.stderr
+    r = json.loads(done.stdout)
+    assert "rendered with" in done.stderr and "either end of the model" in done.stderr
+    world = build_world(load_scene(scene))
+    (x0, y0, _), (x1, y1, _) = world.mesh.bounds
+    for pose in (r["start"], r["goal"]):
+        x, y = pose[:2]
+        assert not (x0 <= x <= x1 and y0 <= y <= y1), "on the model, not the ground beside it"
+        assert world.heightfield.sample(np.array([x, y])) == pytest.approx(0.0, abs=1e-6)
+    assert (r["start"][0] - (x0 + x1) / 2) * (r["goal"][0] - (x0 + x1) / 2) < 0  # either side
+    assert math.dist(r["start"][:2], r["goal"][:2]) >= 0.5
+    assert r["outcome"] == "success", r["reason"]
