@@ -78,6 +78,9 @@ class ValidityConfig:
     """On a capture, conditions 1-3 allow this many standard deviations of the terrain's
     height noise at each sample on top of their tolerances [-]: a floor that is flat within
     the sensor's noise is flat; a step or an object higher than that still counts."""
+    max_noise_slack: float = 0.02
+    """...but at most this much [m]: terrain known worse than that (an airborne survey's 6 cm)
+    is not made more walkable by its noise."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -133,7 +136,7 @@ def check_states(
     wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
     xy = np.stack([wx, wy], axis=-1)
     h = hf.sample(xy)  # (N, P), NaN where there is no surface
-    slack = cfg.noise_sigmas * hf.sample_noise(xy)  # (N, P) [m], 0 on exact terrain
+    slack = np.minimum(cfg.noise_sigmas * hf.sample_noise(xy), cfg.max_noise_slack)  # (N, P) [m]
     x0, x1, y0, y1 = hf.extent
     off_map = ((wx < x0) | (wx > x1) | (wy < y0) | (wy > y1)).any(axis=1)
     n_feet, n_body = len(fp.feet_xy), len(body_design)
