@@ -88,7 +88,7 @@ def test_scene_picker_switches_scenes(server_url, artifacts):
     with browser_pages(server_url) as (page,):
         page.locator("input[value='double_bridge']").first.click()
         page.get_by_role("option", name="heightmap").click()
-        page.get_by_text(re.compile(r"Loaded heightmap")).wait_for(timeout=120_000)
+        page.get_by_text(re.compile(r"Loaded heightmap")).first.wait_for(timeout=120_000)
         assert "heightmap" in title(page)
         page.screenshot(path=artifacts / "app-04-heightmap.png")
 
