@@ -53,14 +53,41 @@ def _pick_square(page, app, x: int, y: int) -> tuple[float, float]:
     return app.voxel_panel.centre
 
 
-def _points_in_square(app, centre, side: float) -> int:
-    """The capture's finite points whose world x, y lie in the square, counted here from the
-    file and the loaded capture's transform (not by the app's study)."""
+def _world_points(app) -> np.ndarray:
+    """(N, 3) the capture's finite points in the loaded world's frame [m]."""
     from roachplan.perception import load_capture
 
     raw = load_capture(REAL / "tutorials_region_growing_rgb_tutorial.pcd").finite_points()
     wfc = app.load_panel.view.world_from_camera
-    world = raw @ wfc[:3, :3].T + wfc[:3, 3]
+    return raw @ wfc[:3, :3].T + wfc[:3, 3]
+
+
+def _chair_seat(app) -> np.ndarray:
+    """(3,) the middle of the chair's seat [m]: the capture's points 0.3-0.6 m up (the
+    planner's height field has the floor there: the seat is overhead)."""
+    pts = _world_points(app)
+    return np.median(pts[(pts[:, 2] > 0.3) & (pts[:, 2] < 0.6)], axis=0)
+
+
+def _on_screen(app, p_world: np.ndarray) -> tuple[int, int]:
+    """The pixel (x, y) where the one browser's camera shows the world point p_world [m]."""
+    (client,) = app.server.get_clients().values()
+    cam = client.camera
+    forward = np.asarray(cam.look_at) - np.asarray(cam.position)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(cam.up_direction))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    d = p_world - np.asarray(cam.position)
+    t = np.tan(cam.fov / 2)
+    u, v = (d @ right) / (d @ forward) / (t * cam.aspect), (d @ up) / (d @ forward) / t
+    return round((u + 1) / 2 * cam.image_width), round((1 - v) / 2 * cam.image_height)
+
+
+def _points_in_square(app, centre, side: float) -> int:
+    """The capture's finite points whose world x, y lie in the square, counted here from the
+    file and the loaded capture's transform (not by the app's study)."""
+    world = _world_points(app)
     h = side / 2
     return int(
         np.sum((np.abs(world[:, 0] - centre[0]) <= h) & (np.abs(world[:, 1] - centre[1]) <= h))
@@ -112,11 +139,15 @@ def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artif
         assert plane[0][0] > 5 * floor[0][0] and plane[0][2] < 20.0
         assert NOT_FLAT not in app.voxel_panel.info.content
 
-        # A square over the chair (left of the centre, low in the view): not one flat surface.
+        # A square over the chair (clicked where the floor under its seat is on this browser's
+        # screen): not one flat surface.
         page.locator("input[value='Ground plane']").first.click()
         page.get_by_role("option", name="Square").click()
-        centre = _pick_square(page, app, 450, 600)
-        assert float(app.world.heightfield.sample(np.array([centre]))[0]) > 0.1  # the chair
+        under_seat = _chair_seat(app) * [1.0, 1.0, 0.0]  # the floor under it: the click's hit
+        centre = _pick_square(page, app, *_on_screen(app, under_seat))
+        pts = _world_points(app)
+        inside = np.all(np.abs(pts[:, :2] - centre) <= 0.25, axis=1)
+        assert np.sum(inside & (pts[:, 2] > 0.1)) > 1000  # the chair is in the square
         page.get_by_role("button", name="Run voxel study").click()
         page.get_by_text("Region not planar").wait_for(timeout=60_000)  # the notification
         page.screenshot(path=artifacts / "voxel-03-chair-not-planar.png")
