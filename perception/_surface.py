@@ -284,26 +284,17 @@ def projected_surface(
     at the origin, z > 0): the Delaunay triangulation of (x/z, y/z), its edges cut at depth
     discontinuities as an organized capture's are; small holes (cut triangles in groups at
     most max_fill [m] across, on a flat rim) are put back."""
-    from scipy.spatial import Delaunay, cKDTree
+    from scipy.spatial import cKDTree
 
     pts = points[points[:, 2] > 1e-6]
-    if len(pts) < 3:
-        return _finish(pts, np.zeros((0, 3), dtype=np.int64), np.zeros(len(pts), bool),
-                       world_from_camera)  # fmt: skip
     uv = pts[:, :2] / pts[:, 2:3]
-    tri = Delaunay(uv)
-    spacing, _ = cKDTree(uv).query(uv, k=2)
-    pitch_v = spacing[:, 1]
-    faces = tri.simplices.astype(np.int64)
-    ok = np.ones(len(faces), dtype=bool)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        p = np.maximum(pitch_v[faces[:, i]], pitch_v[faces[:, j]])
-        ok &= _kept_edges(pts[faces[:, i]], pts[faces[:, j]], world_from_camera, p)
+    pitch = cKDTree(uv).query(uv, k=2)[0][:, 1] if len(pts) >= 3 else np.zeros(len(pts))
+
+    def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return _kept_edges(pts[a], pts[b], world_from_camera, np.maximum(pitch[a], pitch[b]))
+
     world = pts @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
-    back = _small_holes(tri, ~ok, world, max_fill)
-    keep = ok | back
-    return _finish(pts, faces[keep], np.zeros(len(pts), dtype=bool), world_from_camera,
-                   filled_faces=back[keep])  # fmt: skip
+    return _delaunay_surface(uv, pts, world, kept, max_fill, world_from_camera)
 
 
 def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> Surface:
@@ -312,23 +303,39 @@ def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> S
     spacing at their ends (the distance to a point's third nearest neighbour in x, y), as
     greedy projection triangulation does; small holes (dropped triangles in groups at most
     max_fill [m] across, not on the outer edge) are put back."""
-    from scipy.spatial import Delaunay, cKDTree
+    from scipy.spatial import cKDTree
 
-    if len(points) < 3:
-        return _finish(points, np.zeros((0, 3), dtype=np.int64), np.zeros(len(points), bool),
-                       None)  # fmt: skip
     xy = points[:, :2]
-    tri = Delaunay(xy)
-    dist, _ = cKDTree(xy).query(xy, k=4)
-    spacing = dist[:, 3]
+    spacing = cKDTree(xy).query(xy, k=4)[0][:, 3] if len(points) >= 4 else np.zeros(len(xy))
+
+    def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        length = np.linalg.norm(points[a] - points[b], axis=1)
+        return length <= mu * np.minimum(spacing[a], spacing[b])
+
+    return _delaunay_surface(xy, points, points, kept, max_fill, None)
+
+
+def _delaunay_surface(
+    flat: np.ndarray, points: np.ndarray, world: np.ndarray, kept, max_fill: float,
+    world_from_camera: np.ndarray | None,
+) -> Surface:  # fmt: skip
+    """The Surface of points ((N, 3): camera frame with world_from_camera, else world) from
+    the Delaunay triangulation of flat ((N, 2): their image or their x, y): the triangles whose
+    every edge kept(a, b) ((E,) vertex indices each -> (E,) bool) keeps, and the cut ones in
+    small holes (_small_holes, world (N, 3) [m]) put back as filled."""
+    from scipy.spatial import Delaunay
+
+    if len(points) < 4:
+        empty = np.zeros((0, 3), dtype=np.int64)
+        return _finish(points, empty, np.zeros(len(points), dtype=bool), world_from_camera)
+    tri = Delaunay(flat)
     faces = tri.simplices.astype(np.int64)
     ok = np.ones(len(faces), dtype=bool)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        length = np.linalg.norm(points[faces[:, i]] - points[faces[:, j]], axis=1)
-        ok &= length <= mu * np.minimum(spacing[faces[:, i]], spacing[faces[:, j]])
-    back = _small_holes(tri, ~ok, points, max_fill)
+        ok &= kept(faces[:, i], faces[:, j])
+    back = _small_holes(tri, ~ok, world, max_fill)
     keep = ok | back
-    return _finish(points, faces[keep], np.zeros(len(points), dtype=bool), None,
+    return _finish(points, faces[keep], np.zeros(len(points), dtype=bool), world_from_camera,
                    filled_faces=back[keep])  # fmt: skip
 
 
