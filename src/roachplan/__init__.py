@@ -1,8 +1,8 @@
 """roachplan: decide, by physics simulation, which path a small legged robot should take.
 
-The installed package holds the repository's top-level folders as subpackages (pyproject's
-`package-dir`): `roachplan.scenes`, `roachplan.perception`, `roachplan.planning`,
-`roachplan.sim`, `roachplan.experiments` and `roachplan.app` (the CLI and the browser app).
+Subpackages: `roachplan.scenes`, `roachplan.perception`, `roachplan.planning`,
+`roachplan.sim`, `roachplan.experiments` and `roachplan.app` (the CLI and the browser app); in
+the repository they are src/roachplan/*, linked from its top level.
 """
 
 from typing import TYPE_CHECKING
