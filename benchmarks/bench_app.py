@@ -122,8 +122,9 @@ def main() -> None:
     app = RoachApp(world, host="127.0.0.1", port=free_port())
     try:
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=shutil.which("chromium"),
-                                         args=["--no-sandbox", "--disable-gpu"])  # fmt: skip
+            browser = pw.chromium.launch(
+                executable_path=shutil.which("chromium"), args=["--no-sandbox", "--disable-gpu"]
+            )
             page = browser.new_page(viewport={"width": 1280, "height": 900})
             page.add_init_script(COUNTERS)
             received = count_messages(page)
@@ -136,25 +137,40 @@ def main() -> None:
             browser.close()
     finally:
         app.stop()
-    report(latencies, idle, busy, fps=fps, messages=messages, drive_wall=drive_wall,
-           load_before=load_before)  # fmt: skip
+    report(
+        latencies,
+        idle,
+        busy,
+        fps=fps,
+        messages=messages,
+        drive_wall=drive_wall,
+        load_before=load_before,
+    )
 
 
 def report(latencies, idle, busy, *, fps, messages, drive_wall, load_before) -> None:
     med = statistics.median
     print("click-to-path, each [s]:", " ".join(f"{v:.2f}" for v in latencies))
-    print(f"click-to-path on double_bridge: median {med(latencies):.3f} s, first click "
-          f"{latencies[0]:.3f} s, max {max(latencies):.3f} s over {len(latencies)} plans "
-          f"(target <= 1 s, the first included)")  # fmt: skip
-    print(f"drive playback at 1x (software WebGL): {fps:.1f} frames/s drawn, {messages:.1f} "
-          f"server messages/s received, over a {drive_wall:.1f} s drive")  # fmt: skip
+    print(
+        f"click-to-path on double_bridge: median {med(latencies):.3f} s, first click "
+        f"{latencies[0]:.3f} s, max {max(latencies):.3f} s over {len(latencies)} plans "
+        f"(target <= 1 s, the first included)"
+    )
+    print(
+        f"drive playback at 1x (software WebGL): {fps:.1f} frames/s drawn, {messages:.1f} "
+        f"server messages/s received, over a {drive_wall:.1f} s drive"
+    )
     print(f"GUI round trip idle: median {med(idle) * 1e3:.0f} ms, max {max(idle) * 1e3:.0f} ms")
     if busy:
-        print(f"GUI round trip during a 20-trial batch: median {med(busy) * 1e3:.0f} ms, max "
-              f"{max(busy) * 1e3:.0f} ms ({med(busy) / med(idle):.1f}x idle)")  # fmt: skip
+        print(
+            f"GUI round trip during a 20-trial batch: median {med(busy) * 1e3:.0f} ms, max "
+            f"{max(busy) * 1e3:.0f} ms ({med(busy) / med(idle):.1f}x idle)"
+        )
     after = os.getloadavg()
-    print(f"machine: {os.cpu_count()} cores, load average (1 min) {load_before[0]:.2f} before, "
-          f"{after[0]:.2f} after")  # fmt: skip
+    print(
+        f"machine: {os.cpu_count()} cores, load average (1 min) {load_before[0]:.2f} before, "
+        f"{after[0]:.2f} after"
+    )
 
 
 if __name__ == "__main__":

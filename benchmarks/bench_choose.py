@@ -57,22 +57,32 @@ from roachplan.scenes import build_world, load_scene
 
 
 def _pool(scene, workers: int):
-    spec = ExperimentSpec(name="bench", path=scene.path, scene=scene.path,
-                          planner=scene.planner, sim=scene.sim, driver=scene.driver,
-                          uncertainty=scene.uncertainty)  # fmt: skip
+    spec = ExperimentSpec(
+        name="bench",
+        path=scene.path,
+        scene=scene.path,
+        planner=scene.planner,
+        sim=scene.sim,
+        driver=scene.driver,
+        uncertainty=scene.uncertainty,
+    )
     return _make_pool(spec, workers, "local", None)
 
 
-def _drive_all(pool, cfg, candidates, n: int, stream: int, *, paired: bool = False,
-               uncertainty=None) -> dict[int, list[dict]]:  # fmt: skip
+def _drive_all(
+    pool, cfg, candidates, n: int, stream: int, *, paired: bool = False, uncertainty=None
+) -> dict[int, list[dict]]:
     """Drive each candidate n times; paired: rollout k of every candidate in the same world."""
     u = uncertainty or cfg.uncertainty
 
     def seed(c, k):
         return rollout_seed(cfg.seed, 0 if paired else c.index, k, stream)
 
-    calls = [("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u), {"spins": c.spins})
-             for c in candidates for k in range(n)]  # fmt: skip
+    calls = [
+        ("rollout", (c.index, c.path_xyz.tolist(), seed(c, k), u), {"spins": c.spins})
+        for c in candidates
+        for k in range(n)
+    ]
     out: dict[int, list[dict]] = {c.index: [] for c in candidates}
     for rec in pool.run(calls):  # (in the order they finish)
         out[rec["candidate"]].append(rec)
@@ -84,24 +94,34 @@ def _drive_all(pool, cfg, candidates, n: int, stream: int, *, paired: bool = Fal
 
 def decision_time(quick: bool, args) -> None:
     scene = load_scene("double_bridge_rough")
-    cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=0,
-                       indifference=args.indifference)  # fmt: skip
+    cfg = ChooseConfig(
+        candidates=4 if quick else 8, budget_s=60.0, seed=0, indifference=args.indifference
+    )
     choice, _ = choose(scene, cfg, workers=2)
     row = next(r for r in choice.ranking if r["candidate"] == choice.chosen)
-    print(f"1. double_bridge_rough, K={cfg.candidates}, indifference {cfg.indifference}: "
-          f"{choice.wall_time:.1f} s wall, "
-          f"{choice.rollouts} rollouts, {choice.stopped}; chosen {choice.chosen} "
-          f"({row['route']}, P {row['p_success']:.2f} [{row['p_low']:.2f}, {row['p_high']:.2f}])")
-    print(f"   ratio to the report's minute per trial: {choice.wall_time / 60:.2f}; to the "
-          f"robot's traverse ({row['drive_time_s']:.1f} s simulated): "
-          f"{choice.wall_time / row['drive_time_s']:.2f}")
+    print(
+        f"1. double_bridge_rough, K={cfg.candidates}, indifference {cfg.indifference}: "
+        f"{choice.wall_time:.1f} s wall, "
+        f"{choice.rollouts} rollouts, {choice.stopped}; chosen {choice.chosen} "
+        f"({row['route']}, P {row['p_success']:.2f} [{row['p_low']:.2f}, {row['p_high']:.2f}])"
+    )
+    print(
+        f"   ratio to the report's minute per trial: {choice.wall_time / 60:.2f}; to the "
+        f"robot's traverse ({row['drive_time_s']:.1f} s simulated): "
+        f"{choice.wall_time / row['drive_time_s']:.2f}"
+    )
 
 
 def racing_vs_bank(quick: bool, args) -> None:
     scene = load_scene("double_bridge_rough")
     world = build_world(scene)
-    cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=None, seed=0,
-                       uncertainty=scene.uncertainty, indifference=args.indifference)  # fmt: skip
+    cfg = ChooseConfig(
+        candidates=4 if quick else 8,
+        budget_s=None,
+        seed=0,
+        uncertainty=scene.uncertainty,
+        indifference=args.indifference,
+    )
     candidates = plan_candidates(world, cfg)
     n_full = args.bank or (12 if quick else 200)
     pool = _pool(scene, 2)
@@ -117,17 +137,21 @@ def racing_vs_bank(quick: bool, args) -> None:
     firm = Counter()
     for b in range(200):
         pick = np.random.default_rng([7, b]).integers(0, n_full, n_full)
-        resampled = [dataclasses.replace(c, out="", rollouts=[{**bank[c.index][i], "seed": j}
-                                                              for j, i in enumerate(pick)])
-                     for c in candidates]  # fmt: skip
+        resampled = [
+            dataclasses.replace(
+                c, out="", rollouts=[{**bank[c.index][i], "seed": j} for j, i in enumerate(pick)]
+            )
+            for c in candidates
+        ]
         firm[rank(resampled, 1 - (1 - cfg.confidence) / len(full), None)[0].index] += 1
     # Brute force's choice and everything within the indifference zone of it on the bank's own
     # estimates (P within DP, mean relative energy within DE): a race that stops in the zone
     # may pick any of these, which is as good as brute force's choice by the zone's definition.
     dp, de = cfg.indifference
     est = {c.index: (c.p_interval(0.95)[0], c.energy_interval(0.95)[0]) for c in full}
-    zone = {i for i, (p, e) in est.items()
-            if p >= est[truth][0] - dp and e <= (1 + de) * est[truth][1]}  # fmt: skip
+    zone = {
+        i for i, (p, e) in est.items() if p >= est[truth][0] - dp and e <= (1 + de) * est[truth][1]
+    }
     agree, in_zone, used, stops = 0, 0, [], Counter()
     runs = args.races or (5 if quick else 20)
     for r in range(runs):
@@ -146,20 +170,30 @@ def racing_vs_bank(quick: bool, args) -> None:
             return recs
 
         racers = [dataclasses.replace(c, rollouts=[], out="") for c in candidates]
-        choice = race(racers, dataclasses.replace(cfg, seed=100 + r, max_per_candidate=n_full),
-                      replay, mass=world.robot.mass)  # fmt: skip
+        choice = race(
+            racers,
+            dataclasses.replace(cfg, seed=100 + r, max_per_candidate=n_full),
+            replay,
+            mass=world.robot.mass,
+        )
         agree += choice.chosen == truth
         in_zone += choice.chosen in zone
         stops[choice.stopped] += 1
         used.append(choice.rollouts / (n_full * len(candidates)))
-    print(f"2. racing vs all {n_full} rollouts of {len(candidates)} candidates (indifference "
-          f"{dp:g}, {de:.0%}): same choice in {agree}/{runs} races, within the zone of it "
-          f"{in_zone}/{runs}, using {np.mean(used):.0%} of the rollouts (mean; max "
-          f"{np.max(used):.0%})")
-    print("   brute force's own choice on 200 resamples of its bank: "
-          + ", ".join(f"{i} {k}x" for i, k in firm.most_common()))
-    print(f"   brute force: candidate {truth}; zone {sorted(zone)}; bank estimates "
-          + ", ".join(f"{i}: {p:.3f} {e:.3f}" for i, (p, e) in est.items()))
+    print(
+        f"2. racing vs all {n_full} rollouts of {len(candidates)} candidates (indifference "
+        f"{dp:g}, {de:.0%}): same choice in {agree}/{runs} races, within the zone of it "
+        f"{in_zone}/{runs}, using {np.mean(used):.0%} of the rollouts (mean; max "
+        f"{np.max(used):.0%})"
+    )
+    print(
+        "   brute force's own choice on 200 resamples of its bank: "
+        + ", ".join(f"{i} {k}x" for i, k in firm.most_common())
+    )
+    print(
+        f"   brute force: candidate {truth}; zone {sorted(zone)}; bank estimates "
+        + ", ".join(f"{i}: {p:.3f} {e:.3f}" for i, (p, e) in est.items())
+    )
     print("   stopped: " + "; ".join(f"{n}x {why}" for why, n in stops.items()))
 
 
@@ -167,8 +201,12 @@ def chosen_vs_first(quick: bool, args) -> None:
     fresh = args.fresh or (20 if quick else 100)
     for name in args.scenes.split(","):
         scene = load_scene(name)
-        cfg = ChooseConfig(candidates=4 if quick else 8, budget_s=60.0, seed=scene.seed,
-                           uncertainty=scene.uncertainty)  # fmt: skip
+        cfg = ChooseConfig(
+            candidates=4 if quick else 8,
+            budget_s=60.0,
+            seed=scene.seed,
+            uncertainty=scene.uncertainty,
+        )
         choice, _ = choose(scene, cfg, workers=2)
         if choice.chosen is None:
             print(f"3. {name}: no candidate succeeded in any rollout; nothing to compare")
@@ -183,8 +221,14 @@ def chosen_vs_first(quick: bool, args) -> None:
             continue
         xyz = planned.path_xyz
         length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
-        first = Candidate(index=0, route=world.route(xyz[:, :2]) or "-", seed=cfg.seed,
-                          path_xyz=xyz, length=length, spins=planned.spins)  # fmt: skip
+        first = Candidate(
+            index=0,
+            route=world.route(xyz[:, :2]) or "-",
+            seed=cfg.seed,
+            path_xyz=xyz,
+            length=length,
+            spins=planned.spins,
+        )
         chosen = dataclasses.replace(picked, index=1, rollouts=[])
         pool = _pool(scene, 2)
         try:
@@ -192,10 +236,12 @@ def chosen_vs_first(quick: bool, args) -> None:
         finally:
             pool.close()
         rate = {i: np.mean([r["outcome"] == "success" for r in recs]) for i, recs in got.items()}
-        print(f"3. {name}: chosen candidate {picked.index} ({picked.route}) succeeds "
-              f"{rate[1]:.0%} of {fresh} fresh rollouts; the planner's first plan "
-              f"({first.route}, seed {cfg.seed}) {rate[0]:.0%} of the same {fresh} worlds "
-              f"(race: {choice.rollouts} rollouts, {choice.wall_time:.1f} s, {choice.stopped})")
+        print(
+            f"3. {name}: chosen candidate {picked.index} ({picked.route}) succeeds "
+            f"{rate[1]:.0%} of {fresh} fresh rollouts; the planner's first plan "
+            f"({first.route}, seed {cfg.seed}) {rate[0]:.0%} of the same {fresh} worlds "
+            f"(race: {choice.rollouts} rollouts, {choice.wall_time:.1f} s, {choice.stopped})"
+        )
 
 
 def scaling(quick: bool, args) -> None:
@@ -216,8 +262,10 @@ def scaling(quick: bool, args) -> None:
             walls[workers] = time.perf_counter() - t0
         finally:
             pool.close()
-    print(f"4. {n * len(candidates)} rollouts: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s,"
-          f" speed-up {walls[1] / walls[2]:.2f}")
+    print(
+        f"4. {n * len(candidates)} rollouts: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s,"
+        f" speed-up {walls[1] / walls[2]:.2f}"
+    )
 
 
 def main() -> None:
@@ -228,8 +276,12 @@ def main() -> None:
     ap.add_argument("--races", type=int, default=None, help="part 2: races replayed (20)")
     ap.add_argument("--fresh", type=int, default=None, help="part 3: fresh rollouts each (100)")
     ap.add_argument("--scenes", default="double_bridge_rough,kinect_bridge", help="part 3's scenes")
-    ap.add_argument("--indifference", default="0.05,0.05", metavar="DP,DE",
-                    help="parts 1-2: the race's indifference zone (0,0: off)")
+    ap.add_argument(
+        "--indifference",
+        default="0.05,0.05",
+        metavar="DP,DE",
+        help="parts 1-2: the race's indifference zone (0,0: off)",
+    )
     args = ap.parse_args()
     args.indifference = tuple(float(v) for v in args.indifference.split(","))
     parts = {int(p) for p in args.parts.split(",")}

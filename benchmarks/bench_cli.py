@@ -15,8 +15,10 @@ import subprocess
 import sys
 import time
 
-EAGER = ("import roachplan.app.cli, roachplan.experiments._runner, roachplan.planning._ompl, "
-         "roachplan.perception._pipeline, roachplan.scenes._world, matplotlib.pyplot")  # fmt: skip
+EAGER = (
+    "import roachplan.app.cli, roachplan.experiments._runner, roachplan.planning._ompl, "
+    "roachplan.perception._pipeline, roachplan.scenes._world, matplotlib.pyplot"
+)
 
 
 def median_time(cmd: list[str], repeat: int) -> float:
@@ -37,7 +39,14 @@ def main() -> None:
         "python -c pass": [py, "-c", "pass"],
         "roachplan --help": [py, "-m", "roachplan", "--help"],
         "roachplan scene list": [py, "-m", "roachplan", "scene", "list"],
-        "roachplan trial --seed x (argument error)": [py, "-m", "roachplan", "trial", "--seed", "x"],
+        "roachplan trial --seed x (argument error)": [
+            py,
+            "-m",
+            "roachplan",
+            "trial",
+            "--seed",
+            "x",
+        ],
         "import every heavy module (the old start-up)": [py, "-c", EAGER],
     }
     base = None

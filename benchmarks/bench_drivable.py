@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from roachplan.experiments import load_experiment, plan, run_experiment
 from roachplan.experiments._spec import reference_settings
 from roachplan.planning import check_states
@@ -82,9 +83,24 @@ class _DubinsMotions(ob.MotionValidator):
         return bool(self._check(dubins_path(a, b, self._radius).sample(self._step)).all())
 
 
-def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, planner: str,
-                          radius: float, seed: int, vcfg, time_limit: float,
-                          max_iterations: int, step: float, shortcut: bool) -> dict:  # fmt: skip
+def _plan_in_dubins_space(
+    hf,
+    fp,
+    *,
+    world_bounds,
+    start,
+    goal,
+    cells,
+    cell,
+    planner: str,
+    radius: float,
+    seed: int,
+    vcfg,
+    time_limit: float,
+    max_iterations: int,
+    step: float,
+    shortcut: bool,
+) -> dict:
     """In a child process (OMPL's seed): plan with `planner` in OMPL's DubinsStateSpace with
     the terrain sampler and validity checker the default planner uses."""
     t0 = time.perf_counter()
@@ -100,8 +116,11 @@ def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, pla
     keep: list = []
 
     def alloc(sp):
-        keep.append(_TerrainSampler(sp, rng=rng, cells=cells, cell=cell, lo=lo, hi=hi,
-                                    check=check, known=known))  # fmt: skip
+        keep.append(
+            _TerrainSampler(
+                sp, rng=rng, cells=cells, cell=cell, lo=lo, hi=hi, check=check, known=known
+            )
+        )
         return keep[-1]
 
     space = ob.DubinsStateSpace(radius, False)  # forward only: the roach does not reverse
@@ -138,8 +157,11 @@ def _plan_in_dubins_space(hf, fp, *, world_bounds, start, goal, cells, cell, pla
         poses = [(s.getX(), s.getY(), s.getYaw()) for s in pdef.getSolutionPath().getStates()]
         curves = [dubins_path(a, b, radius) for a, b in zip(poses, poses[1:])]
         dense = np.concatenate([c.sample(step) for c in curves])
-        out.update(length=sum(c.length for c in curves), states=dense,
-                   all_valid=bool(check_states(hf, fp, vcfg, dense).valid.all()))  # fmt: skip
+        out.update(
+            length=sum(c.length for c in curves),
+            states=dense,
+            all_valid=bool(check_states(hf, fp, vcfg, dense).valid.all()),
+        )
     return out
 
 
@@ -151,12 +173,24 @@ def dubins_space_plan(world, planner: str, radius: float, seed: int, shortcut: b
 
     cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
     return run_isolated(
-        _plan_in_dubins_space, world.heightfield, world.footprint, isolation="fork",
-        world_bounds=sc.bounds, start=sc.start, goal=sc.goal, cells=cells, cell=regions.cell,
-        planner=planner, radius=radius, seed=seed, vcfg=cfg.validity,
-        time_limit=cfg.time_limit, max_iterations=cfg.max_iterations, step=cfg.check_resolution,
+        _plan_in_dubins_space,
+        world.heightfield,
+        world.footprint,
+        isolation="fork",
+        world_bounds=sc.bounds,
+        start=sc.start,
+        goal=sc.goal,
+        cells=cells,
+        cell=regions.cell,
+        planner=planner,
+        radius=radius,
+        seed=seed,
+        vcfg=cfg.validity,
+        time_limit=cfg.time_limit,
+        max_iterations=cfg.max_iterations,
+        step=cfg.check_resolution,
         shortcut=shortcut,
-    )  # fmt: skip
+    )
 
 
 def compare_spaces(seeds: int) -> None:
@@ -164,50 +198,81 @@ def compare_spaces(seeds: int) -> None:
     double_bridge: successes, median plan time and path length, largest curvature."""
     world = build_world(load_scene("double_bridge"))
     radius = world.scene.planner.turning_radius
-    print(f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
-          f"(curvature limit {1 / radius:.2f} /m)")  # fmt: skip
-    print(f"  {'method':<44} {'success':>8} {'time s':>7} {'length m':>9} {'max curv.':>9} "
-          f"{'all valid':>9}")  # fmt: skip
+    print(
+        f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
+        f"(curvature limit {1 / radius:.2f} /m)"
+    )
+    print(
+        f"  {'method':<44} {'success':>8} {'time s':>7} {'length m':>9} {'max curv.':>9} "
+        f"{'all valid':>9}"
+    )
     rows = []
     for name in ("prm", "rrtconnect", "rrt", "kpiece1"):
         cfg = dataclasses.replace(world.scene.planner, name=name)
         res = [plan(world, seed=s, planner=cfg) for s in range(seeds)]
         ok = [r for r in res if r.found]
         # Re-sampled every cm along the waypoints the driver gets, checked independently.
-        valid = all(check_states(world.heightfield, world.footprint, cfg.validity,
-                                 r.states).valid.all() for r in ok)  # fmt: skip
-        rows.append((f"(x,y,yaw) {name} + Dubins shortcuts", res, ok, valid,
-                     [float(np.sum(np.linalg.norm(np.diff(r.states[:, :2], axis=0), axis=1)))
-                      for r in ok], [max_curvature(r.states) for r in ok]))  # fmt: skip
+        valid = all(
+            check_states(world.heightfield, world.footprint, cfg.validity, r.states).valid.all()
+            for r in ok
+        )
+        rows.append(
+            (
+                f"(x,y,yaw) {name} + Dubins shortcuts",
+                res,
+                ok,
+                valid,
+                [
+                    float(np.sum(np.linalg.norm(np.diff(r.states[:, :2], axis=0), axis=1)))
+                    for r in ok
+                ],
+                [max_curvature(r.states) for r in ok],
+            )
+        )
     for name, shortcut in (("RRT", False), ("RRT", True), ("KPIECE1", False), ("KPIECE1", True)):
         res = [dubins_space_plan(world, name, radius, s, shortcut) for s in range(seeds)]
         ok = [r for r in res if r["found"]]
         assert not any(r["metric"] for r in res), "OMPL calls the Dubins space a metric"
         label = f"DubinsStateSpace {name}" + (" + OMPL shortcuts" if shortcut else "")
-        rows.append((label, [argparse.Namespace(**r) for r in res], ok,
-                     all(r["all_valid"] for r in ok), [r["length"] for r in ok],
-                     [max_curvature(r["states"]) for r in ok]))  # fmt: skip
+        rows.append(
+            (
+                label,
+                [argparse.Namespace(**r) for r in res],
+                ok,
+                all(r["all_valid"] for r in ok),
+                [r["length"] for r in ok],
+                [max_curvature(r["states"]) for r in ok],
+            )
+        )
     for label, res, ok, valid, lengths, curv in rows:
         t = statistics.median(r.plan_time for r in res)
-        print(f"  {label:<44} {len(ok):>3}/{len(res):<4} {t:>7.3f} "
-              f"{statistics.median(lengths) if lengths else float('nan'):>9.2f} "
-              f"{max(curv) if curv else float('nan'):>9.2f} {str(valid):>9}", flush=True)  # fmt: skip
+        print(
+            f"  {label:<44} {len(ok):>3}/{len(res):<4} {t:>7.3f} "
+            f"{statistics.median(lengths) if lengths else float('nan'):>9.2f} "
+            f"{max(curv) if curv else float('nan'):>9.2f} {str(valid):>9}",
+            flush=True,
+        )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="a fifth of the trials")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--spaces-only", action="store_true",
-                    help="only the planner-space comparison on double_bridge")  # fmt: skip
+    ap.add_argument(
+        "--spaces-only",
+        action="store_true",
+        help="only the planner-space comparison on double_bridge",
+    )
     ap.add_argument("--space-seeds", type=int, default=10, help="seeds per planner there")
     args = ap.parse_args()
     if args.spaces_only:
         compare_spaces(args.space_seeds)
         return
     scale = 5 if args.quick else 1
-    print(f"{'spec':<14} {'setting':<10} {'success':>9} {'rel. energy mean':>17} {'max':>6} "
-          f"{'spun':>9} {'wall s':>7}")  # fmt: skip
+    print(
+        f"{'spec':<14} {'setting':<10} {'success':>9} {'rel. energy mean':>17} {'max':>6} "
+        f"{'spun':>9} {'wall s':>7}"
+    )
     means = {}
     for name, trials in (("kinect_bridge", 25), ("bridge_rough", 50), ("bridge_smooth", 50)):
         spec = load_experiment(name)
@@ -215,12 +280,17 @@ def main() -> None:
             r = run(settings(spec, reference), max(2, trials // scale), args.workers)
             means[name, label] = r["mean"]
             spun = f"{r['spun']}/{r['n']} ({r['spins']})"  # trials with spins (spins in all)
-            print(f"{name:<14} {label:<10} {r['ok']:>4}/{r['n']:<4} {r['mean']:>17.2f} "
-                  f"{r['max']:>6.2f} {spun:>9} {r['wall']:>7.1f}", flush=True)  # fmt: skip
+            print(
+                f"{name:<14} {label:<10} {r['ok']:>4}/{r['n']:<4} {r['mean']:>17.2f} "
+                f"{r['max']:>6.2f} {spun:>9} {r['wall']:>7.1f}",
+                flush=True,
+            )
     for label in ("reference", "drivable"):
         rough, smooth = means["bridge_rough", label], means["bridge_smooth", label]
-        print(f"{label}: rough / smooth relative energy = {rough / smooth:.2f} "
-              f"({'rough costs more' if rough > smooth else 'rough does NOT cost more'})")
+        print(
+            f"{label}: rough / smooth relative energy = {rough / smooth:.2f} "
+            f"({'rough costs more' if rough > smooth else 'rough does NOT cost more'})"
+        )
 
     world = build_world(load_scene("double_bridge"))
     print("\nplanning time on double_bridge, median of 10 seeds [s]")
@@ -228,9 +298,13 @@ def main() -> None:
         times = {}
         for label, radius in (("raw", None), ("drivable", world.scene.planner.turning_radius)):
             cfg = dataclasses.replace(world.scene.planner, name=planner, turning_radius=radius)
-            times[label] = np.median([plan(world, seed=s, planner=cfg).plan_time for s in range(10)])
-        print(f"  {planner:<11} raw {times['raw']:.3f}  drivable {times['drivable']:.3f}  "
-              f"ratio {times['drivable'] / times['raw']:.2f} (goal <= 2)")
+            times[label] = np.median(
+                [plan(world, seed=s, planner=cfg).plan_time for s in range(10)]
+            )
+        print(
+            f"  {planner:<11} raw {times['raw']:.3f}  drivable {times['drivable']:.3f}  "
+            f"ratio {times['drivable'] / times['raw']:.2f} (goal <= 2)"
+        )
     compare_spaces(args.space_seeds)
 
 

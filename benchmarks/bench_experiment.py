@@ -49,8 +49,10 @@ def main() -> None:
     for workers in (1, 2):
         wall, work, ok = timed_run(spec, args.trials, workers)
         walls[workers] = wall
-        print(f"{workers:7d} {wall:7.1f} {wall / args.trials:7.2f} {work:7.1f} "
-              f"{work / (wall * workers):10.2f} {ok:9d}")  # fmt: skip
+        print(
+            f"{workers:7d} {wall:7.1f} {wall / args.trials:7.2f} {work:7.1f} "
+            f"{work / (wall * workers):10.2f} {ok:9d}"
+        )
     speedup = walls[1] / walls[2]
     print(f"2 workers: {walls[2]:.1f} s wall (target <= 60 s; the report: ~{args.trials} min)")
     print(f"speed-up 1 -> 2 workers: {speedup:.2f}x (target >= 1.8)")

@@ -63,6 +63,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+
 from roachplan.scenes import SceneError, list_scenes, load_scene, render_scad, render_scad_result
 from roachplan.scenes._mesh import disagreement, surface_distances
 from roachplan.scenes._openscad import TEXT_DEVIATION, manifold_version, scad_dependencies
@@ -121,7 +122,8 @@ def compare(cgal: Path, other: Path, text_size: float) -> str:
         d = np.concatenate([surface_distances(a, b), surface_distances(b, a)])
         bound = TEXT_DEVIATION * text_size
         text = f"; text: {d.max():.2g} model units apart, bound {bound:.2g} " + (
-            "(within)" if d.max() <= bound else "(BEYOND)")  # fmt: skip
+            "(within)" if d.max() <= bound else "(BEYOND)"
+        )
     return (
         f"{'AGREE' if agree else 'DIFFER'}: bounds {apart['bounds']:.1e}, volume {volume:.1e}, "
         f"p99 {apart['p99']:.1e}, Hausdorff {apart['hausdorff']:.1e} of the diagonal; "
@@ -130,8 +132,9 @@ def compare(cgal: Path, other: Path, text_size: float) -> str:
 
 
 def bench_backends(args) -> None:
-    version = subprocess.run(["openscad", "--version"], capture_output=True, text=True,
-                             check=False).stderr
+    version = subprocess.run(
+        ["openscad", "--version"], capture_output=True, text=True, check=False
+    ).stderr
     print(f"cgal: {version.strip()}; manifold: {manifold_version()}")
     print(f"load average before: {os.getloadavg()[0]:.2f} (2 shared cores)")
     print(f"{'model':40s} {'cgal [s]':>9s} {'auto [s]':>9s} {'ratio':>6s}  auto chose  agreement")
@@ -149,19 +152,28 @@ def bench_backends(args) -> None:
                 verdict = "the binary's mesh"
             else:
                 verdict = compare(a, b, r.text_size)
-            print(f"{name:40s} {t_cgal:9.2f} {t_auto:9.2f} {t_cgal / t_auto:6.1f}  {chose}  "
-                  f"{verdict}", flush=True)  # fmt: skip
+            print(
+                f"{name:40s} {t_cgal:9.2f} {t_auto:9.2f} {t_cgal / t_auto:6.1f}  {chose}  "
+                f"{verdict}",
+                flush=True,
+            )
             if args.manifold:
                 t_mf, rm, err_mf = render(model, params, "manifold", b, args.timeout)
                 shown = err_mf or (compare(a, b, rm.text_size) if not err_cgal else "")
-                print(f"{'  manifold alone':40s} {'':9s} {t_mf:9.2f} {t_cgal / t_mf:6.1f}  {shown}",
-                      flush=True)  # fmt: skip
+                print(
+                    f"{'  manifold alone':40s} {'':9s} {t_mf:9.2f} {t_cgal / t_mf:6.1f}  {shown}",
+                    flush=True,
+                )
 
 
 TEXT_STRINGS = ("Wq@&%$ Roach 42", "The quick brown fox jumps over the lazy dog 0123456789")
 TEXT_SIZES = (1, 3, 10, 30, 100)
-TEXT_ALIGN = ('halign = "left", valign = "baseline"', 'halign = "right", valign = "top"',
-              'halign = "center", valign = "center"', 'valign = "bottom"')  # fmt: skip
+TEXT_ALIGN = (
+    'halign = "left", valign = "baseline"',
+    'halign = "right", valign = "top"',
+    'halign = "center", valign = "center"',
+    'valign = "bottom"',
+)
 TEXT_FONTS = ("", "DejaVu Sans Mono:style=Bold", "Futura:style=Bold", "Liberation Serif")
 
 
@@ -178,23 +190,33 @@ def bench_text(args) -> None:
                     if k >= len(TEXT_ALIGN):
                         break
                     model = Path(tmp) / f"t{len(text)}-{size}-{k}.scad"
-                    model.write_text(f'linear_extrude(2) text("{text}", size = {size}, '
-                                     f'font = "{font}", {align});\n')  # fmt: skip
+                    model.write_text(
+                        f'linear_extrude(2) text("{text}", size = {size}, '
+                        f'font = "{font}", {align});\n'
+                    )
                     a = trimesh.load(render_scad(model, backend="cgal"))
                     b = trimesh.load(render_scad(model, backend="manifold"))
                     d = np.concatenate([surface_distances(a, b), surface_distances(b, a)])
                     worst = max(worst, d.max() / size)
-                    print(f"{len(text):3d} glyphs  size {size:5g}  {align:38s} "
-                          f"{font or '(default)':28s} max {d.max():.4f} = {d.max() / size:.2e} x "
-                          f"size", flush=True)  # fmt: skip
+                    print(
+                        f"{len(text):3d} glyphs  size {size:5g}  {align:38s} "
+                        f"{font or '(default)':28s} max {d.max():.4f} = {d.max() / size:.2e} x "
+                        f"size",
+                        flush=True,
+                    )
     print(f"largest: {worst:.2e} x size; TEXT_DEVIATION = {TEXT_DEVIATION:.2e}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", default=None, help="case names containing these")
-    parser.add_argument("--extra", nargs="*", type=Path, default=[],
-                        help="more .scad models to time (e.g. public ones not kept here)")
+    parser.add_argument(
+        "--extra",
+        nargs="*",
+        type=Path,
+        default=[],
+        help="more .scad models to time (e.g. public ones not kept here)",
+    )
     parser.add_argument("--manifold", action="store_true", help="time backend manifold alone too")
     parser.add_argument("--text", action="store_true", help="measure text()'s deviation instead")
     parser.add_argument("--timeout", type=float, default=900.0, help="per render [s]")

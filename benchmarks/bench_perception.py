@@ -24,19 +24,21 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
+
 from roachplan.perception import (
     PRESETS,
     MeshingConfig,
     NoiseModel,
+    capture_settings,
     load_capture,
     look_at,
+    mesh_capture,
     reconstruct,
     render_depth,
     save_depth,
 )
-from roachplan.perception import capture_settings, mesh_capture
 from roachplan.scenes import build_terrain_mesh, build_world, load_scene
-from scipy import ndimage
 
 REAL_CAPTURES = {
     "tutorials_region_growing_rgb_tutorial.pcd": {},
@@ -57,8 +59,13 @@ def run_once(png: Path, stl: Path, method: str = "sensor") -> dict[str, float]:
     rec = reconstruct(cap, MeshingConfig(method=method))
     t1 = time.perf_counter()
     rec.mesh.export(stl)
-    return {"load": load, **rec.times, "STL": time.perf_counter() - t1,
-            "total": time.perf_counter() - t0, "triangles": len(rec.mesh.faces)}  # fmt: skip
+    return {
+        "load": load,
+        **rec.times,
+        "STL": time.perf_counter() - t1,
+        "total": time.perf_counter() - t0,
+        "triangles": len(rec.mesh.faces),
+    }
 
 
 def main() -> None:
@@ -79,14 +86,18 @@ def main() -> None:
                 )
                 if method == "sensor":
                     sensor = best["total"]
-                    print(f"{intr.width}x{intr.height} ({int((depth > 0).sum())} points), "
-                          f"{method}: total {best['total']:.3f} s (target <= {target:g} s, "
-                          f"{target / best['total']:.1f}x under), {best['triangles']} "
-                          f"triangles\n    {stages}")  # fmt: skip
+                    print(
+                        f"{intr.width}x{intr.height} ({int((depth > 0).sum())} points), "
+                        f"{method}: total {best['total']:.3f} s (target <= {target:g} s, "
+                        f"{target / best['total']:.1f}x under), {best['triangles']} "
+                        f"triangles\n    {stages}"
+                    )
                 else:
-                    print(f"  {method}: total {best['total']:.3f} s (sensor / grid "
-                          f"{sensor / best['total']:.2f}x), {best['triangles']} triangles\n"
-                          f"    {stages}")  # fmt: skip
+                    print(
+                        f"  {method}: total {best['total']:.3f} s (sensor / grid "
+                        f"{sensor / best['total']:.2f}x), {best['triangles']} triangles\n"
+                        f"    {stages}"
+                    )
 
 
 def real_data() -> Path | None:
@@ -119,11 +130,16 @@ def walkable(path: Path, settings: dict) -> dict[str, float]:
     ground = pts[np.abs(pts[:, 2]) < 0.03][:, :2]
     ij = np.round((ground - [sm.x0, sm.y0]) / sm.cell).astype(int)
     ny, nx = sm.standable.shape
-    ij = np.unique(ij[(ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)], axis=0)
+    ij = np.unique(
+        ij[(ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)], axis=0
+    )
     labels, n = ndimage.label(sm.standable)
     largest = ndimage.sum(np.ones_like(labels), labels, np.arange(1, n + 1)).max() if n else 0.0
-    return {"share": float(sm.standable[ij[:, 1], ij[:, 0]].mean()) if len(ij) else 0.0,
-            "largest": float(largest) * sm.cell**2, "seconds": seconds}  # fmt: skip
+    return {
+        "share": float(sm.standable[ij[:, 1], ij[:, 0]].mean()) if len(ij) else 0.0,
+        "largest": float(largest) * sm.cell**2,
+        "seconds": seconds,
+    }
 
 
 def real_captures() -> None:
@@ -131,17 +147,21 @@ def real_captures() -> None:
     if data is None:
         print("real captures: not found (set ROACHPLAN_TESTDATA); skipped")
         return
-    print("\nreal captures, sensor (default) vs grid: share of the observed ground the robot "
-          "can stand on, largest standing region, seconds from file to world")
+    print(
+        "\nreal captures, sensor (default) vs grid: share of the observed ground the robot "
+        "can stand on, largest standing region, seconds from file to world"
+    )
     for name, settings in REAL_CAPTURES.items():
         s = {k: str(data / v) if k == "intrinsics" else v for k, v in settings.items()}
         a = walkable(data / name, {**s, "method": "sensor"})
         b = walkable(data / name, {**s, "method": "grid"})
-        print(f"  {name}: share {a['share']:.2f} vs {b['share']:.2f} "
-              f"({a['share'] / max(b['share'], 1e-9):.1f}x), largest {a['largest']:.2f} vs "
-              f"{b['largest']:.2f} m^2 ({a['largest'] / max(b['largest'], 1e-9):.1f}x), "
-              f"{a['seconds']:.1f} vs {b['seconds']:.1f} s "
-              f"({a['seconds'] / max(b['seconds'], 1e-9):.1f}x)")  # fmt: skip
+        print(
+            f"  {name}: share {a['share']:.2f} vs {b['share']:.2f} "
+            f"({a['share'] / max(b['share'], 1e-9):.1f}x), largest {a['largest']:.2f} vs "
+            f"{b['largest']:.2f} m^2 ({a['largest'] / max(b['largest'], 1e-9):.1f}x), "
+            f"{a['seconds']:.1f} vs {b['seconds']:.1f} s "
+            f"({a['seconds'] / max(b['seconds'], 1e-9):.1f}x)"
+        )
 
 
 if __name__ == "__main__":

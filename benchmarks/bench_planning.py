@@ -18,6 +18,7 @@ import dataclasses
 import time
 
 import numpy as np
+
 from roachplan.experiments import plan
 from roachplan.planning import PLANNER_NAMES, check_states
 from roachplan.scenes import build_world, load_scene
@@ -39,8 +40,10 @@ def main() -> None:
             n += 1
         single = n / (time.perf_counter() - t0)
         print(f"\n{scene}: {args.seeds} seeds per planner; one-state checks {single:,.0f}/s")
-        print(f"{'planner':16s} {'success':>8s} {'median s':>9s} {'max s':>7s} {'checks/s':>10s}"
-              f" {'fork ms':>8s}")  # fmt: skip
+        print(
+            f"{'planner':16s} {'success':>8s} {'median s':>9s} {'max s':>7s} {'checks/s':>10s}"
+            f" {'fork ms':>8s}"
+        )
         for name in args.planners:
             cfg = dataclasses.replace(world.scene.planner, name=name)
             times, walls, checks, check_time, found = [], [], 0, 0.0, 0
@@ -55,9 +58,11 @@ def main() -> None:
                 check_time += r.validity_time
             med = f"{np.median(times):9.3f}" if times else f"{'-':>9s}"
             mx = f"{np.max(times):7.3f}" if times else f"{'-':>7s}"
-            print(f"{name:16s} {found:5d}/{args.seeds:<2d} {med} {mx} "
-                  f"{checks / max(check_time, 1e-9):10,.0f} {1000 * np.median(walls):8.1f}",
-                  flush=True)  # fmt: skip
+            print(
+                f"{name:16s} {found:5d}/{args.seeds:<2d} {med} {mx} "
+                f"{checks / max(check_time, 1e-9):10,.0f} {1000 * np.median(walls):8.1f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import math
 import time
 
 import pybullet as p
+
 from roachplan.experiments import plan
 from roachplan.scenes import build_world, load_scene
 from roachplan.sim import drive_path

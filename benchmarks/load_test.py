@@ -42,8 +42,13 @@ LIBRARY = ROOT / "scenes" / "library"
 PAGES = 5
 ANSWER_S = 30.0
 """How long a click may wait for its answer [s]."""
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run"]  # fmt: skip
+ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+]
 
 # What each command's answer looks like (JavaScript regular expressions on the page's new text).
 PLAN = r"Plan|Path found|No path|path\(s\)|Start and goal"
@@ -153,7 +158,7 @@ async def act(page, stats: PageStats, what: str, path: Path | None = None) -> fl
     return took
 
 
-async def user(page, stats: PageStats, rng, files, k: int, until: float) -> None:
+async def user(page, stats: PageStats, rng, files, *, k: int, until: float) -> None:
     """One person: Plan, Drive, and every few rounds a file, good and bad in turn."""
     good, bad = files
     uploaded, next_upload = 0, int(rng.integers(2, 5))
@@ -179,20 +184,27 @@ async def load(url: str, seconds: float, rngs, files) -> list[PageStats]:
         stats = [PageStats() for _ in range(PAGES)]
         pages = []
         for s in stats:
-            page = await (await browser.new_context(viewport={"width": 1280, "height": 900})).new_page()
+            page = await (
+                await browser.new_context(viewport={"width": 1280, "height": 900})
+            ).new_page()
             page.on("pageerror", lambda exc, s=s: s.errors.append(str(exc)))
             await page.add_init_script(OBSERVER)
             await page.goto(url)
             await page.get_by_role("button", name="Plan").wait_for(timeout=60_000)
             pages.append(page)
         # Faster playback (shared by all pages), so that drives end within the run.
-        row = pages[0].locator("xpath=//label[text()='Playback speed [x real time]']"
-                               "/ancestor::div[.//input][1]")  # fmt: skip
+        row = pages[0].locator(
+            "xpath=//label[text()='Playback speed [x real time]']/ancestor::div[.//input][1]"
+        )
         await row.locator("input").last.fill("10")
         await row.locator("input").last.press("Enter")
         until = time.monotonic() + seconds
-        await asyncio.gather(*(user(p, s, r, files, k, until)
-                               for k, (p, s, r) in enumerate(zip(pages, stats, rngs))))  # fmt: skip
+        await asyncio.gather(
+            *(
+                user(p, s, r, files, k=k, until=until)
+                for k, (p, s, r) in enumerate(zip(pages, stats, rngs))
+            )
+        )
         await browser.close()
     return stats
 
@@ -200,9 +212,12 @@ async def load(url: str, seconds: float, rngs, files) -> list[PageStats]:
 def start_server(log: Path) -> tuple[subprocess.Popen, str]:
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "roachplan", "serve", "--port", str(port)], cwd=ROOT,
-        stdout=log.open("w"), stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )  # fmt: skip
+        [sys.executable, "-m", "roachplan", "serve", "--port", str(port)],
+        cwd=ROOT,
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         for line in log.read_text().splitlines():
@@ -244,28 +259,41 @@ def main() -> int:
                 proc.kill()
         log = (Path(tmp) / "server.log").read_text()
 
-    print(f"{'page':>4} {'clicks':>6} {'uploads':>7} {'answered':>8} {'lost':>4} "
-          f"{'median [s]':>10} {'max [s]':>7} {'last Plan [s]':>13} {'trials':>6} {'page errors':>11}")  # fmt: skip
+    print(
+        f"{'page':>4} {'clicks':>6} {'uploads':>7} {'answered':>8} {'lost':>4} "
+        f"{'median [s]':>10} {'max [s]':>7} {'last Plan [s]':>13} {'trials':>6} {'page errors':>11}"
+    )
     for k, s in enumerate(stats):
         lat = s.latencies or [float("nan")]
         last = "none" if s.final is None else f"{s.final:.2f}"
-        print(f"{k + 1:>4} {s.clicks:>6} {s.uploads:>7} {s.answered:>8} {s.clicks - s.answered:>4} "
-              f"{statistics.median(lat):>10.2f} {max(lat):>7.2f} {last:>13} {s.rows:>6} "
-              f"{len(s.errors):>11}")  # fmt: skip
+        print(
+            f"{k + 1:>4} {s.clicks:>6} {s.uploads:>7} {s.answered:>8} {s.clicks - s.answered:>4} "
+            f"{statistics.median(lat):>10.2f} {max(lat):>7.2f} {last:>13} {s.rows:>6} "
+            f"{len(s.errors):>11}"
+        )
     for k, s in enumerate(stats):
         for e in s.errors[:3]:
             print(f"  page {k + 1}: {e[:200]}")
     tracebacks = log.count("Traceback")
     errors = [line for line in log.splitlines() if "Error" in line]
-    print(f"server: answers HTTP at the end: {'yes' if alive else 'NO'}; "
-          f"'Traceback' in its log: {tracebacks}; lines with 'Error': {len(errors)}")
+    print(
+        f"server: answers HTTP at the end: {'yes' if alive else 'NO'}; "
+        f"'Traceback' in its log: {tracebacks}; lines with 'Error': {len(errors)}"
+    )
     for line in errors[:10]:
         print(f"  | {line[:200]}")
     lost = sum(s.clicks - s.answered for s in stats)
     dead = sum(s.final is None for s in stats)
     ok = alive and not tracebacks and not lost and not dead
-    print("load_test: " + ("PASS" if ok else f"FAIL ({lost} lost click(s), {dead} unresponsive "
-                                              f"page(s), {tracebacks} traceback(s))"))  # fmt: skip
+    print(
+        "load_test: "
+        + (
+            "PASS"
+            if ok
+            else f"FAIL ({lost} lost click(s), {dead} unresponsive "
+            f"page(s), {tracebacks} traceback(s))"
+        )
+    )
     return 0 if ok else 1
 
 

@@ -15,8 +15,10 @@ def main() -> None:
     print(f"planned {len(path.path_xyz)} waypoints in {path.plan_time:.2f} s ({path.planner})")
 
     trial = roachplan.drive(world, path)
-    print(f"{trial.outcome}: {trial.drive_time:.1f} s, {trial.energy:.2f} J, "
-          f"relative energy {trial.relative_energy:.2f}, route {trial.route or '-'}")
+    print(
+        f"{trial.outcome}: {trial.drive_time:.1f} s, {trial.energy:.2f} J, "
+        f"relative energy {trial.relative_energy:.2f}, route {trial.route or '-'}"
+    )
 
     again = roachplan.trial(world, seed=3)  # plan + drive: the same seed, the same trial
     assert (again.outcome, again.energy) == (trial.outcome, trial.energy)

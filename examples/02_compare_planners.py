@@ -17,8 +17,10 @@ def main() -> None:
         ok = [t for t in trials if t.outcome == "success"]
         energy = statistics.mean(t.relative_energy for t in ok) if ok else float("nan")
         routes = ", ".join(sorted({t.route or "-" for t in trials}))
-        print(f"{planner:12s} {len(ok)}/{len(trials)} succeeded, mean relative energy "
-              f"{energy:.2f}, routes: {routes}")
+        print(
+            f"{planner:12s} {len(ok)}/{len(trials)} succeeded, mean relative energy "
+            f"{energy:.2f}, routes: {routes}"
+        )
 
 
 if __name__ == "__main__":

@@ -6,18 +6,19 @@ ground's support), then use the capture file directly as a scene: start and goal
 where the robot can stand, and a trial runs on it.
 """
 
-from roachplan.scenes import LIBRARY
-
 import roachplan
+from roachplan.scenes import LIBRARY
 
 
 def main() -> None:
     capture = LIBRARY / "kinect_bridge_depth.png"  # its intrinsics: kinect_bridge_depth.json
     rec = roachplan.mesh(capture, voxel=0.02)
     found = rec.report()
-    print(f"camera {found['camera_height_m']:.2f} m above the ground, pitched "
-          f"{found['pitch_down_deg']:.1f} deg down; ground: {found['ground']['support_points']} "
-          f"points; {found['triangles']} triangles")
+    print(
+        f"camera {found['camera_height_m']:.2f} m above the ground, pitched "
+        f"{found['pitch_down_deg']:.1f} deg down; ground: {found['ground']['support_points']} "
+        f"points; {found['triangles']} triangles"
+    )
     for warning in found["warnings"]:
         print("warning:", warning)
 

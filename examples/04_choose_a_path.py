@@ -14,9 +14,11 @@ def main() -> None:
     choice = roachplan.choose(world, candidates=2, rollouts=16, budget_s=None, seed=0, workers=2)
     print(f"stopped: {choice.stopped}; {choice.rollouts} rollouts in {choice.wall_time:.1f} s")
     for row in choice.ranking:  # best first
-        print(f"candidate {row['candidate']} ({row['route']}): P(success) {row['p_success']:.2f} "
-              f"[{row['p_low']:.2f}, {row['p_high']:.2f}], relative energy "
-              f"{row['relative_energy']:.2f}, {row['rollouts']} rollouts {row['out']}")
+        print(
+            f"candidate {row['candidate']} ({row['route']}): P(success) {row['p_success']:.2f} "
+            f"[{row['p_low']:.2f}, {row['p_high']:.2f}], relative energy "
+            f"{row['relative_energy']:.2f}, {row['rollouts']} rollouts {row['out']}"
+        )
     print("chosen candidate:", choice.chosen)
 
 

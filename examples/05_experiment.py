@@ -13,8 +13,9 @@ import roachplan
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        report = roachplan.experiment("bridge_rough", trials=4, workers=2,
-                                      out=Path(tmp) / "results")
+        report = roachplan.experiment(
+            "bridge_rough", trials=4, workers=2, out=Path(tmp) / "results"
+        )
         print(report.table)
         print("files:", ", ".join(sorted(p.name for p in report.out.iterdir())))
 

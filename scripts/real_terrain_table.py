@@ -44,10 +44,14 @@ def main() -> None:
         rec = mesh_capture(path, cs)
         r = rec.report()
         if r["camera_pose"] is not None:
-            ground = (f"camera {r['camera_height_m']:.2f} m up, pitch {r['pitch_down_deg']:.0f} deg, "
-                      f"{100 * r['ground']['support_fraction']:.0f} % of points")  # fmt: skip
+            ground = (
+                f"camera {r['camera_height_m']:.2f} m up, pitch {r['pitch_down_deg']:.0f} deg, "
+                f"{100 * r['ground']['support_fraction']:.0f} % of points"
+            )
         else:
-            ground = "world frame (z up); " + ("recentred" if any("recentred" in n for n in r["notes"]) else "kept")
+            ground = "world frame (z up); " + (
+                "recentred" if any("recentred" in n for n in r["notes"]) else "kept"
+            )
         scene = terrain_file_scene(path)
         obj = scene.terrain[0]
         import dataclasses
@@ -63,8 +67,10 @@ def main() -> None:
         load = time.perf_counter() - t
         trial = run_trial(world, seed=0)
         d = math.dist(trial.start[:2], trial.goal[:2])
-        print(f"| `{name}` | {ground} | {d:.2f} m | {trial.plan_time:.2f} s | {trial.outcome} "
-              f"({trial.drive_time:.1f} s driven) | {load:.1f} s |")  # fmt: skip
+        print(
+            f"| `{name}` | {ground} | {d:.2f} m | {trial.plan_time:.2f} s | {trial.outcome} "
+            f"({trial.drive_time:.1f} s driven) | {load:.1f} s |"
+        )
     for model in sorted(REAL.glob("**/*.scad")):  # public models: a scene of their own
         t = time.perf_counter()
         world = build_world(load_scene(model))
@@ -72,9 +78,11 @@ def main() -> None:
         trial = run_trial(world, seed=0)
         d = math.dist(trial.start[:2], trial.goal[:2])
         size = "x".join(f"{v:.0f}" for v in world.mesh.extents[:2])
-        print(f"| `{model.relative_to(REAL)}` | a model on the ground plane ({size} m) | {d:.2f} m "
-              f"| {trial.plan_time:.2f} s | {trial.outcome} ({trial.drive_time:.1f} s driven) "
-              f"| {load:.1f} s |")  # fmt: skip
+        print(
+            f"| `{model.relative_to(REAL)}` | a model on the ground plane ({size} m) | {d:.2f} m "
+            f"| {trial.plan_time:.2f} s | {trial.outcome} ({trial.drive_time:.1f} s driven) "
+            f"| {load:.1f} s |"
+        )
 
 
 if __name__ == "__main__":

@@ -13,13 +13,20 @@ from hypothesis import HealthCheck, settings
 # Property-based fuzzing (issue 15): brief in `make test`, long in `make fuzz`
 # (ROACHPLAN_FUZZ=1). Examples are derived from a fixed database-free seed so a run repeats.
 settings.register_profile(
-    "test", max_examples=60, deadline=None, derandomize=True, database=None,
+    "test",
+    max_examples=60,
+    deadline=None,
+    derandomize=True,
+    database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
-)  # fmt: skip
+)
 settings.register_profile(
-    "fuzz", max_examples=5000, deadline=None, database=None,
+    "fuzz",
+    max_examples=5000,
+    deadline=None,
+    database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
-)  # fmt: skip
+)
 settings.load_profile("fuzz" if os.environ.get("ROACHPLAN_FUZZ") else "test")
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,12 +9,18 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
+
 from conftest import ROOT, free_port
 
 CHROMIUM = shutil.which("chromium")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run"]  # fmt: skip
+ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+]
 
 
 @contextmanager
@@ -176,8 +182,12 @@ def test_cancel_a_batch_show_a_trial_and_the_roadmap(artifacts):
     from roachplan.app._server import RoachApp
     from roachplan.scenes import build_world, load_scene
 
-    app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port(),
-                   max_upload_bytes=1000)  # fmt: skip
+    app = RoachApp(
+        build_world(load_scene("double_bridge")),
+        host="127.0.0.1",
+        port=free_port(),
+        max_upload_bytes=1000,
+    )
     try:
         with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
             set_value(page, "Trials (N)", "40")

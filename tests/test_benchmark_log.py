@@ -17,6 +17,7 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+
 from conftest import roachplan
 
 SEED = 5
@@ -120,24 +121,53 @@ def read_benchmark_log(dbname: Path, filename: Path) -> None:  # noqa: PLR0912, 
             if c.fetchone() is None:
                 for j in range(len(enum) - 1):
                     c.execute("INSERT INTO enums VALUES (?,?,?)", (enum[0], j, enum[j + 1]))
-        names = ["name", "totaltime", "timelimit", "memorylimit", "runcount", "version",
-                 "hostname", "cpuinfo", "date", "seed", "setup", *expprops]  # fmt: skip
-        values = [expname, totaltime, timelimit, memorylimit, nruns, version, hostname, cpuinfo,
-                  date, seed, setup, *(v for v, _ in expprops.values())]  # fmt: skip
-        c.execute(f"INSERT INTO experiments ({','.join(names)}) VALUES "
-                  f"({','.join('?' * len(values))})", values)  # fmt: skip
+        names = [
+            "name",
+            "totaltime",
+            "timelimit",
+            "memorylimit",
+            "runcount",
+            "version",
+            "hostname",
+            "cpuinfo",
+            "date",
+            "seed",
+            "setup",
+            *expprops,
+        ]
+        values = [
+            expname,
+            totaltime,
+            timelimit,
+            memorylimit,
+            nruns,
+            version,
+            hostname,
+            cpuinfo,
+            date,
+            seed,
+            setup,
+            *(v for v, _ in expprops.values()),
+        ]
+        c.execute(
+            f"INSERT INTO experiments ({','.join(names)}) VALUES ({','.join('?' * len(values))})",
+            values,
+        )
         experiment = c.lastrowid
         for _ in range(int(_required("planner count", f, 0, {-1: "planners"}))):
             planner_name = f.readline()[:-1]
             settings = ""
             for _ in range(int(f.readline().split()[0])):
                 settings = settings + f.readline() + ";"
-            c.execute("SELECT id FROM plannerConfigs WHERE (name=? AND settings=?)",
-                      (planner_name, settings))  # fmt: skip
+            c.execute(
+                "SELECT id FROM plannerConfigs WHERE (name=? AND settings=?)",
+                (planner_name, settings),
+            )
             p = c.fetchone()
             if p is None:
-                c.execute("INSERT INTO plannerConfigs VALUES (?,?,?)",
-                          (None, planner_name, settings))  # fmt: skip
+                c.execute(
+                    "INSERT INTO plannerConfigs VALUES (?,?,?)", (None, planner_name, settings)
+                )
                 planner = c.lastrowid
             else:
                 planner = p[0]
@@ -152,8 +182,10 @@ def read_benchmark_log(dbname: Path, filename: Path) -> None:  # noqa: PLR0912, 
             insert = f"INSERT INTO runs ({','.join(props)}) VALUES ({','.join('?' * len(props))})"
             run_ids = []
             for _ in range(int(f.readline().split()[0])):
-                data = [None if not x or x in ("nan", "inf") else x
-                        for x in f.readline().split("; ")[:-1]]  # fmt: skip
+                data = [
+                    None if not x or x in ("nan", "inf") else x
+                    for x in f.readline().split("; ")[:-1]
+                ]
                 c.execute(insert, (experiment, planner, *data))
                 run_ids.append(c.lastrowid)
             next_line = f.readline().strip()
@@ -166,12 +198,16 @@ def read_benchmark_log(dbname: Path, filename: Path) -> None:  # noqa: PLR0912, 
                     if "_".join(field[:-1]) not in columns:
                         c.execute(f"ALTER TABLE progress ADD {'_'.join(field[:-1])} {field[-1]}")
                     pnames.append("_".join(field[:-1]))
-                insert = (f"INSERT INTO progress ({','.join(pnames)}) VALUES "
-                          f"({','.join('?' * len(pnames))})")  # fmt: skip
+                insert = (
+                    f"INSERT INTO progress ({','.join(pnames)}) VALUES "
+                    f"({','.join('?' * len(pnames))})"
+                )
                 for j in range(int(f.readline().split()[0])):
                     for sample in f.readline().split(";")[:-1]:
-                        data = [None if not x or x in ("nan", "inf") else x
-                                for x in sample.split(",")[:-1]]  # fmt: skip
+                        data = [
+                            None if not x or x in ("nan", "inf") else x
+                            for x in sample.split(",")[:-1]
+                        ]
                         c.execute(insert, (run_ids[j], *data))
                 f.readline()
     conn.commit()
@@ -187,9 +223,25 @@ def bench(tmp_path_factory, artifacts) -> dict:
     by the script's grammar into a database of its own."""
     folder = tmp_path_factory.mktemp("bench")
     log, db, parsed = folder / "bench.log", folder / "bench.db", folder / "parsed.db"
-    out = roachplan("benchmark", "--scene", "double_bridge", "--planners", ",".join(PLANNERS),
-                    "--runs", str(RUNS), "--time-limit", str(TIME_LIMIT), "--seed", str(SEED),
-                    "--simulate", "--quiet", "-o", str(log), "--db", str(db))  # fmt: skip
+    out = roachplan(
+        "benchmark",
+        "--scene",
+        "double_bridge",
+        "--planners",
+        ",".join(PLANNERS),
+        "--runs",
+        str(RUNS),
+        "--time-limit",
+        str(TIME_LIMIT),
+        "--seed",
+        str(SEED),
+        "--simulate",
+        "--quiet",
+        "-o",
+        str(log),
+        "--db",
+        str(db),
+    )
     assert out.returncode == 0, out.stderr
     read_benchmark_log(parsed, log)
     for p in (log, db):  # for a look, or Planner Arena
@@ -217,11 +269,21 @@ def test_log_reads_into_planner_arena_tables(bench):
     assert f"time_limit = {TIME_LIMIT}\n;" in configs[0]["settings"]
     enums = _rows(bench["parsed"], "SELECT * FROM enums WHERE name = 'failure_mode'")
     assert [e["description"] for e in sorted(enums, key=lambda e: e["value"])][:2] == [
-        "none", "fell"]  # fmt: skip
+        "none",
+        "fell",
+    ]
     runs = _rows(bench["parsed"], "SELECT * FROM runs")
     assert len(runs) == len(PLANNERS) * RUNS
-    for column in (*PHYSICS, "time", "solved", "status", "solution_length", "graph_states",
-                   "graph_motions", "collision_checks"):  # fmt: skip
+    for column in (
+        *PHYSICS,
+        "time",
+        "solved",
+        "status",
+        "solution_length",
+        "graph_states",
+        "graph_motions",
+        "collision_checks",
+    ):
         assert column in runs[0], column
 
 
@@ -240,8 +302,9 @@ def test_physics_columns_match_the_trials_themselves(bench, world):
     ]
     straight = math.dist(world.scene.start[:2], world.scene.goal[:2])
     for r in runs:
-        cfg = dataclasses.replace(world.scene.planner, name=r["planner"].removeprefix(
-            "geometric_"), time_limit=TIME_LIMIT)  # fmt: skip
+        cfg = dataclasses.replace(
+            world.scene.planner, name=r["planner"].removeprefix("geometric_"), time_limit=TIME_LIMIT
+        )
         trial = run_trial(world, seed=r["seed"], planner=cfg)  # the same plan, driven afresh
         assert r["solved"] == int(trial.path_found)
         assert r["status_text"] == ("Exact solution" if trial.path_found else "Timeout")
@@ -283,6 +346,7 @@ def test_status_enum_is_omplS_own():
 
 def test_smoothness_is_omplS_formula():
     import numpy as np
+
     from roachplan.experiments._benchmark import _xy_smoothness
 
     assert _xy_smoothness(np.array([[0, 0], [1, 0], [2, 0], [3, 0.0]])) == pytest.approx(0)

@@ -15,8 +15,9 @@ import zlib
 import numpy as np
 import pytest
 import yaml
-from conftest import roachplan
 from PIL import Image
+
+from conftest import roachplan
 from roachplan.perception import (
     PRESETS,
     CaptureError,
@@ -43,8 +44,9 @@ def _write_png16(path, depth: np.ndarray) -> None:
     Image.fromarray(depth.astype(np.uint16)).save(path)
 
 
-def _write_pgm(path, depth: np.ndarray, *, channels: int = 1, ascii_: bool = False,
-               comment: bool = True) -> None:  # fmt: skip
+def _write_pgm(
+    path, depth: np.ndarray, *, channels: int = 1, ascii_: bool = False, comment: bool = True
+) -> None:
     """netpbm as specified: magic, (comments,) width, height, maxval, one whitespace,
     big-endian 16-bit samples."""
     h, w = depth.shape
@@ -57,8 +59,11 @@ def _write_pgm(path, depth: np.ndarray, *, channels: int = 1, ascii_: bool = Fal
         samples[..., 2] = 65535
     head = f"{magic}\n" + ("# written by test_cameras\n" if comment else "")
     head += f"{w} {h}\n65535\n"
-    body = (" ".join(map(str, samples.reshape(-1))) + "\n").encode() if ascii_ else \
-        samples.astype(">u2").tobytes()  # fmt: skip
+    body = (
+        (" ".join(map(str, samples.reshape(-1))) + "\n").encode()
+        if ascii_
+        else samples.astype(">u2").tobytes()
+    )
     path.write_bytes(head.encode() + body)
 
 
@@ -94,8 +99,10 @@ def test_opencv_yaml_without_pose_and_damaged_pose(tmp_path):
     assert load_intrinsics(plain) == cal.intrinsics  # the old entry point keeps its return
     # a local_transform that is no rotation is refused, naming the key
     bad = tmp_path / "bad.yaml"
-    bad.write_text(text.split("local_transform:")[0] + "local_transform:\n   rows: 3\n   cols: 4\n"
-                   "   data: [ 2., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0. ]\n")  # fmt: skip
+    bad.write_text(
+        text.split("local_transform:")[0] + "local_transform:\n   rows: 3\n   cols: 4\n"
+        "   data: [ 2., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0. ]\n"
+    )
     with pytest.raises(CaptureError, match=r"bad\.yaml: local_transform: .*rotation"):
         load_calibration(bad)
     # no camera matrix at all: the file, what is missing, what is accepted
@@ -113,14 +120,20 @@ CAMERA_INFO = {  # camera_calibration's ost.yaml layout
     "image_width": 848,
     "image_height": 480,
     "camera_name": "depth",
-    "camera_matrix": {"rows": 3, "cols": 3,
-                      "data": [421.5, 0.0, 422.1, 0.0, 421.9, 241.3, 0.0, 0.0, 1.0]},
+    "camera_matrix": {
+        "rows": 3,
+        "cols": 3,
+        "data": [421.5, 0.0, 422.1, 0.0, 421.9, 241.3, 0.0, 0.0, 1.0],
+    },
     "distortion_model": "plumb_bob",
     "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.0] * 5},
     "rectification_matrix": {"rows": 3, "cols": 3, "data": [1, 0, 0, 0, 1, 0, 0, 0, 1]},
-    "projection_matrix": {"rows": 3, "cols": 4,
-                          "data": [421.5, 0, 422.1, 0, 0, 421.9, 241.3, 0, 0, 0, 1, 0]},
-}  # fmt: skip
+    "projection_matrix": {
+        "rows": 3,
+        "cols": 4,
+        "data": [421.5, 0, 422.1, 0, 0, 421.9, 241.3, 0, 0, 0, 1, 0],
+    },
+}
 
 
 def test_ros_camera_info_yaml_both_forms(tmp_path):
@@ -130,9 +143,14 @@ def test_ros_camera_info_yaml_both_forms(tmp_path):
     assert (k.width, k.height, k.fx, k.fy, k.cx, k.cy) == (848, 480, 421.5, 421.9, 422.1, 241.3)
     # `rostopic echo` (ROS 1, K) of two messages, and `ros2 topic echo` (k)
     for key in ("K", "k"):
-        msg = {"header": {"frame_id": "camera_depth_optical_frame"}, "height": 480,
-               "width": 848, "distortion_model": "plumb_bob", "D": [0.0] * 5,
-               key: [421.5, 0.0, 422.1, 0.0, 421.9, 241.3, 0.0, 0.0, 1.0]}  # fmt: skip
+        msg = {
+            "header": {"frame_id": "camera_depth_optical_frame"},
+            "height": 480,
+            "width": 848,
+            "distortion_model": "plumb_bob",
+            "D": [0.0] * 5,
+            key: [421.5, 0.0, 422.1, 0.0, 421.9, 241.3, 0.0, 0.0, 1.0],
+        }
         dump = tmp_path / f"info_{key}.yml"
         dump.write_text(
             yaml.safe_dump(msg) + "---\n" + yaml.safe_dump({**msg, "width": 1}) + "---\n"
@@ -140,8 +158,9 @@ def test_ros_camera_info_yaml_both_forms(tmp_path):
         assert load_intrinsics(dump) == k
     # a wrong matrix is named
     broken = tmp_path / "broken.yaml"
-    broken.write_text(yaml.safe_dump({**CAMERA_INFO, "camera_matrix": {"rows": 3, "cols": 3,
-                                                                       "data": [1, 2, 3]}}))  # fmt: skip
+    broken.write_text(
+        yaml.safe_dump({**CAMERA_INFO, "camera_matrix": {"rows": 3, "cols": 3, "data": [1, 2, 3]}})
+    )
     with pytest.raises(CaptureError, match=r"broken\.yaml: camera_matrix: expected a 3x3 matrix"):
         load_intrinsics(broken)
 
@@ -149,9 +168,11 @@ def test_ros_camera_info_yaml_both_forms(tmp_path):
 def test_orbslam_settings_carry_the_depth_scale(tmp_path):
     """ORB-SLAM's TUM1.yaml: %YAML:1.0, Camera.fx..., DepthMapFactor 5000, no image size."""
     f = tmp_path / "TUM1.yaml"
-    f.write_text("%YAML:1.0\n\n# Camera Parameters\nCamera.fx: 517.306408\nCamera.fy: 516.469215\n"
-                 "Camera.cx: 318.643040\nCamera.cy: 255.313989\nCamera.fps: 30.0\n"
-                 "DepthMapFactor: 5000.0\n")  # fmt: skip
+    f.write_text(
+        "%YAML:1.0\n\n# Camera Parameters\nCamera.fx: 517.306408\nCamera.fy: 516.469215\n"
+        "Camera.cx: 318.643040\nCamera.cy: 255.313989\nCamera.fps: 30.0\n"
+        "DepthMapFactor: 5000.0\n"
+    )
     cal = load_calibration(f, size=(640, 480))
     assert cal.depth_scale == 5000 and cal.intrinsics.cy == 255.313989
     assert (cal.intrinsics.width, cal.intrinsics.height) == (640, 480)
@@ -205,8 +226,11 @@ def test_tum_image_at_5000_per_metre_and_the_advice_when_read_at_1000(tmp_path):
 
 
 def test_depth_scale_so_wrong_the_capture_is_refused_says_which_scale(tmp_path):
-    with pytest.raises(CaptureError, match=r"depth_154\.png: .* at 10 units per metre; .*"
-                                           r"--depth-scale 1000"):  # fmt: skip
+    with pytest.raises(
+        CaptureError,
+        match=r"depth_154\.png: .* at 10 units per metre; .*"
+        r"--depth-scale 1000",
+    ):
         load_capture(RTAB_PNG, intrinsics=RTAB_YAML, depth_scale=10)
 
 
@@ -216,8 +240,11 @@ def test_depth_scale_so_wrong_the_capture_is_refused_says_which_scale(tmp_path):
 def test_sidecar_found_by_stem(tmp_path):
     png = tmp_path / "scan.png"
     shutil.copy(RTAB_PNG, png)
-    with pytest.raises(CaptureError, match=r"needs intrinsics.*realsense-d435-848x480.*tum-fr1"
-                                           r".*--fx --fy --cx --cy.*scan\.json, \.xml, \.yaml"):  # fmt: skip
+    with pytest.raises(
+        CaptureError,
+        match=r"needs intrinsics.*realsense-d435-848x480.*tum-fr1"
+        r".*--fx --fy --cx --cy.*scan\.json, \.xml, \.yaml",
+    ):
         load_capture(png)
     # an uploaded capture's scene file has the capture's stem: not a calibration, passed over
     (tmp_path / "scan.yaml").write_text(yaml.safe_dump({"terrain": [{"capture": "scan.png"}]}))
@@ -244,8 +271,12 @@ def test_sidecar_found_by_stem(tmp_path):
 def test_pgm_and_ppm_round_trip_to_the_png_points(tmp_path):
     ref = load_capture(RTAB_PNG, intrinsics=RTAB_YAML)
     mm = _raw_mm()
-    for name, kw in (("d.pgm", {}), ("a.pgm", {"ascii_": True}), ("c.ppm", {"channels": 3}),
-                     ("n.pgm", {"comment": False})):  # fmt: skip
+    for name, kw in (
+        ("d.pgm", {}),
+        ("a.pgm", {"ascii_": True}),
+        ("c.ppm", {"channels": 3}),
+        ("n.pgm", {"comment": False}),
+    ):
         _write_pgm(tmp_path / name, mm, **kw)
         cap = load_capture(tmp_path / name, intrinsics=RTAB_YAML)
         assert cap.shape == (480, 640)
@@ -280,12 +311,21 @@ def test_png_over_the_pixel_limit_is_refused_before_decoding(tmp_path):
     ihdr = struct.pack(">IIBBBBB", 20000, 20000, 16, 0, 0, 0, 0)
     chunk = struct.pack(">I", 13) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
     idat = zlib.compress(b"\0" * 1000)
-    data = (b"\x89PNG\r\n\x1a\n" + chunk + struct.pack(">I", len(idat)) + b"IDAT" + idat
-            + struct.pack(">I", zlib.crc32(b"IDAT" + idat)))  # fmt: skip
+    data = (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk
+        + struct.pack(">I", len(idat))
+        + b"IDAT"
+        + idat
+        + struct.pack(">I", zlib.crc32(b"IDAT" + idat))
+    )
     big = tmp_path / "big.png"
     big.write_bytes(data)
-    with pytest.raises(CaptureError, match=r"big\.png: the header says 20000x20000 pixels \(400 "
-                                           r"megapixels\); .* at most 100 megapixels"):  # fmt: skip
+    with pytest.raises(
+        CaptureError,
+        match=r"big\.png: the header says 20000x20000 pixels \(400 "
+        r"megapixels\); .* at most 100 megapixels",
+    ):
         load_capture(big, intrinsics="kinect1")
     truncated = tmp_path / "cut.png"
     truncated.write_bytes(RTAB_PNG.read_bytes()[:5000])
@@ -305,11 +345,13 @@ def test_intrinsics_mapping_in_capture_settings(tmp_path):
     sized = capture_settings({"intrinsics": {**RTAB_K, "width": 320, "height": 240}})
     half = load_capture(RTAB_PNG, intrinsics=sized.intrinsics)  # scaled up to the image
     assert half.intrinsics.fx == 1050 and half.intrinsics.width == 640
-    for bad, message in (({**RTAB_K, "fx": -1}, r"intrinsics\.fx: expected a number > 0"),
-                         ({**RTAB_K, "cy": "x"}, r"intrinsics\.cy: expected a number > 0"),
-                         ({"fx": 1, "fy": 1}, r"intrinsics: .*missing cx, cy"),
-                         ({**RTAB_K, "f": 1}, r"intrinsics: .*unknown f"),
-                         ({**RTAB_K, "width": 1.5}, r"intrinsics\.width: expected a whole")):  # fmt: skip
+    for bad, message in (
+        ({**RTAB_K, "fx": -1}, r"intrinsics\.fx: expected a number > 0"),
+        ({**RTAB_K, "cy": "x"}, r"intrinsics\.cy: expected a number > 0"),
+        ({"fx": 1, "fy": 1}, r"intrinsics: .*missing cx, cy"),
+        ({**RTAB_K, "f": 1}, r"intrinsics: .*unknown f"),
+        ({**RTAB_K, "width": 1.5}, r"intrinsics\.width: expected a whole"),
+    ):
         with pytest.raises(CaptureError, match=message):
             capture_settings({"intrinsics": bad})
 

@@ -9,15 +9,16 @@ import math
 import numpy as np
 import pytest
 import trimesh
+
 from conftest import roachplan
 from roachplan.experiments._choose import (
     Candidate,
     ChooseConfig,
     _eliminate,
     _to_sample,
+    clopper_pearson,
     race,
     rank,
-    clopper_pearson,
     within_zone,
     world_seed,
 )
@@ -29,8 +30,7 @@ def test_clopper_pearson_intervals_hold_their_coverage():
     for p in (0.1, 0.5, 0.9, 0.98):
         hits = sum(
             lo <= p <= hi
-            for lo, hi in (clopper_pearson(int(rng.binomial(30, p)), 30, 0.9)
-                           for _ in range(2000))  # fmt: skip
+            for lo, hi in (clopper_pearson(int(rng.binomial(30, p)), 30, 0.9) for _ in range(2000))
         )
         assert hits / 2000 > 0.885  # at least the nominal 0.9 (exact), less sampling noise
     assert clopper_pearson(0, 0, 0.95) == (0.0, 1.0)
@@ -56,9 +56,17 @@ def test_draws_are_a_pure_function_of_the_seed_and_stay_in_their_ranges():
 
 def _cand(i: int, outcomes: str, energy: float) -> Candidate:
     c = Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
-    c.rollouts = [{"outcome": "success" if o == "1" else "fell", "relative_energy": energy,
-                   "energy": energy, "drive_time": 1.0, "end": [0, 0], "seed": k}
-                  for k, o in enumerate(outcomes)]  # fmt: skip
+    c.rollouts = [
+        {
+            "outcome": "success" if o == "1" else "fell",
+            "relative_energy": energy,
+            "energy": energy,
+            "drive_time": 1.0,
+            "end": [0, 0],
+            "seed": k,
+        }
+        for k, o in enumerate(outcomes)
+    ]
     return c
 
 
@@ -88,15 +96,24 @@ def _rollout(i: int, seed: int, p: float, energy: float, sd: float) -> dict:
     rng = np.random.default_rng([seed, i])
     ok = rng.random() < p
     e = float(rng.normal(energy, sd))
-    return {"candidate": i, "seed": seed, "outcome": "success" if ok else "fell",
-            "relative_energy": e, "energy": e, "drive_time": 1.0, "end": [0, 0]}  # fmt: skip
+    return {
+        "candidate": i,
+        "seed": seed,
+        "outcome": "success" if ok else "fell",
+        "relative_energy": e,
+        "energy": e,
+        "drive_time": 1.0,
+        "end": [0, 0],
+    }
 
 
 def _race(truths, **cfg):
     """Race hand-made candidates whose rollouts come from truths[i] = (p, energy, sd): the
     race's own logic on seeded draws, no simulation."""
-    racers = [Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
-              for i in range(len(truths))]  # fmt: skip
+    racers = [
+        Candidate(index=i, route="r", seed=i, path_xyz=np.zeros((2, 3)), length=1.0)
+        for i in range(len(truths))
+    ]
 
     def run(calls):
         return [_rollout(i, seed, *truths[i]) for i, _path, seed in calls]
@@ -113,8 +130,15 @@ def test_practically_equal_candidates_stop_within_the_indifference_zone():
     assert best is rank([a, b], conf, None)[0]
     assert within_zone([a, b], conf, None, (0.0, 0.0)) is None
     # Too few rollouts to bound P(success) within 0.05: no decision yet.
-    assert within_zone([_drawn(0, 40, 1.0, 1.84, 0.08), _drawn(1, 40, 1.0, 1.86, 0.08)],
-                       conf, None, (0.05, 0.05)) is None  # fmt: skip
+    assert (
+        within_zone(
+            [_drawn(0, 40, 1.0, 1.84, 0.08), _drawn(1, 40, 1.0, 1.86, 0.08)],
+            conf,
+            None,
+            (0.05, 0.05),
+        )
+        is None
+    )
     # A rival that may be more than 5 % cheaper (energy 10 % lower) is no decision either.
     cheap = _drawn(1, 200, 1.0, 1.66, 0.08)
     assert within_zone([a, cheap], conf, None, (0.05, 0.05)) in (None, cheap)
@@ -187,15 +211,18 @@ def test_a_race_cut_short_says_at_what_confidence_its_choice_stands():
     alive = [c for c in short.candidates if not c.out]
     at = within_zone(alive, 1 - (1 - reached) / 3, None, (0.05, 0.05))
     assert at is not None and at.index == short.chosen  # it holds there ...
-    assert within_zone(alive, 1 - (1 - reached - 0.01) / 3, None, (0.05, 0.05)) is not at  # not above
+    assert (
+        within_zone(alive, 1 - (1 - reached - 0.01) / 3, None, (0.05, 0.05)) is not at
+    )  # not above
     assert _race(truths, max_per_candidate=400, seed=2).confidence_reached is None  # decided
 
 
 def test_with_min_success_the_one_that_may_qualify_is_driven_too():
     # The cheap path fails 15 % of the time and can never clear 0.9; the costly one never
     # fails. The race must drive the costly one, not spend every rollout on the cheap one.
-    choice = _race([(0.85, 1.2, 0.05), (1.0, 2.0, 0.05)], min_success=0.9,
-                   max_per_candidate=60, seed=1)  # fmt: skip
+    choice = _race(
+        [(0.85, 1.2, 0.05), (1.0, 2.0, 0.05)], min_success=0.9, max_per_candidate=60, seed=1
+    )
     n = {c.index: c.n for c in choice.candidates}
     assert choice.chosen == 1 and n[1] >= 40, (choice.stopped, n)
 
@@ -232,11 +259,18 @@ def test_the_chosen_is_never_wholly_below_another_with_or_without_the_zone():
     zoned = 0
     for trial in range(60):
         k = int(rng.integers(2, 6))
-        truths = [(float(rng.choice([1.0, 0.98, 0.9, 0.6])), float(rng.uniform(1.5, 2.0)), 0.1)
-                  for _ in range(k)]  # fmt: skip
+        truths = [
+            (float(rng.choice([1.0, 0.98, 0.9, 0.6])), float(rng.uniform(1.5, 2.0)), 0.1)
+            for _ in range(k)
+        ]
         zone = (0.05, 0.05) if trial % 2 else (0.0, 0.0)
-        choice = _race(truths, rollouts=int(rng.integers(40, 1000)), max_per_candidate=200,
-                       seed=trial, indifference=zone)  # fmt: skip
+        choice = _race(
+            truths,
+            rollouts=int(rng.integers(40, 1000)),
+            max_per_candidate=200,
+            seed=trial,
+            indifference=zone,
+        )
         conf = 1 - 0.05 / k
         chosen = next(c for c in choice.candidates if c.index == choice.chosen)
         low = chosen.p_interval(conf)[1]
@@ -256,8 +290,12 @@ def two_bridges(tmp_path_factory):
     """Start and goal platforms joined by a wide bridge (safe) and a narrow one (risky: 12 cm
     for feet 7 cm apart), over a void."""
     d = tmp_path_factory.mktemp("two_bridges")
-    boxes = [((0.9, 1.2, 0.1), (-0.75, 0.0)), ((0.9, 1.2, 0.1), (0.75, 0.0)),
-             ((0.62, 0.3, 0.1), (0.0, 0.3)), ((0.62, 0.12, 0.1), (0.0, -0.2))]  # fmt: skip
+    boxes = [
+        ((0.9, 1.2, 0.1), (-0.75, 0.0)),
+        ((0.9, 1.2, 0.1), (0.75, 0.0)),
+        ((0.62, 0.3, 0.1), (0.0, 0.3)),
+        ((0.62, 0.12, 0.1), (0.0, -0.2)),
+    ]
     parts = []
     for size, (x, y) in boxes:
         b = trimesh.creation.box(size)
@@ -274,8 +312,22 @@ def two_bridges(tmp_path_factory):
 
 
 def _choose(scene, *extra):
-    proc = roachplan("choose", "--scene", str(scene), "--candidates", "4", "--rollouts", "32",
-                     "--workers", "2", "--seed", "1", "--json", *extra, timeout=900)  # fmt: skip
+    proc = roachplan(
+        "choose",
+        "--scene",
+        str(scene),
+        "--candidates",
+        "4",
+        "--rollouts",
+        "32",
+        "--workers",
+        "2",
+        "--seed",
+        "1",
+        "--json",
+        *extra,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr
     return json.loads(proc.stdout)
@@ -294,9 +346,12 @@ def test_the_safe_route_wins_and_the_same_seed_gives_the_same_ranking(two_bridge
             assert not a["p_high"] < b["p_low"]
     assert first["rollouts"] <= 32 and first["stopped"]
     again = _choose(two_bridges)
+
     def key(result):  # every rollout the same: counts and the energies' means
-        return [(r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
-                for r in result["ranking"]]  # fmt: skip
+        return [
+            (r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
+            for r in result["ranking"]
+        ]
 
     assert key(again) == key(first)
 
@@ -321,8 +376,10 @@ def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, t
 
 # -- the uncertainty model from scene and spec YAML (`uncertainty:`) ------------------------------
 
-FLAT = ("terrain: []\nground: 0.0\nrobot: {start: [0.0, 0.0, 0]}\ngoal: [0.6, 0.0, 0]\n"
-        "bounds: [[-0.4, -0.4], [1.0, 0.4]]\nplanner: {name: rrtconnect}\n")  # fmt: skip
+FLAT = (
+    "terrain: []\nground: 0.0\nrobot: {start: [0.0, 0.0, 0]}\ngoal: [0.6, 0.0, 0]\n"
+    "bounds: [[-0.4, -0.4], [1.0, 0.4]]\nplanner: {name: rrtconnect}\n"
+)
 
 
 def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
@@ -345,14 +402,30 @@ def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
 
     # Through `roachplan choose`: the rollouts it drove were drawn from the scene's model.
     out = tmp_path / "choice"
-    proc = roachplan("choose", "--scene", str(path), "--candidates", "1", "--rollouts", "4",
-                     "--workers", "1", "--seed", "1", "--json", "--out", str(out),
-                     timeout=600)  # fmt: skip
+    proc = roachplan(
+        "choose",
+        "--scene",
+        str(path),
+        "--candidates",
+        "1",
+        "--rollouts",
+        "4",
+        "--workers",
+        "1",
+        "--seed",
+        "1",
+        "--json",
+        "--out",
+        str(out),
+        timeout=600,
+    )
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     result = json.loads(proc.stdout)
     assert result["rollouts"] == 4, "a lone candidate still gets its rollouts"
     assert result["uncertainty"]["friction"] == 0.0 and result["uncertainty"]["start_xy"] == 0.05
-    worlds = [json.loads(line)["world"] for line in (out / "rollouts.jsonl").read_text().splitlines()]
+    worlds = [
+        json.loads(line)["world"] for line in (out / "rollouts.jsonl").read_text().splitlines()
+    ]
     assert len(worlds) == 4 and all(w["friction_scale"] == 1.0 for w in worlds)
     assert sorted(w["seed"] for w in worlds) == sorted(rollout_seed(1, 0, k) for k in range(4))
     for w in worlds:  # each the pure draw of its recorded seed; no capture, no terrain noise
@@ -372,18 +445,26 @@ def test_a_spec_s_uncertainty_overrides_its_scene_s_field_by_field(tmp_path):
 @pytest.mark.parametrize(
     ("body", "message"),
     [
-        ("uncertainty: {friction: 1.5}\n",
-         "uncertainty.friction: expected a number from 0 to below 1 [-], got 1.5"),
-        ("uncertainty: {start_yaw: -3}\n",
-         "uncertainty.start_yaw: expected a number from 0 to 180 [deg], got -3"),
-        ("uncertainty: {start_xy: 2}\n",
-         "uncertainty.start_xy: expected a number from 0 to 0.5 [m], got 2"),
-        ("uncertainty: {frction: 0.1}\n",
-         "uncertainty.frction: unknown key; accepted keys: start_xy, start_yaw, friction"),
+        (
+            "uncertainty: {friction: 1.5}\n",
+            "uncertainty.friction: expected a number from 0 to below 1 [-], got 1.5",
+        ),
+        (
+            "uncertainty: {start_yaw: -3}\n",
+            "uncertainty.start_yaw: expected a number from 0 to 180 [deg], got -3",
+        ),
+        (
+            "uncertainty: {start_xy: 2}\n",
+            "uncertainty.start_xy: expected a number from 0 to 0.5 [m], got 2",
+        ),
+        (
+            "uncertainty: {frction: 0.1}\n",
+            "uncertainty.frction: unknown key; accepted keys: start_xy, start_yaw, friction",
+        ),
         ("uncertainty: {body_mass: lots}\n", "uncertainty.body_mass: expected a finite number"),
         ("uncertainty: 0.2\n", "uncertainty: expected a mapping with keys start_xy"),
     ],
-)  # fmt: skip
+)
 def test_a_bad_uncertainty_is_refused_naming_file_key_and_range(tmp_path, body, message):
     scene = tmp_path / "bad.yaml"
     scene.write_text(FLAT + body)
@@ -427,24 +508,41 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, m
     monkeypatch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     scene = tmp_path / "flat.yaml"
     scene.write_text(FLAT)
-    args = ("choose", "--scene", str(scene), "--candidates", "2", "--rollouts", "8",
-            "--seed", "3", "--json")  # fmt: skip
+    args = (
+        "choose",
+        "--scene",
+        str(scene),
+        "--candidates",
+        "2",
+        "--rollouts",
+        "8",
+        "--seed",
+        "3",
+        "--json",
+    )
     local = roachplan(*args, "--workers", "2", timeout=600)
     assert local.returncode in (0, 1), local.stderr[-2000:]
     # The holder starts Ray and, when its stdin closes, shuts down what it started. Ray >= 2.59
     # turns token authentication on for a local cluster by default, and a client connecting by
     # address does not send the token (ray-project/ray#64755): off for this loopback test.
     holder = subprocess.Popen(
-        [sys.executable, "-c",
-         "import sys, ray; ray.init(num_cpus=2, include_dashboard=False, "
-         "logging_level='ERROR'); print(ray.get_runtime_context().gcs_address, flush=True); "
-         "sys.stdin.read(); ray.shutdown()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-c",
+            "import sys, ray; ray.init(num_cpus=2, include_dashboard=False, "
+            "logging_level='ERROR'); print(ray.get_runtime_context().gcs_address, flush=True); "
+            "sys.stdin.read(); ray.shutdown()",
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
         env={**os.environ, "RAY_AUTH_MODE": "disabled"},
-    )  # fmt: skip
+    )
     try:
         address = holder.stdout.readline().strip()
-        assert address.startswith("127.0.0.1:"), f"the Ray holder did not start on loopback: {address!r}"
+        assert address.startswith("127.0.0.1:"), (
+            f"the Ray holder did not start on loopback: {address!r}"
+        )
         on_ray = roachplan(*args, "--backend", "ray", "--address", address, timeout=300)
     finally:
         holder.stdin.close()
@@ -452,8 +550,10 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, m
     assert on_ray.returncode == local.returncode, on_ray.stderr[-2000:]
 
     def key(result):
-        return [(r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
-                for r in result["ranking"]]  # fmt: skip
+        return [
+            (r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
+            for r in result["ranking"]
+        ]
 
     a, b = json.loads(local.stdout), json.loads(on_ray.stdout)
     assert key(b) == key(a) and b["chosen"] == a["chosen"]
@@ -477,8 +577,14 @@ def test_a_capture_s_terrain_height_noise_reaches_the_physics_and_reruns_exactly
     assert not terrain_noise(dataclasses.replace(cfg, terrain_height=0.0), 7, 5).any()
 
     scene = load_scene("kinect_bridge")
-    spec = ExperimentSpec(name="t", path=scene.path, scene=scene.path, planner=scene.planner,
-                          sim=scene.sim, driver=scene.driver)  # fmt: skip
+    spec = ExperimentSpec(
+        name="t",
+        path=scene.path,
+        scene=scene.path,
+        planner=scene.planner,
+        sim=scene.sim,
+        driver=scene.driver,
+    )
     worker = TrialWorker(spec)
     try:
         from roachplan.experiments import plan

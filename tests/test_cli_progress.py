@@ -18,8 +18,15 @@ def _run(*args: str, progress: bool = True, cache=None) -> subprocess.CompletedP
         env["ROACHPLAN_CACHE"] = str(cache)  # an empty render cache: the model renders
     if progress:
         env["ROACHPLAN_PROGRESS"] = "1"
-    return subprocess.run([*ROACHPLAN, *args], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=600, check=False)  # fmt: skip
+    return subprocess.run(
+        [*ROACHPLAN, *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
 
 
 def test_meshing_shows_its_stages_and_json_stays_clean(tmp_path):
@@ -35,8 +42,16 @@ def test_meshing_shows_its_stages_and_json_stays_clean(tmp_path):
 def test_a_render_shows_seconds_of_its_limit_and_many_paths_show_paths_found(tmp_path):
     model = tmp_path / "ramp.scad"
     model.write_text("cube([1.5, 1.5, 0.02]);\n")
-    run = _run("scene", "build", str(model), "-o", str(tmp_path / "ramp.stl"), "--scad-timeout", "90",
-               cache=tmp_path / "cache")
+    run = _run(
+        "scene",
+        "build",
+        str(model),
+        "-o",
+        str(tmp_path / "ramp.stl"),
+        "--scad-timeout",
+        "90",
+        cache=tmp_path / "cache",
+    )
     assert run.returncode == 0, run.stderr
     assert "OpenSCAD ramp.scad:" in run.stderr and "of 90 s limit" in run.stderr, run.stderr
     plans = _run("plan", "--scene", "double_bridge", "--count", "2", "--json")

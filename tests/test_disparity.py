@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from PIL import Image
+
 from roachplan.perception import CaptureError, capture_settings, load_capture, mesh_capture
 from test_perception import REAL
 
@@ -48,8 +49,9 @@ def depth_image(cap) -> np.ndarray:
 )
 def test_raw_disparity_is_recognised_and_converted_by_nyus_model(tmp_path, maxval, little_endian):
     mm = depth_mm(RTAB / "depth_154.png")
-    pgm = write_pgm(tmp_path / "raw_154.pgm", disparity_of(mm), maxval=maxval,
-                    little_endian=little_endian)  # fmt: skip
+    pgm = write_pgm(
+        tmp_path / "raw_154.pgm", disparity_of(mm), maxval=maxval, little_endian=little_endian
+    )
     cap = load_capture(pgm, intrinsics=CALIB)
     assert cap.depth_scale is None  # (no depth scale to advise on: it is not one)
     assert any("raw disparity" in n and "351.3 / (1092.5 - d)" in n for n in cap.notes), cap.notes

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+
 from roachplan.experiments import plan
 from roachplan.experiments._trial import drive
 from roachplan.planning._drivable import max_curvature
@@ -42,9 +43,7 @@ def test_dubins_curves_end_on_the_goal_and_are_as_long_as_ompls():
 
 
 @pytest.mark.parametrize("planner", ["prm", "rrtconnect", "stride"])
-def test_drivable_paths_turn_no_tighter_than_the_radius_and_pass_the_ray_cast_check(
-    world, planner
-):
+def test_drivable_paths_turn_no_tighter_than_the_radius_and_pass_the_ray_cast_check(world, planner):
     cfg = dataclasses.replace(world.scene.planner, name=planner)
     assert cfg.turning_radius is not None, "drivable plans are the default"
     for seed in range(5):
@@ -177,14 +176,16 @@ def _scene_world(folder, name: str, scad: str, yaml_text: str):
 
 @pytest.fixture(scope="module")
 def dead_end(tmp_path_factory):
-    return _scene_world(tmp_path_factory.mktemp("dead_end"), "dead_end", DEAD_END_SCAD,
-                        DEAD_END_YAML)  # fmt: skip
+    return _scene_world(
+        tmp_path_factory.mktemp("dead_end"), "dead_end", DEAD_END_SCAD, DEAD_END_YAML
+    )
 
 
 @pytest.fixture(scope="module")
 def switchback(tmp_path_factory):
-    return _scene_world(tmp_path_factory.mktemp("switchback"), "switchback", SWITCHBACK_SCAD,
-                        SWITCHBACK_YAML)  # fmt: skip
+    return _scene_world(
+        tmp_path_factory.mktemp("switchback"), "switchback", SWITCHBACK_SCAD, SWITCHBACK_YAML
+    )
 
 
 def _on_the_floor(world, states: np.ndarray) -> bool:
@@ -195,8 +196,13 @@ def _on_the_floor(world, states: np.ndarray) -> bool:
     dense = dense_states(states)
     feet = world.robot.foot_points_xy
     c, s = np.cos(dense[:, 2:3]), np.sin(dense[:, 2:3])
-    pts = np.stack([dense[:, :1] + c * feet[:, 0] - s * feet[:, 1],
-                    dense[:, 1:2] + s * feet[:, 0] + c * feet[:, 1]], axis=-1).reshape(-1, 2)  # fmt: skip
+    pts = np.stack(
+        [
+            dense[:, :1] + c * feet[:, 0] - s * feet[:, 1],
+            dense[:, 1:2] + s * feet[:, 0] + c * feet[:, 1],
+        ],
+        axis=-1,
+    ).reshape(-1, 2)
     with world.simulation() as sim:
         sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, -100), (0, 0, 0, 1))
         hits = sim._bc.rayTestBatch([(x, y, 2.0) for x, y in pts], [(x, y, -2.0) for x, y in pts])
@@ -237,8 +243,9 @@ def test_a_dead_end_too_narrow_for_arcs_is_left_by_a_turn_on_the_spot(dead_end):
     np.testing.assert_allclose(planned.path_xyz[1], planned.path_xyz[0], atol=1e-12)
     assert planned.states[1, 2] == yaw
     np.testing.assert_allclose(planned.states[-1, :2], scene.goal[:2], atol=1e-9)
-    valid = check_states(dead_end.heightfield, dead_end.footprint, scene.planner.validity,
-                         planned.states).valid  # fmt: skip
+    valid = check_states(
+        dead_end.heightfield, dead_end.footprint, scene.planner.validity, planned.states
+    ).valid
     assert valid.all() and _spins_are_valid(dead_end, planned)
     assert _on_the_floor(dead_end, planned.states)
     assert max_curvature(planned.states[1:]) <= 1 / scene.planner.turning_radius * 1.05
@@ -269,8 +276,11 @@ def test_spins_mid_path_are_driven_where_the_route_turns_back(switchback):
     from roachplan.experiments._trial import finish_trial
 
     scene = switchback.scene
-    mid = [p for p in (plan(switchback, seed=s) for s in range(6))
-           if p.found and any(k > 0 for k, _ in p.spins)]  # fmt: skip
+    mid = [
+        p
+        for p in (plan(switchback, seed=s) for s in range(6))
+        if p.found and any(k > 0 for k, _ in p.spins)
+    ]
     assert mid, "no plan of seeds 0-5 turned on the spot along the way"
     for planned in mid:
         for k, yaw in planned.spins:
@@ -319,8 +329,13 @@ def test_start_and_goal_that_coincide_make_a_trivial_plan_and_a_trial_that_succe
     assert abs(math.remainder(yaw - turned[2], 2 * math.pi)) < 0.2
     assert trial.relative_energy < 5.0  # against a walk of the goal radius, not of 0 m
     # The report's raw plan: OMPL's two states, no spin.
-    raw = plan(world, seed=0, start=start, goal=turned,
-               planner=dataclasses.replace(world.scene.planner, turning_radius=None))  # fmt: skip
+    raw = plan(
+        world,
+        seed=0,
+        start=start,
+        goal=turned,
+        planner=dataclasses.replace(world.scene.planner, turning_radius=None),
+    )
     assert raw.found and raw.spins == () and raw.states.shape == (2, 3)
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from roachplan.sim import (
     DriverConfig,
     RobotConfig,
@@ -93,7 +94,10 @@ def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
     world = build_world(with_scad_backend(load_scene(rec["scene"]), "cgal"))
     scene = world.scene
     world = dataclasses.replace(
-        world, scene=dataclasses.replace(scene, driver=dataclasses.replace(scene.driver, kind="reference"))
+        world,
+        scene=dataclasses.replace(
+            scene, driver=dataclasses.replace(scene.driver, kind="reference")
+        ),
     )
     result = drive(world, np.array(rec["path"]))
     assert (result.outcome, result.reason) == (rec["outcome"], rec["reason"])

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from conftest import ROACHPLAN, ROOT, roachplan
 
 N = 8  # trials: 4 over each bridge of double_bridge_rough
@@ -56,8 +57,10 @@ def run_killed_and_resumed(tmp_path_factory):
     out = tmp_path_factory.mktemp("exp") / "killed"
     proc = subprocess.Popen(
         [*ROACHPLAN, "experiment", *ARGS, "--workers", "2", "--out", str(out)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     store = out / "trials.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
@@ -188,6 +191,7 @@ def test_best_path_is_the_lowest_energy_success_re_driven(run_one_worker):
 def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_worker, tmp_path):
     """Against the same figure drawn without trials: the paths add dark and blue pixels."""
     import matplotlib.image
+
     from roachplan.experiments import load_experiment
     from roachplan.experiments._figures import paths_figure
     from roachplan.scenes import build_world
@@ -195,8 +199,9 @@ def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_wo
     out, _ = run_one_worker
     spec = load_experiment("bridge_rough")
     world = build_world(spec.scene_with_settings())
-    paths_figure(tmp_path / "empty.png", world.heightfield, [], None,
-                 f"{spec.name}: {spec.description}")  # fmt: skip
+    paths_figure(
+        tmp_path / "empty.png", world.heightfield, [], None, f"{spec.name}: {spec.description}"
+    )
 
     def count(png: Path) -> tuple[int, int]:
         img = matplotlib.image.imread(png)[..., :3]
@@ -228,9 +233,20 @@ def test_ray_backend_runs_the_same_trials(run_one_worker, tmp_path):
     out_local, _ = run_one_worker
     out = tmp_path / "ray"
     done = roachplan(
-        "experiment", "bridge_rough", "--trials", "4", "--repeats", "0", "--quiet",
-        "--workers", "2", "--backend", "ray", "--out", str(out),
-    )  # fmt: skip
+        "experiment",
+        "bridge_rough",
+        "--trials",
+        "4",
+        "--repeats",
+        "0",
+        "--quiet",
+        "--workers",
+        "2",
+        "--backend",
+        "ray",
+        "--out",
+        str(out),
+    )
     assert done.returncode == 0, done.stderr
     local = {t["seed"]: t for t in trials_of(out_local)}
     ray_trials = trials_of(out)
@@ -250,8 +266,9 @@ def test_existing_results_need_resume_and_the_same_settings(run_one_worker):
     # Without --trials and --repeats, --resume takes them from the manifest: nothing to run.
     same = roachplan("experiment", "bridge_rough", "--quiet", "--out", str(out), "--resume")
     assert same.returncode == 0 and "(0 run now, 8 stored before)" in same.stdout
-    smooth = roachplan("experiment", "bridge_smooth", "--trials", str(N), "--out", str(out),
-                       "--resume")  # fmt: skip
+    smooth = roachplan(
+        "experiment", "bridge_smooth", "--trials", str(N), "--out", str(out), "--resume"
+    )
     assert smooth.returncode == 2 and "was started with" in smooth.stderr
 
 
@@ -293,11 +310,35 @@ def test_summary_statistics_on_known_records():
     from roachplan.experiments import summarize
 
     recs = [
-        {"target_route": "a", "outcome": "success", "relative_energy": 1.0, "energy": 2.0, "drive_time": 10.0},
-        {"target_route": "a", "outcome": "success", "relative_energy": 2.0, "energy": 4.0, "drive_time": 20.0},
-        {"target_route": "a", "outcome": "flipped", "relative_energy": 9.0, "energy": 9.0, "drive_time": 5.0},
-        {"target_route": "b", "outcome": "stuck", "relative_energy": 3.0, "energy": 3.0, "drive_time": 5.0},
-    ]  # fmt: skip
+        {
+            "target_route": "a",
+            "outcome": "success",
+            "relative_energy": 1.0,
+            "energy": 2.0,
+            "drive_time": 10.0,
+        },
+        {
+            "target_route": "a",
+            "outcome": "success",
+            "relative_energy": 2.0,
+            "energy": 4.0,
+            "drive_time": 20.0,
+        },
+        {
+            "target_route": "a",
+            "outcome": "flipped",
+            "relative_energy": 9.0,
+            "energy": 9.0,
+            "drive_time": 5.0,
+        },
+        {
+            "target_route": "b",
+            "outcome": "stuck",
+            "relative_energy": 3.0,
+            "energy": 3.0,
+            "drive_time": 5.0,
+        },
+    ]
     a, b = summarize(recs, ("a", "b"))
     assert (a.trials, a.successes, a.energy_mean, a.energy_min, a.energy_max) == (
         3,

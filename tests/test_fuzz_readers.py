@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
+
 from roachplan.perception import CaptureError, load_capture
 from roachplan.perception._camera import MAX_IMAGE_SIDE, parse_calibration
 from roachplan.perception._headers import (
@@ -28,10 +29,46 @@ from roachplan.perception._headers import (
 )
 from test_perception import REAL
 
-HOSTILE_TOKENS = ["0", "-1", "1", "3", "4", "8", "12", "1000000000", "99999999999999", "4294967295",
-                  "nan", "inf", "-inf", "1e309", "abc", "", "x", "y", "z", "_", "F", "U", "I", "Q",
-                  "ascii", "binary", "binary_compressed", "float", "list", "uchar", "vertex",
-                  "end_header", "DATA", "\xff", "0x10", "1.5", "  ", "\n"]  # fmt: skip
+HOSTILE_TOKENS = [
+    "0",
+    "-1",
+    "1",
+    "3",
+    "4",
+    "8",
+    "12",
+    "1000000000",
+    "99999999999999",
+    "4294967295",
+    "nan",
+    "inf",
+    "-inf",
+    "1e309",
+    "abc",
+    "",
+    "x",
+    "y",
+    "z",
+    "_",
+    "F",
+    "U",
+    "I",
+    "Q",
+    "ascii",
+    "binary",
+    "binary_compressed",
+    "float",
+    "list",
+    "uchar",
+    "vertex",
+    "end_header",
+    "DATA",
+    "\xff",
+    "0x10",
+    "1.5",
+    "  ",
+    "\n",
+]
 
 
 @st.composite
@@ -39,8 +76,9 @@ def mutated(draw, valid: bytes, header_end: int) -> bytes:
     """valid with 1-4 mutations, mostly within its first header_end bytes (the header)."""
     data = bytearray(valid)
     for _ in range(draw(st.integers(1, 4))):
-        op = draw(st.sampled_from(["token", "token", "drop_line", "repeat_line", "flip",
-                                   "insert", "cut"]))  # fmt: skip
+        op = draw(
+            st.sampled_from(["token", "token", "drop_line", "repeat_line", "flip", "insert", "cut"])
+        )
         lines = bytes(data[:header_end]).split(b"\n")
         if op == "token" and lines:
             i = draw(st.integers(0, len(lines) - 1))
@@ -67,22 +105,41 @@ def mutated(draw, valid: bytes, header_end: int) -> bytes:
 
 
 def _pcd(data: str, body: bytes, **over: str) -> bytes:
-    header = {"VERSION": "0.7", "FIELDS": "x y z rgb", "SIZE": "4 4 4 4", "TYPE": "F F F U",
-              "COUNT": "1 1 1 1", "WIDTH": "3", "HEIGHT": "2", "VIEWPOINT": "0 0 0 1 0 0 0",
-              "POINTS": "6", "DATA": data, **over}  # fmt: skip
+    header = {
+        "VERSION": "0.7",
+        "FIELDS": "x y z rgb",
+        "SIZE": "4 4 4 4",
+        "TYPE": "F F F U",
+        "COUNT": "1 1 1 1",
+        "WIDTH": "3",
+        "HEIGHT": "2",
+        "VIEWPOINT": "0 0 0 1 0 0 0",
+        "POINTS": "6",
+        "DATA": data,
+        **over,
+    }
     return "".join(f"{k} {v}\n" for k, v in header.items()).encode() + body
 
 
 PTS = np.arange(24, dtype="<f4").reshape(6, 4) / 7
 PCD_BINARY = _pcd("binary", PTS.tobytes())
 PCD_ASCII = _pcd("ascii", "".join(" ".join(f"{v:.9g}" for v in row) + "\n" for row in PTS).encode())
-PCD_COMPRESSED = (_pcd("binary_compressed", b"") + np.array([99, 96], "<u4").tobytes()
-                  + bytes([31]) + PTS.T.tobytes()[:32] + bytes([31]) + PTS.T.tobytes()[32:64]
-                  + bytes([31]) + PTS.T.tobytes()[64:])  # fmt: skip
+PCD_COMPRESSED = (
+    _pcd("binary_compressed", b"")
+    + np.array([99, 96], "<u4").tobytes()
+    + bytes([31])
+    + PTS.T.tobytes()[:32]
+    + bytes([31])
+    + PTS.T.tobytes()[32:64]
+    + bytes([31])
+    + PTS.T.tobytes()[64:]
+)
 """LZF of literal runs (a control byte of 31 then 32 bytes) holds the fields one after another."""
-PLY_HEADER = (b"ply\nformat binary_little_endian 1.0\ncomment fuzz\nelement vertex 6\n"
-              b"property float x\nproperty float y\nproperty float z\nproperty float w\n"
-              b"element face 1\nproperty list uchar int vertex_indices\nend_header\n")  # fmt: skip
+PLY_HEADER = (
+    b"ply\nformat binary_little_endian 1.0\ncomment fuzz\nelement vertex 6\n"
+    b"property float x\nproperty float y\nproperty float z\nproperty float w\n"
+    b"element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+)
 PLY_BINARY = PLY_HEADER + PTS.tobytes() + b"\x03" + np.array([0, 1, 2], "<i4").tobytes()
 PLY_ASCII = (
     PLY_HEADER.replace(b"binary_little_endian", b"ascii")
@@ -106,7 +163,7 @@ CALIBRATIONS = {
             "cy": 239.5,
             "depth_scale": 1000,
         }
-    ),  # fmt: skip
+    ),
     ".yml": "image_width: 640\nimage_height: 480\ncamera_name: c\ncamera_matrix:\n  rows: 3\n"
     "  cols: 3\n  data: [525, 0, 319.5, 0, 525, 239.5, 0, 0, 1]\n",
 }
@@ -237,14 +294,20 @@ def test_calibration_of_any_text(text, suffix):
 # -- valid files, mutated -------------------------------------------------------------------
 
 
-@given(st.sampled_from([PCD_BINARY, PCD_ASCII, PCD_COMPRESSED]).flatmap(
-    lambda v: mutated(v, _header_end(v, b"\nDATA ") + 20)))  # fmt: skip
+@given(
+    st.sampled_from([PCD_BINARY, PCD_ASCII, PCD_COMPRESSED]).flatmap(
+        lambda v: mutated(v, _header_end(v, b"\nDATA ") + 20)
+    )
+)
 def test_pcd_header_mutated(data):
     check_pcd(data)
 
 
-@given(st.sampled_from([PLY_BINARY, PLY_ASCII]).flatmap(
-    lambda v: mutated(v, _header_end(v, b"end_header\n"))))  # fmt: skip
+@given(
+    st.sampled_from([PLY_BINARY, PLY_ASCII]).flatmap(
+        lambda v: mutated(v, _header_end(v, b"end_header\n"))
+    )
+)
 def test_ply_header_mutated(data):
     check_ply(data)
 
@@ -255,17 +318,30 @@ def test_netpbm_and_png_headers_mutated(netpbm, png):
     check_png(png)
 
 
-@given(st.sampled_from(sorted(CALIBRATIONS)).flatmap(
-    lambda s: st.tuples(st.just(s), mutated(CALIBRATIONS[s].encode(), len(CALIBRATIONS[s])))))  # fmt: skip
+@given(
+    st.sampled_from(sorted(CALIBRATIONS)).flatmap(
+        lambda s: st.tuples(st.just(s), mutated(CALIBRATIONS[s].encode(), len(CALIBRATIONS[s])))
+    )
+)
 def test_calibration_mutated(case):
     suffix, data = case
     check_calibration(data.decode("utf-8", errors="replace"), suffix)
 
 
-@given(st.sampled_from([".pcd", ".ply"]).flatmap(lambda s: st.tuples(st.just(s), mutated(
-    *{".pcd": (PCD_COMPRESSED, _header_end(PCD_COMPRESSED, b"\nDATA ") + 20),
-      ".ply": (PLY_BINARY, _header_end(PLY_BINARY, b"end_header\n"))}[s])))
-    | st.tuples(st.just(".pcd"), mutated(PCD_ASCII, len(PCD_ASCII))))  # fmt: skip
+@given(
+    st.sampled_from([".pcd", ".ply"]).flatmap(
+        lambda s: st.tuples(
+            st.just(s),
+            mutated(
+                *{
+                    ".pcd": (PCD_COMPRESSED, _header_end(PCD_COMPRESSED, b"\nDATA ") + 20),
+                    ".ply": (PLY_BINARY, _header_end(PLY_BINARY, b"end_header\n")),
+                }[s]
+            ),
+        )
+    )
+    | st.tuples(st.just(".pcd"), mutated(PCD_ASCII, len(PCD_ASCII)))
+)
 def test_mutated_clouds_load_or_refuse(tmp_path, case):
     """The decoders behind the headers: a mutated file loads (finite or NaN points, as many as
     its header says) or is refused with a CaptureError."""

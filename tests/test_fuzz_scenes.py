@@ -11,17 +11,61 @@ import trimesh
 import yaml
 from hypothesis import given
 from hypothesis import strategies as st
+
 from roachplan.perception import MAX_YAML_BYTES, load_yaml, short_repr
 from roachplan.scenes import Scene, SceneError, load_scene
 
-SCENE_KEYS = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
-              "planner", "sim", "driver", "seed")  # fmt: skip
-OBJECT_KEYS = ("scad", "mesh", "capture", "params", "timeout", "perception", "scale", "position",
-               "orientation")  # fmt: skip
-CONFIG_KEYS = ("name", "time_limit", "max_iterations", "prm_batch", "simplify", "validity",
-               "timestep", "solver_iterations", "friction", "omega0", "gain", "r_end")  # fmt: skip
-PERCEPTION_KEYS = ("voxel", "method", "intrinsics", "depth_scale", "units", "topic", "crop",
-                   "depth_range", "seed", "frame", "up")  # fmt: skip
+SCENE_KEYS = (
+    "description",
+    "terrain",
+    "ground",
+    "robot",
+    "goal",
+    "bounds",
+    "routes",
+    "planner",
+    "sim",
+    "driver",
+    "seed",
+)
+OBJECT_KEYS = (
+    "scad",
+    "mesh",
+    "capture",
+    "params",
+    "timeout",
+    "perception",
+    "scale",
+    "position",
+    "orientation",
+)
+CONFIG_KEYS = (
+    "name",
+    "time_limit",
+    "max_iterations",
+    "prm_batch",
+    "simplify",
+    "validity",
+    "timestep",
+    "solver_iterations",
+    "friction",
+    "omega0",
+    "gain",
+    "r_end",
+)
+PERCEPTION_KEYS = (
+    "voxel",
+    "method",
+    "intrinsics",
+    "depth_scale",
+    "units",
+    "topic",
+    "crop",
+    "depth_range",
+    "seed",
+    "frame",
+    "up",
+)
 
 
 @pytest.fixture(scope="module")
@@ -45,13 +89,29 @@ scalars = (
     | st.integers(min_value=-(10**30), max_value=10**30)
     | st.floats(allow_nan=True, allow_infinity=True)
     | st.text(max_size=20)
-    | st.sampled_from(["1e6", "prm", "rrtconnect", "block.stl", "m.scad", "cloud.pcd", "x\0y",
-                       "../block.stl", "/etc/passwd", "m", "kinect_v2", "a" * 300])  # fmt: skip
+    | st.sampled_from(
+        [
+            "1e6",
+            "prm",
+            "rrtconnect",
+            "block.stl",
+            "m.scad",
+            "cloud.pcd",
+            "x\0y",
+            "../block.stl",
+            "/etc/passwd",
+            "m",
+            "kinect_v2",
+            "a" * 300,
+        ]
+    )
 )
 values = st.recursive(
     scalars,
-    lambda inner: st.lists(inner, max_size=5)
-    | st.dictionaries(st.text(max_size=8) | st.sampled_from(CONFIG_KEYS), inner, max_size=4),
+    lambda inner: (
+        st.lists(inner, max_size=5)
+        | st.dictionaries(st.text(max_size=8) | st.sampled_from(CONFIG_KEYS), inner, max_size=4)
+    ),
     max_leaves=12,
 )
 poses = st.lists(st.floats(-1, 1) | values, min_size=0, max_size=4)
@@ -70,8 +130,10 @@ def _object_value(key: str) -> st.SearchStrategy:
     return {
         "params": st.dictionaries(
             st.sampled_from(["size", "unit", "label", "solid", "dims", "width", "post"]),
-            scalars, max_size=3,
-        ) | values,  # fmt: skip
+            scalars,
+            max_size=3,
+        )
+        | values,
         "perception": _sometimes(PERCEPTION_KEYS, lambda _: values) | values,
         "orientation": st.lists(st.floats(-2, 2), min_size=4, max_size=4) | values,
     }.get(key, values)
@@ -100,8 +162,7 @@ def _scene_value(key: str) -> st.SearchStrategy:
         "goal": poses,
         "seed": st.integers(-5, 2**32) | values,
         "ground": st.floats(-1, 1) | values,
-        "bounds": st.lists(st.lists(st.floats(-2, 2), min_size=2, max_size=2), max_size=2)
-        | values,
+        "bounds": st.lists(st.lists(st.floats(-2, 2), min_size=2, max_size=2), max_size=2) | values,
         "planner": _sometimes(CONFIG_KEYS, lambda _: values) | values,
         "sim": _sometimes(CONFIG_KEYS, lambda _: values) | values,
         "driver": _sometimes(CONFIG_KEYS, lambda _: values) | values,
@@ -113,11 +174,49 @@ scenes = _sometimes(SCENE_KEYS[2:], _scene_value, {"terrain": _scene_value("terr
 # Pieces of YAML syntax, so random text reaches the parser's corners: anchors and aliases,
 # tags, flow collections, merges, block scalars, documents and directives.
 yaml_pieces = st.lists(
-    st.sampled_from(["terrain:", "\n", "  ", "- ", "mesh: block.stl", "&a ", "*a", "<<: *a",
-                     "[", "]", "{", "}", ", ", ": ", "? ", "!!int ", "!!float ", "!!binary ",
-                     "!!python/object ", "!!set ", "|\n", ">\n", "---\n", "...\n", "%YAML 1.1\n",
-                     "1e6", "0x1F", "1:30", "2001-02-30", "'", '"', "#", "\t", "\x00", "\ufeff",
-                     "seed: ", "planner: ", "ground: ", "9" * 5000])  # fmt: skip
+    st.sampled_from(
+        [
+            "terrain:",
+            "\n",
+            "  ",
+            "- ",
+            "mesh: block.stl",
+            "&a ",
+            "*a",
+            "<<: *a",
+            "[",
+            "]",
+            "{",
+            "}",
+            ", ",
+            ": ",
+            "? ",
+            "!!int ",
+            "!!float ",
+            "!!binary ",
+            "!!python/object ",
+            "!!set ",
+            "|\n",
+            ">\n",
+            "---\n",
+            "...\n",
+            "%YAML 1.1\n",
+            "1e6",
+            "0x1F",
+            "1:30",
+            "2001-02-30",
+            "'",
+            '"',
+            "#",
+            "\t",
+            "\x00",
+            "\ufeff",
+            "seed: ",
+            "planner: ",
+            "ground: ",
+            "9" * 5000,
+        ]
+    )
     | st.text(max_size=6),
     max_size=40,
 ).map("".join)

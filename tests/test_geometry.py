@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+
 from roachplan.planning import (
     COLLISION,
     FOOT,

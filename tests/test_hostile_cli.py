@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 import trimesh
+
 from conftest import roachplan
 from hostile import Case, run_case
 from roachplan.experiments import (
@@ -55,8 +56,17 @@ def study(*flags: str):
 
 def synth(*flags: str, out: str = "synth.png"):
     """`roachplan synth-capture double_bridge -o OUT --eye .. --target .. FLAGS`."""
-    return lambda tmp: ["synth-capture", "double_bridge", "-o", str(tmp / out),
-                        "--eye", "0,-2,1.5", "--target", "0,0,0", *flags]  # fmt: skip
+    return lambda tmp: [
+        "synth-capture",
+        "double_bridge",
+        "-o",
+        str(tmp / out),
+        "--eye",
+        "0,-2,1.5",
+        "--target",
+        "0,0,0",
+        *flags,
+    ]
 
 
 def with_files(files: dict[str, bytes | str], argv):
@@ -131,44 +141,87 @@ CASES = [
     Case("plan count huge", lambda t: ["plan", "--count", "1000000"], ("--count", "1 to 100")),
     Case("plan time-limit 0", lambda t: ["plan", "--time-limit", "0"], ("--time-limit", "above 0")),
     Case("plan time-limit nan", lambda t: ["plan", "--time-limit", "nan"], ("--time-limit nan",)),
-    Case("plan time-limit inf", lambda t: ["plan", "--time-limit", "inf"], ("--time-limit inf", "3600")),
-    Case("plan scale 0", lambda t: ["plan", "--scale", "0"], ("--scale", "positive number", "0.001")),
+    Case(
+        "plan time-limit inf",
+        lambda t: ["plan", "--time-limit", "inf"],
+        ("--time-limit inf", "3600"),
+    ),
+    Case(
+        "plan scale 0", lambda t: ["plan", "--scale", "0"], ("--scale", "positive number", "0.001")
+    ),
     Case("trial scale -1", lambda t: ["trial", "--scale=-1"], ("--scale", "-1")),
-    Case("scene build scale nan", lambda t: ["scene", "build", "double_bridge", "-o",
-         str(t / "x.stl"), "--scale", "nan"], ("--scale", "nan")),  # fmt: skip
-    Case("scene check scad-timeout 1e9", lambda t: ["scene", "check", "double_bridge",
-         "--scad-timeout", "1e9"], ("--scad-timeout", "86400")),  # fmt: skip
+    Case(
+        "scene build scale nan",
+        lambda t: ["scene", "build", "double_bridge", "-o", str(t / "x.stl"), "--scale", "nan"],
+        ("--scale", "nan"),
+    ),
+    Case(
+        "scene check scad-timeout 1e9",
+        lambda t: ["scene", "check", "double_bridge", "--scad-timeout", "1e9"],
+        ("--scad-timeout", "86400"),
+    ),
     Case("plan start nan", lambda t: ["plan", "--start", "nan,0,90"], ("--start", "finite")),
     Case("plan goal two numbers", lambda t: ["plan", "--goal", "1,2"], ("--goal", "x,y,yaw_deg")),
     Case("trial number -1", lambda t: ["trial", "--from", str(t), "--trial=-1"], ("--trial -1",)),
-    Case("experiment workers 0", lambda t: ["experiment", "bridge_smooth", "--workers", "0",
-         "--out", str(t / "r")], ("--workers 0", "1 or more")),  # fmt: skip
-    Case("experiment workers 100000", lambda t: ["experiment", "bridge_smooth", "--workers",
-         "100000", "--out", str(t / "r")], ("--workers 100000", "cores")),  # fmt: skip
-    Case("experiment trials 0", lambda t: ["experiment", "bridge_smooth", "--trials", "0"],
-         ("--trials 0", "1 or more")),  # fmt: skip
-    Case("experiment repeats -1", lambda t: ["experiment", "bridge_smooth", "--repeats=-1"],
-         ("--repeats -1", "0 or more")),  # fmt: skip
+    Case(
+        "experiment workers 0",
+        lambda t: ["experiment", "bridge_smooth", "--workers", "0", "--out", str(t / "r")],
+        ("--workers 0", "1 or more"),
+    ),
+    Case(
+        "experiment workers 100000",
+        lambda t: ["experiment", "bridge_smooth", "--workers", "100000", "--out", str(t / "r")],
+        ("--workers 100000", "cores"),
+    ),
+    Case(
+        "experiment trials 0",
+        lambda t: ["experiment", "bridge_smooth", "--trials", "0"],
+        ("--trials 0", "1 or more"),
+    ),
+    Case(
+        "experiment repeats -1",
+        lambda t: ["experiment", "bridge_smooth", "--repeats=-1"],
+        ("--repeats -1", "0 or more"),
+    ),
     Case("serve port 70000", lambda t: ["serve", "--port", "70000"], ("--port 70000", "65535")),
     Case("serve port 0", lambda t: ["serve", "--port", "0"], ("--port 0", "1 to 65535")),
-    Case("calibrate duration 0", lambda t: ["calibrate-turning", "--out", str(t / "c"),
-         "--duration", "0"], ("--duration 0",)),  # fmt: skip
-    Case("calibrate duration inf", lambda t: ["calibrate-turning", "--out", str(t / "c"),
-         "--duration", "inf"], ("--duration inf", "3600")),  # fmt: skip
-    Case("calibrate ratios text", lambda t: ["calibrate-turning", "--out", str(t / "c"),
-         "--ratios", "a,b"], ("--ratios", "'a' is not a number")),  # fmt: skip
-    Case("calibrate ratios below 1", lambda t: ["calibrate-turning", "--out", str(t / "c"),
-         "--ratios", "0.5,2"], ("--ratios", ">= 1")),  # fmt: skip
-    Case("calibrate one ratio", lambda t: ["calibrate-turning", "--out", str(t / "c"),
-         "--ratios", "2"], ("--ratios", "2 to 32")),  # fmt: skip
+    Case(
+        "calibrate duration 0",
+        lambda t: ["calibrate-turning", "--out", str(t / "c"), "--duration", "0"],
+        ("--duration 0",),
+    ),
+    Case(
+        "calibrate duration inf",
+        lambda t: ["calibrate-turning", "--out", str(t / "c"), "--duration", "inf"],
+        ("--duration inf", "3600"),
+    ),
+    Case(
+        "calibrate ratios text",
+        lambda t: ["calibrate-turning", "--out", str(t / "c"), "--ratios", "a,b"],
+        ("--ratios", "'a' is not a number"),
+    ),
+    Case(
+        "calibrate ratios below 1",
+        lambda t: ["calibrate-turning", "--out", str(t / "c"), "--ratios", "0.5,2"],
+        ("--ratios", ">= 1"),
+    ),
+    Case(
+        "calibrate one ratio",
+        lambda t: ["calibrate-turning", "--out", str(t / "c"), "--ratios", "2"],
+        ("--ratios", "2 to 32"),
+    ),
     Case("voxel-study sizes text", study("--sizes", "a,b"), ("--sizes", "'a' is not a number")),
     Case("voxel-study sizes 0", study("--sizes", "0,1"), ("--sizes", "> 0")),
     Case("voxel-study sizes inf", study("--sizes", "1,inf"), ("--sizes", "not a finite number")),
     Case("voxel-study square -1", study("--square", "-1"), ("--square -1", "above 0")),
     Case("voxel-study square 0", study("--square", "0"), ("--square 0",)),
     Case("voxel-study region swapped", study("--region", "1,1,0,0"), ("--region", "x0 < x1")),
-    Case("mesh crop swapped", mesh("--crop", "1,1,1,0,0,0"), ("--crop", "min below its max", "x, y, z"),
-         keep=("cap.pcd",)),  # fmt: skip
+    Case(
+        "mesh crop swapped",
+        mesh("--crop", "1,1,1,0,0,0"),
+        ("--crop", "min below its max", "x, y, z"),
+        keep=("cap.pcd",),
+    ),
     Case("mesh crop one axis swapped", mesh("--crop", "-1,1,-1,1,0,1"), ("--crop", "for y")),
     Case("mesh crop five numbers", mesh("--crop", "0,0,0,1,1"), ("--crop", "expected 6", "got 5")),
     Case("mesh depth-range swapped", mesh("--depth-range", "5,1"), ("--depth-range", "NEAR < FAR")),
@@ -176,98 +229,260 @@ CASES = [
     Case("mesh depth-scale 0", mesh("--depth-scale", "0"), ("--depth-scale 0",)),
     Case("synth eye two numbers", synth("--eye", "1,2"), ("--eye", "expected 3", "got 2")),
     # --- -o: where a file may be written ---------------------------------------------------
-    Case("mesh -o missing folder", mesh(out="nodir/out.stl"), ("nodir", "does not exist"),
-         keep=("cap.pcd",)),  # fmt: skip
-    Case("mesh -o under a file", with_files({"somefile": "x"}, mesh(out="somefile/out.stl")),
-         ("somefile", "is a file, not a folder"), keep=("somefile", "cap.pcd")),  # fmt: skip
-    Case("mesh -o under /proc", lambda t: ["mesh", cap(t), "-o", "/proc/roachplan-out.stl"],
-         ("/proc", "cannot create files")),  # fmt: skip
-    Case("mesh -o onto a folder", with_files({"x.stl/keep.txt": "x"}, mesh(out="x.stl")),
-         ("x.stl", "is a folder"), keep=("x.stl/keep.txt",)),  # fmt: skip
+    Case(
+        "mesh -o missing folder",
+        mesh(out="nodir/out.stl"),
+        ("nodir", "does not exist"),
+        keep=("cap.pcd",),
+    ),
+    Case(
+        "mesh -o under a file",
+        with_files({"somefile": "x"}, mesh(out="somefile/out.stl")),
+        ("somefile", "is a file, not a folder"),
+        keep=("somefile", "cap.pcd"),
+    ),
+    Case(
+        "mesh -o under /proc",
+        lambda t: ["mesh", cap(t), "-o", "/proc/roachplan-out.stl"],
+        ("/proc", "cannot create files"),
+    ),
+    Case(
+        "mesh -o onto a folder",
+        with_files({"x.stl/keep.txt": "x"}, mesh(out="x.stl")),
+        ("x.stl", "is a folder"),
+        keep=("x.stl/keep.txt",),
+    ),
     Case("mesh -o wrong suffix", mesh(out="out.pcd"), ("-o", "must end in one of", ".stl")),
-    Case("mesh -o its input", lambda t: ["mesh", str(_cloud(t, "cloud.ply")), "-o",
-         str(t / "cloud.ply")], ("would overwrite the input",), keep=("cloud.ply",)),  # fmt: skip
-    Case("mesh -o its input --force", lambda t: ["mesh", str(_cloud(t, "cloud.ply")), "-o",
-         str(t / "cloud.ply"), "--force"], ("would overwrite the input",), keep=("cloud.ply",)),  # fmt: skip
-    Case("mesh -o a symlink to its input", linked("symlink", mesh(out="link.ply")),
-         ("would overwrite the input", "cap.pcd"), keep=("cap.pcd",)),  # fmt: skip
-    Case("mesh -o a hard link to its input", linked("hardlink", mesh(out="link.ply")),
-         ("would overwrite the input",), keep=("cap.pcd", "link.ply")),  # fmt: skip
-    Case("mesh -o hard link --force", linked("hardlink", mesh("--force", out="link.ply")),
-         ("would overwrite the input", "even with --force"), keep=("cap.pcd",)),  # fmt: skip
-    Case("mesh -o someone's stl", with_files({"theirs.stl": "solid theirs\nendsolid\n"},
-         mesh(out="theirs.stl")), ("theirs.stl", "not a mesh roachplan wrote", "--force"),
-         keep=("theirs.stl", "cap.pcd")),  # fmt: skip
-    Case("mesh -o another capture", lambda t: ["mesh", cap(t), "-o", str(_cloud(t, "other.ply"))],
-         ("other.ply", "--force"), keep=("other.ply",)),  # fmt: skip
-    Case("voxel-study --csv missing folder", lambda t: study("--csv", str(t / "nodir" / "s.csv"))(t),
-         ("--csv", "nodir", "does not exist")),  # fmt: skip
-    Case("voxel-study --csv under a file", with_files({"f": "x"}, lambda t: study("--csv",
-         str(t / "f" / "s.csv"))(t)), ("--csv", "not a folder"), keep=("f",)),  # fmt: skip
-    Case("voxel-study --csv someone's csv", with_files({"their.csv": "a,b\n1,2\n"}, lambda t:
-         study("--csv", str(t / "their.csv"))(t)), ("their.csv", "not a voxel-study table"),
-         keep=("their.csv",)),  # fmt: skip
-    Case("voxel-study --csv not .csv", lambda t: study("--csv", str(t / "s.txt"))(t),
-         ("--csv", "must end in one of .csv")),  # fmt: skip
-    Case("scene build -o its own mesh", rock_build("rock.stl"), ("would overwrite the input",
-         "rock.stl"), keep=("rock.stl",)),  # fmt: skip
-    Case("scene build -o its scene file", rock_build("rock.yaml"), ("must end in one of",),
-         keep=("rock.yaml",)),  # fmt: skip
-    Case("scene build -o missing folder", lambda t: ["scene", "build", "double_bridge", "-o",
-         str(t / "a" / "b.stl")], ("does not exist",)),  # fmt: skip
-    Case("scene build -o someone's obj", with_files({"t.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
-         lambda t: ["scene", "build", "double_bridge", "-o", str(t / "t.obj")]),
-         ("t.obj", "not a mesh roachplan wrote"), keep=("t.obj",)),  # fmt: skip
-    Case("scene build -o its own stl again", built_before("b.stl", lambda t: ["scene", "build",
-         "double_bridge", "-o", str(t / "b.stl")]), ("wrote",), status=0),  # fmt: skip
-    Case("scene build --force someone's obj", with_files({"t.obj": "v 0 0 0\nf 1 1 1\n"},
-         lambda t: ["scene", "build", "double_bridge", "-o", str(t / "t.obj"), "--force"]),
-         ("wrote", "triangles"), status=0),  # fmt: skip
-    Case("synth -o an existing capture", lambda t: [cap(t), *synth(out="cap.pcd")(t)][1:],
-         ("cap.pcd", "--force"), keep=("cap.pcd",)),  # fmt: skip
-    Case("synth -o png beside its intrinsics", with_files({"cam.json": json.dumps(
-         {"fx": 525.0, "fy": 525.0, "cx": 319.5, "cy": 239.5, "width": 640, "height": 480})},
-         lambda t: synth("--intrinsics", str(t / "cam.json"), out="cam.png")(t)),
-         ("would overwrite the input", "cam.json"),
-         keep=("cam.json",)),  # fmt: skip
-    Case("synth -o png beside someone's json", with_files({"s.json": '{"mine": 1}'},
-         synth(out="s.png")), ("sidecar", "s.json", "--force"), keep=("s.json",)),  # fmt: skip
+    Case(
+        "mesh -o its input",
+        lambda t: ["mesh", str(_cloud(t, "cloud.ply")), "-o", str(t / "cloud.ply")],
+        ("would overwrite the input",),
+        keep=("cloud.ply",),
+    ),
+    Case(
+        "mesh -o its input --force",
+        lambda t: ["mesh", str(_cloud(t, "cloud.ply")), "-o", str(t / "cloud.ply"), "--force"],
+        ("would overwrite the input",),
+        keep=("cloud.ply",),
+    ),
+    Case(
+        "mesh -o a symlink to its input",
+        linked("symlink", mesh(out="link.ply")),
+        ("would overwrite the input", "cap.pcd"),
+        keep=("cap.pcd",),
+    ),
+    Case(
+        "mesh -o a hard link to its input",
+        linked("hardlink", mesh(out="link.ply")),
+        ("would overwrite the input",),
+        keep=("cap.pcd", "link.ply"),
+    ),
+    Case(
+        "mesh -o hard link --force",
+        linked("hardlink", mesh("--force", out="link.ply")),
+        ("would overwrite the input", "even with --force"),
+        keep=("cap.pcd",),
+    ),
+    Case(
+        "mesh -o someone's stl",
+        with_files({"theirs.stl": "solid theirs\nendsolid\n"}, mesh(out="theirs.stl")),
+        ("theirs.stl", "not a mesh roachplan wrote", "--force"),
+        keep=("theirs.stl", "cap.pcd"),
+    ),
+    Case(
+        "mesh -o another capture",
+        lambda t: ["mesh", cap(t), "-o", str(_cloud(t, "other.ply"))],
+        ("other.ply", "--force"),
+        keep=("other.ply",),
+    ),
+    Case(
+        "voxel-study --csv missing folder",
+        lambda t: study("--csv", str(t / "nodir" / "s.csv"))(t),
+        ("--csv", "nodir", "does not exist"),
+    ),
+    Case(
+        "voxel-study --csv under a file",
+        with_files({"f": "x"}, lambda t: study("--csv", str(t / "f" / "s.csv"))(t)),
+        ("--csv", "not a folder"),
+        keep=("f",),
+    ),
+    Case(
+        "voxel-study --csv someone's csv",
+        with_files({"their.csv": "a,b\n1,2\n"}, lambda t: study("--csv", str(t / "their.csv"))(t)),
+        ("their.csv", "not a voxel-study table"),
+        keep=("their.csv",),
+    ),
+    Case(
+        "voxel-study --csv not .csv",
+        lambda t: study("--csv", str(t / "s.txt"))(t),
+        ("--csv", "must end in one of .csv"),
+    ),
+    Case(
+        "scene build -o its own mesh",
+        rock_build("rock.stl"),
+        ("would overwrite the input", "rock.stl"),
+        keep=("rock.stl",),
+    ),
+    Case(
+        "scene build -o its scene file",
+        rock_build("rock.yaml"),
+        ("must end in one of",),
+        keep=("rock.yaml",),
+    ),
+    Case(
+        "scene build -o missing folder",
+        lambda t: ["scene", "build", "double_bridge", "-o", str(t / "a" / "b.stl")],
+        ("does not exist",),
+    ),
+    Case(
+        "scene build -o someone's obj",
+        with_files(
+            {"t.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+            lambda t: ["scene", "build", "double_bridge", "-o", str(t / "t.obj")],
+        ),
+        ("t.obj", "not a mesh roachplan wrote"),
+        keep=("t.obj",),
+    ),
+    Case(
+        "scene build -o its own stl again",
+        built_before(
+            "b.stl", lambda t: ["scene", "build", "double_bridge", "-o", str(t / "b.stl")]
+        ),
+        ("wrote",),
+        status=0,
+    ),
+    Case(
+        "scene build --force someone's obj",
+        with_files(
+            {"t.obj": "v 0 0 0\nf 1 1 1\n"},
+            lambda t: ["scene", "build", "double_bridge", "-o", str(t / "t.obj"), "--force"],
+        ),
+        ("wrote", "triangles"),
+        status=0,
+    ),
+    Case(
+        "synth -o an existing capture",
+        lambda t: [cap(t), *synth(out="cap.pcd")(t)][1:],
+        ("cap.pcd", "--force"),
+        keep=("cap.pcd",),
+    ),
+    Case(
+        "synth -o png beside its intrinsics",
+        with_files(
+            {
+                "cam.json": json.dumps(
+                    {
+                        "fx": 525.0,
+                        "fy": 525.0,
+                        "cx": 319.5,
+                        "cy": 239.5,
+                        "width": 640,
+                        "height": 480,
+                    }
+                )
+            },
+            lambda t: synth("--intrinsics", str(t / "cam.json"), out="cam.png")(t),
+        ),
+        ("would overwrite the input", "cam.json"),
+        keep=("cam.json",),
+    ),
+    Case(
+        "synth -o png beside someone's json",
+        with_files({"s.json": '{"mine": 1}'}, synth(out="s.png")),
+        ("sidecar", "s.json", "--force"),
+        keep=("s.json",),
+    ),
     # --- --out: folders ---------------------------------------------------------------------
-    Case("experiment --out someone's folder", with_files({"res/summary.csv": FOREIGN,
-         "res/paths.png": FOREIGN}, lambda t: ["experiment", "bridge_smooth", "--out",
-         str(t / "res")]), ("did not write", "paths.png", "new or empty folder"),
-         keep=("res/summary.csv", "res/paths.png")),  # fmt: skip
-    Case("experiment --out foreign manifest", with_files({"res/manifest.json": '{"name": "app"}'},
-         lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res"), "--resume"]),
-         ("not the manifest of a roachplan experiment", "roachplan experiment"),
-         keep=("res/manifest.json",)),  # fmt: skip
-    Case("experiment --out manifest of a newer format", with_files({"res/manifest.json":
-         json.dumps({**MANIFEST_ALIKE, "format": 9})}, lambda t: ["experiment", "bridge_smooth",
-         "--out", str(t / "res")]), ("format 9", "reads format 1"),
-         keep=("res/manifest.json",)),  # fmt: skip
-    Case("experiment --out store without manifest", with_files({"res/trials.jsonl": "{}\n"},
-         lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res"), "--resume"]),
-         ("trials.jsonl", "did not write"), keep=("res/trials.jsonl",)),  # fmt: skip
-    Case("experiment --out is a file", with_files({"res": FOREIGN}, lambda t: ["experiment",
-         "bridge_smooth", "--out", str(t / "res")]), ("is a file",), keep=("res",)),  # fmt: skip
-    Case("experiment --out under a file", with_files({"f": FOREIGN}, lambda t: ["experiment",
-         "bridge_smooth", "--out", str(t / "f" / "res")]), ("cannot create the folder",),
-         keep=("f",)),  # fmt: skip
-    Case("experiment --out under /proc", lambda t: ["experiment", "bridge_smooth", "--out",
-         "/proc/roachplan/res"], ("/proc", "cannot create")),  # fmt: skip
-    Case("trial --from foreign manifest", with_files({"res/manifest.json": "[1, 2]"},
-         lambda t: ["trial", "--from", str(t / "res"), "--trial", "0"]),
-         ("not the manifest of a roachplan experiment",)),  # fmt: skip
-    Case("trial --from a folder of nothing", lambda t: ["trial", "--from", str(t / "none"),
-         "--trial", "0"], ("no manifest.json",)),  # fmt: skip
-    Case("calibrate --out someone's folder", with_files({"c/notes.txt": FOREIGN}, lambda t:
-         ["calibrate-turning", "--out", str(t / "c")]), ("did not write", "notes.txt",
-         "earlier calibration"), keep=("c/notes.txt",)),  # fmt: skip
-    Case("calibrate --out is a file", with_files({"c": FOREIGN}, lambda t: ["calibrate-turning",
-         "--out", str(t / "c")]), ("is a file",), keep=("c",)),  # fmt: skip
-    Case("calibrate --out under a file", with_files({"f": FOREIGN}, lambda t:
-         ["calibrate-turning", "--out", str(t / "f" / "c")]), ("cannot create the folder",),
-         keep=("f",)),  # fmt: skip
+    Case(
+        "experiment --out someone's folder",
+        with_files(
+            {"res/summary.csv": FOREIGN, "res/paths.png": FOREIGN},
+            lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res")],
+        ),
+        ("did not write", "paths.png", "new or empty folder"),
+        keep=("res/summary.csv", "res/paths.png"),
+    ),
+    Case(
+        "experiment --out foreign manifest",
+        with_files(
+            {"res/manifest.json": '{"name": "app"}'},
+            lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res"), "--resume"],
+        ),
+        ("not the manifest of a roachplan experiment", "roachplan experiment"),
+        keep=("res/manifest.json",),
+    ),
+    Case(
+        "experiment --out manifest of a newer format",
+        with_files(
+            {"res/manifest.json": json.dumps({**MANIFEST_ALIKE, "format": 9})},
+            lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res")],
+        ),
+        ("format 9", "reads format 1"),
+        keep=("res/manifest.json",),
+    ),
+    Case(
+        "experiment --out store without manifest",
+        with_files(
+            {"res/trials.jsonl": "{}\n"},
+            lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res"), "--resume"],
+        ),
+        ("trials.jsonl", "did not write"),
+        keep=("res/trials.jsonl",),
+    ),
+    Case(
+        "experiment --out is a file",
+        with_files(
+            {"res": FOREIGN}, lambda t: ["experiment", "bridge_smooth", "--out", str(t / "res")]
+        ),
+        ("is a file",),
+        keep=("res",),
+    ),
+    Case(
+        "experiment --out under a file",
+        with_files(
+            {"f": FOREIGN}, lambda t: ["experiment", "bridge_smooth", "--out", str(t / "f" / "res")]
+        ),
+        ("cannot create the folder",),
+        keep=("f",),
+    ),
+    Case(
+        "experiment --out under /proc",
+        lambda t: ["experiment", "bridge_smooth", "--out", "/proc/roachplan/res"],
+        ("/proc", "cannot create"),
+    ),
+    Case(
+        "trial --from foreign manifest",
+        with_files(
+            {"res/manifest.json": "[1, 2]"},
+            lambda t: ["trial", "--from", str(t / "res"), "--trial", "0"],
+        ),
+        ("not the manifest of a roachplan experiment",),
+    ),
+    Case(
+        "trial --from a folder of nothing",
+        lambda t: ["trial", "--from", str(t / "none"), "--trial", "0"],
+        ("no manifest.json",),
+    ),
+    Case(
+        "calibrate --out someone's folder",
+        with_files(
+            {"c/notes.txt": FOREIGN}, lambda t: ["calibrate-turning", "--out", str(t / "c")]
+        ),
+        ("did not write", "notes.txt", "earlier calibration"),
+        keep=("c/notes.txt",),
+    ),
+    Case(
+        "calibrate --out is a file",
+        with_files({"c": FOREIGN}, lambda t: ["calibrate-turning", "--out", str(t / "c")]),
+        ("is a file",),
+        keep=("c",),
+    ),
+    Case(
+        "calibrate --out under a file",
+        with_files({"f": FOREIGN}, lambda t: ["calibrate-turning", "--out", str(t / "f" / "c")]),
+        ("cannot create the folder",),
+        keep=("f",),
+    ),
 ]
 
 
@@ -289,13 +504,18 @@ def test_hostile_cli(case: Case, tmp_path: Path):
 
 @pytest.mark.parametrize("where", ["before", "after"])
 def test_debug_shows_the_traceback_that_is_otherwise_hidden(where):
-    argv = ["--debug", "plan", "--seed=-1"] if where == "before" else ["plan", "--seed=-1", "--debug"]
+    argv = (
+        ["--debug", "plan", "--seed=-1"] if where == "before" else ["plan", "--seed=-1", "--debug"]
+    )
     shown = roachplan(*argv, timeout=120)
     hidden = roachplan("plan", "--seed=-1", timeout=120)
     assert shown.returncode == hidden.returncode == 2
     assert "Traceback" in shown.stderr and "UsageError" in shown.stderr
     assert "Traceback" not in hidden.stderr
-    assert "roachplan: error: --seed -1" in shown.stderr and "roachplan: error: --seed -1" in hidden.stderr
+    assert (
+        "roachplan: error: --seed -1" in shown.stderr
+        and "roachplan: error: --seed -1" in hidden.stderr
+    )
 
 
 def test_a_bug_is_one_line_naming_it_and_asking_for_debug(capsys):

@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 import trimesh
 import yaml
+
 from conftest import ROOT
 from hostile import Case, run_case
 from roachplan.planning._isolated import IsolationError, child_memory_limit, run_isolated
@@ -58,17 +59,26 @@ def _fill(text: str, tmp: Path) -> str:
     or U00002f escape, {stl_x} the secret solid's path escaped."""
     out = tmp / "outside"
     values = {
-        "out": str(out), "secret": str(out / "secret.dat"),
-        "secret_x": _esc(out / "secret.dat"), "secret_u": _esc(out / "secret.dat", "\\u002f"),
-        "secret_U": _esc(out / "secret.dat", "\\U00002f"), "stl_x": _esc(out / "secret.stl"),
-    }  # fmt: skip
+        "out": str(out),
+        "secret": str(out / "secret.dat"),
+        "secret_x": _esc(out / "secret.dat"),
+        "secret_u": _esc(out / "secret.dat", "\\u002f"),
+        "secret_U": _esc(out / "secret.dat", "\\U00002f"),
+        "stl_x": _esc(out / "secret.stl"),
+    }
     for key, value in values.items():
         text = text.replace("{" + key + "}", value)
     return text
 
 
-def model(code: str, files: dict[str, str] | None = None, *, decoy: str = "",
-          command: tuple[str, ...] = ("scene", "build"), flags: tuple[str, ...] = ()):  # fmt: skip
+def model(
+    code: str,
+    files: dict[str, str] | None = None,
+    *,
+    decoy: str = "",
+    command: tuple[str, ...] = ("scene", "build"),
+    flags: tuple[str, ...] = (),
+):
     """A case's make(): model/m.scad holding code, the files (name -> text) beside it, and a
     decoy: a harmless height map whose undecoded name is the model's escaped path (the trick of
     issue 15: a scan that did not decode escapes found this file and let the model through).
@@ -110,10 +120,12 @@ def scene_file(obj: dict, code: str, files=None, decoy: str = "") -> Callable[[P
     def make(tmp: Path) -> list[str]:
         model(code, files, decoy=decoy)(tmp)
         data = {
-            "terrain": [{"scad": "m.scad", **obj}], "ground": None,
-            "robot": {"start": [0.2, 0.2, 90]}, "goal": [0.8, 0.8, 90],
+            "terrain": [{"scad": "m.scad", **obj}],
+            "ground": None,
+            "robot": {"start": [0.2, 0.2, 90]},
+            "goal": [0.8, 0.8, 90],
             "bounds": [[0.1, 0.1], [0.9, 0.9]],
-        }  # fmt: skip
+        }
         scene = tmp / "model" / "scene.yaml"
         scene.write_text(yaml.safe_dump(data))
         return ["scene", "build", str(scene), "-o", str(tmp / "out.stl")]
@@ -131,35 +143,68 @@ DOTS = "\\x2e\\x2e/outside/secret.dat"
 
 CASES = [
     # -- escapes that spell a path outside the folder -----------------------------------------
-    Case("escape-x2f-absolute-with-decoy",
-         model('surface(file="{secret_x}");', decoy="{secret_x}"), ("secret.dat", "own folder")),
-    Case("escape-u002f-absolute-with-decoy",
-         model('surface(file="{secret_u}");', decoy="{secret_u}"), OWN_FOLDER),
-    Case("escape-U00002f-absolute-with-decoy",
-         model('surface(file="{secret_U}");', decoy="{secret_U}"), OWN_FOLDER),
+    Case(
+        "escape-x2f-absolute-with-decoy",
+        model('surface(file="{secret_x}");', decoy="{secret_x}"),
+        ("secret.dat", "own folder"),
+    ),
+    Case(
+        "escape-u002f-absolute-with-decoy",
+        model('surface(file="{secret_u}");', decoy="{secret_u}"),
+        OWN_FOLDER,
+    ),
+    Case(
+        "escape-U00002f-absolute-with-decoy",
+        model('surface(file="{secret_U}");', decoy="{secret_U}"),
+        OWN_FOLDER,
+    ),
     Case("escape-x2e-dots", model(f'surface(file="{DOTS}");', decoy=DOTS), ("own folder", "'..'")),
-    Case("escape-u002e-dots-in-one-name", model(
-        'surface(file="\\u002e\\u002e\\u002foutside\\u002fsecret.dat");',
-        decoy="\\u002e\\u002e\\u002foutside\\u002fsecret.dat",
-    ), OWN_FOLDER),
-    Case("escape-octal-is-no-escape", model(
-        'surface(file="\\056\\056\\057outside\\057secret.dat");',
-        decoy="\\056\\056\\057outside\\057secret.dat",
-    ), ("no such file", "056056057outside057secret.dat")),
+    Case(
+        "escape-u002e-dots-in-one-name",
+        model(
+            'surface(file="\\u002e\\u002e\\u002foutside\\u002fsecret.dat");',
+            decoy="\\u002e\\u002e\\u002foutside\\u002fsecret.dat",
+        ),
+        OWN_FOLDER,
+    ),
+    Case(
+        "escape-octal-is-no-escape",
+        model(
+            'surface(file="\\056\\056\\057outside\\057secret.dat");',
+            decoy="\\056\\056\\057outside\\057secret.dat",
+        ),
+        ("no such file", "056056057outside057secret.dat"),
+    ),
     Case("escape-import-stl", model('import("{stl_x}");', decoy="{stl_x}"), OWN_FOLDER),
-    Case("escape-in-an-included-file", model(
-        "include <inc.scad>\ncube(1);", {"inc.scad": 'surface(file="{secret_x}");'},
-        decoy="{secret_x}",
-    ), ("inc.scad, line 1", "own folder")),
-    Case("escape-in-a-used-module", model(
-        "use <lib.scad>\nterrain();", {"lib.scad": 'module terrain() import(file="{stl_x}");'},
-        decoy="{stl_x}",
-    ), ("lib.scad, line 1", "own folder")),
-    Case("escape-dev-zero-does-not-hang", model(
-        'surface(file="\\x2fdev\\x2fzero");', decoy="\\x2fdev\\x2fzero"
-    ), ("'/dev/zero'", "own folder"), timeout=60),
-    Case("escape-proc-environ", model('surface(file="\\x2fproc\\x2fself\\x2fenviron");'),
-         ("'/proc/self/environ'", "own folder")),
+    Case(
+        "escape-in-an-included-file",
+        model(
+            "include <inc.scad>\ncube(1);",
+            {"inc.scad": 'surface(file="{secret_x}");'},
+            decoy="{secret_x}",
+        ),
+        ("inc.scad, line 1", "own folder"),
+    ),
+    Case(
+        "escape-in-a-used-module",
+        model(
+            "use <lib.scad>\nterrain();",
+            {"lib.scad": 'module terrain() import(file="{stl_x}");'},
+            decoy="{stl_x}",
+        ),
+        ("lib.scad, line 1", "own folder"),
+    ),
+    Case(
+        "escape-dev-zero-does-not-hang",
+        model('surface(file="\\x2fdev\\x2fzero");', decoy="\\x2fdev\\x2fzero"),
+        ("'/dev/zero'", "own folder"),
+        timeout=60,
+    ),
+    Case(
+        "escape-proc-environ",
+        model('surface(file="\\x2fproc\\x2fself\\x2fenviron");'),
+        ("'/proc/self/environ'", "own folder"),
+    ),
     # -- plain absolute and '..' paths ------------------------------------------------------
     Case("absolute-surface", model('surface(file="{secret}");'), OWN_FOLDER),
     Case("absolute-import-positional", model('import("{out}/secret.stl");'), OWN_FOLDER),
@@ -168,48 +213,94 @@ CASES = [
     Case("home-tilde", model('surface(file="~/.bashrc");'), OWN_FOLDER),
     Case("dotdot-surface", model('surface(file="../outside/secret.dat");'), ("'..'",)),
     Case("dotdot-include", model("include <../outside/secret.scad>"), ("'..'",)),
-    Case("dotdot-through-a-subfolder",
-         model('surface(file="sub/../../outside/secret.dat");', {"sub/x": ""}), ("'..'",)),
-    Case("dxf-file-argument", model('linear_extrude(height=1, file="{out}/secret.dxf");'),
-         OWN_FOLDER),
+    Case(
+        "dotdot-through-a-subfolder",
+        model('surface(file="sub/../../outside/secret.dat");', {"sub/x": ""}),
+        ("'..'",),
+    ),
+    Case(
+        "dxf-file-argument", model('linear_extrude(height=1, file="{out}/secret.dxf");'), OWN_FOLDER
+    ),
     # -- symlinks in the model's folder -----------------------------------------------------
-    Case("symlink-relative", linked({"h.dat": "../outside/secret.dat"}, 'surface(file="h.dat");'),
-         ("leads outside",)),
-    Case("symlink-absolute", linked({"h.dat": "{secret}"}, 'surface(file="h.dat");'),
-         ("leads outside",)),
-    Case("symlink-folder", linked({"data": "{out}"}, 'surface(file="data/secret.dat");'),
-         ("leads outside",)),
-    Case("symlink-included-model", linked({"lib.scad": "{out}/secret.scad"}, "include <lib.scad>"),
-         ("leads outside",)),
+    Case(
+        "symlink-relative",
+        linked({"h.dat": "../outside/secret.dat"}, 'surface(file="h.dat");'),
+        ("leads outside",),
+    ),
+    Case(
+        "symlink-absolute",
+        linked({"h.dat": "{secret}"}, 'surface(file="h.dat");'),
+        ("leads outside",),
+    ),
+    Case(
+        "symlink-folder",
+        linked({"data": "{out}"}, 'surface(file="data/secret.dat");'),
+        ("leads outside",),
+    ),
+    Case(
+        "symlink-included-model",
+        linked({"lib.scad": "{out}/secret.scad"}, "include <lib.scad>"),
+        ("leads outside",),
+    ),
     # -- paths the scan cannot read: computed ones are refused ------------------------------
     Case("str-concatenation", model('surface(file=str("{out}", "/secret.dat"));'), LITERAL),
     Case("variable-path", model('f = "{secret}";\nsurface(file=f);'), LITERAL),
-    Case("path-from-a-scene-parameter", scene_file(
-        {"params": {"f": "../outside/secret.dat"}}, 'f = "h.dat";\nsurface(file=f);',
-        {"h.dat": "0 0\n0 0\n"},
-    ), LITERAL),
-    Case("scene-file-with-an-escape",
-         scene_file({}, 'surface(file="{secret_x}");', decoy="{secret_x}"), OWN_FOLDER),
-    Case("plan-with-an-escaping-model",
-         model(f'surface(file="{DOTS}");', decoy=DOTS, command=("plan",)), OWN_FOLDER),
-    Case("trial-with-an-absolute-model",
-         model('import("{out}/secret.stl");', command=("trial",)), OWN_FOLDER),
+    Case(
+        "path-from-a-scene-parameter",
+        scene_file(
+            {"params": {"f": "../outside/secret.dat"}},
+            'f = "h.dat";\nsurface(file=f);',
+            {"h.dat": "0 0\n0 0\n"},
+        ),
+        LITERAL,
+    ),
+    Case(
+        "scene-file-with-an-escape",
+        scene_file({}, 'surface(file="{secret_x}");', decoy="{secret_x}"),
+        OWN_FOLDER,
+    ),
+    Case(
+        "plan-with-an-escaping-model",
+        model(f'surface(file="{DOTS}");', decoy=DOTS, command=("plan",)),
+        OWN_FOLDER,
+    ),
+    Case(
+        "trial-with-an-absolute-model",
+        model('import("{out}/secret.stl");', command=("trial",)),
+        OWN_FOLDER,
+    ),
     # -- limits ----------------------------------------------------------------------------
-    Case("memory-limit", model(HUNGRY), ("ran out of memory", "300 MiB", "ROACHPLAN_SCAD_MEMORY"),
-         timeout=60),
-    Case("memory-setting-not-a-size", model("cube(1);"),
-         ("ROACHPLAN_SCAD_MEMORY='lots'", "16G")),
-    Case("time-limit-flag", model(SLOW, flags=("--scad-timeout", "2")),
-         ("time limit of 2 s", "--scad-timeout"), timeout=60),
-    Case("time-limit-scene-key", scene_file({"timeout": 2}, SLOW),
-         ("time limit of 2 s", "timeout: SECONDS"), timeout=60),
+    Case(
+        "memory-limit",
+        model(HUNGRY),
+        ("ran out of memory", "300 MiB", "ROACHPLAN_SCAD_MEMORY"),
+        timeout=60,
+    ),
+    Case("memory-setting-not-a-size", model("cube(1);"), ("ROACHPLAN_SCAD_MEMORY='lots'", "16G")),
+    Case(
+        "time-limit-flag",
+        model(SLOW, flags=("--scad-timeout", "2")),
+        ("time limit of 2 s", "--scad-timeout"),
+        timeout=60,
+    ),
+    Case(
+        "time-limit-scene-key",
+        scene_file({"timeout": 2}, SLOW),
+        ("time limit of 2 s", "timeout: SECONDS"),
+        timeout=60,
+    ),
     # -- what a model may do still works in the jail ---------------------------------------
-    Case("inside-the-folder-renders", model(
-        'include <parts/base.scad>\nsurface(file="h.dat");\n'
-        'translate([0, 0, 1]) linear_extrude(0.1) text("A", size=0.5);',
-        {"h.dat": "0 0.5\n0.5 0.2\n", "parts/base.scad": "cube([1, 1, 0.1]);"},
-    ), ("wrote",), status=0),
-]  # fmt: skip
+    Case(
+        "inside-the-folder-renders",
+        model(
+            'include <parts/base.scad>\nsurface(file="h.dat");\n'
+            'translate([0, 0, 1]) linear_extrude(0.1) text("A", size=0.5);',
+            {"h.dat": "0 0.5\n0.5 0.2\n", "parts/base.scad": "cube([1, 1, 0.1]);"},
+        ),
+        ("wrote",),
+        status=0,
+    ),
+]
 
 ENV = {
     "memory-limit": {"ROACHPLAN_SCAD_MEMORY": "300M"},
@@ -249,8 +340,14 @@ def test_the_table_holds_enough_cases():
 # -- without namespaces: refused unless the user opts out ---------------------------------------
 
 # Runs argv in a user namespace that may create no further ones: the jail cannot be made.
-_NO_NAMESPACES = ["unshare", "-r", "sh", "-c",
-                  'echo 0 > /proc/sys/user/max_user_namespaces && exec "$@"', "sh"]  # fmt: skip
+_NO_NAMESPACES = [
+    "unshare",
+    "-r",
+    "sh",
+    "-c",
+    'echo 0 > /proc/sys/user/max_user_namespaces && exec "$@"',
+    "sh",
+]
 
 
 @pytest.mark.skipif(
@@ -266,8 +363,13 @@ def test_without_namespaces_a_render_is_refused_unless_opted_out(tmp_path, unsaf
         env["ROACHPLAN_UNSAFE_SCAD"] = "1"
     proc = subprocess.run(
         [*_NO_NAMESPACES, sys.executable, "-m", "roachplan", *argv],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     out = proc.stdout + proc.stderr
     assert "Traceback" not in out
     if unsafe:
@@ -298,8 +400,7 @@ def _openscad_direct(
     (work / "out").mkdir(parents=True)
     target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
     cmd = confined(["openscad", "-o", target, "m.scad"], folder, work, jail=jail)
-    proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, timeout=60,
-                          check=False)  # fmt: skip
+    proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, timeout=60, check=False)
     return proc, work / "out" / "mesh.stl"
 
 
@@ -340,8 +441,7 @@ def _jailed_sh(tmp: Path, script: str, **limits) -> subprocess.CompletedProcess:
     folder.mkdir(exist_ok=True)
     (tmp / "work").mkdir(exist_ok=True)
     cmd = confined(["sh", "-c", script], folder, tmp / "work", **limits)
-    return subprocess.run(cmd, cwd=folder, capture_output=True, text=True, timeout=60,
-                          check=False)  # fmt: skip
+    return subprocess.run(cmd, cwd=folder, capture_output=True, text=True, timeout=60, check=False)
 
 
 @needs_jail
@@ -349,8 +449,19 @@ def test_the_jail_shows_only_what_openscad_needs(tmp_path):
     # Shell built-ins only (globbing, echo): the jail holds the program and its libraries.
     proc = _jailed_sh(tmp_path, "echo /*; echo /etc/*; echo /usr/share/*; echo /dev/*")
     top, etc, share, dev = (set(line.split()) for line in proc.stdout.splitlines())
-    assert top <= {"/bin", "/lib", "/lib64", "/sbin", "/usr", "/etc", "/var", "/dev", "/tmp",
-                   "/model", "/out"}, top  # fmt: skip
+    assert top <= {
+        "/bin",
+        "/lib",
+        "/lib64",
+        "/sbin",
+        "/usr",
+        "/etc",
+        "/var",
+        "/dev",
+        "/tmp",
+        "/model",
+        "/out",
+    }, top
     assert {"/model", "/out"} <= top
     assert etc <= {"/etc/ld.so.cache", "/etc/fonts"}, etc
     assert share <= {"/usr/share/fonts", "/usr/share/fontconfig", "/usr/share/openscad"}, share
@@ -361,8 +472,10 @@ def test_the_jail_shows_only_what_openscad_needs(tmp_path):
 def test_the_jail_writes_only_its_output_folder(tmp_path):
     (tmp_path / "model").mkdir()
     (tmp_path / "model" / "m.scad").write_text("cube(1);")
-    script = ("for f in /model/new /new /usr/new /tmp/../etc/new /out/mesh.stl; do "
-              "(echo x > $f) 2>/dev/null && echo wrote $f; done")  # fmt: skip
+    script = (
+        "for f in /model/new /new /usr/new /tmp/../etc/new /out/mesh.stl; do "
+        "(echo x > $f) 2>/dev/null && echo wrote $f; done"
+    )
     proc = _jailed_sh(tmp_path, script)
     assert proc.stdout.split() == ["wrote", "/out/mesh.stl"]
     assert (tmp_path / "work" / "out" / "mesh.stl").read_text() == "x\n"
@@ -373,8 +486,9 @@ def test_the_jail_writes_only_its_output_folder(tmp_path):
 def test_the_limits_hold_in_and_out_of_the_jail(tmp_path, jail):
     if jail and not _sandbox_available():
         pytest.skip("no unprivileged user namespaces here")
-    proc = _jailed_sh(tmp_path, "ulimit -v; ulimit -t; ulimit -f", memory=300 << 20, cpu=7.5,
-                      jail=jail)  # fmt: skip
+    proc = _jailed_sh(
+        tmp_path, "ulimit -v; ulimit -t; ulimit -f", memory=300 << 20, cpu=7.5, jail=jail
+    )
     memory_kib, cpu_s, file_blocks = proc.stdout.split()
     assert int(memory_kib) == 300 << 10
     assert int(cpu_s) == 9  # the time limit rounded up, and a second for the start

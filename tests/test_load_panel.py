@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 import yaml
+
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_perception import REAL
 
@@ -107,7 +108,9 @@ def test_a_model_in_millimetres_is_refused_then_scaled(app, artifacts, tmp_path)
     model.write_text("cube([400, 300, 20]);\n")
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         upload(page, model)
-        page.get_by_text(re.compile(r"most likely a model in millimetres")).wait_for(timeout=120_000)
+        page.get_by_text(re.compile(r"most likely a model in millimetres")).wait_for(
+            timeout=120_000
+        )
         page.screenshot(path=artifacts / "load-04-millimetres-refused.png")
         assert "double_bridge" in title(page)
         assert str(app.upload_dir) not in page.content()

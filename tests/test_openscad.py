@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
 from roachplan.scenes._openscad import _sandbox_available, confined, scad_variables
 
@@ -40,9 +41,7 @@ def peaks(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
 
 def test_rough_bridge_bumps_follow_appendix_c2():
     # The binary, the reference (test_scad_backend.py checks the default backend against it).
-    mesh = trimesh.load(
-        render_scad(LIBRARY / "double_bridge.scad", rough_params(), backend="cgal")
-    )
+    mesh = trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params(), backend="cgal"))
     assert mesh.is_watertight
     bumps = peaks(mesh)
     for side, max_height in (("left", 0.015), ("right", 0.010)):
@@ -64,9 +63,13 @@ def test_rough_bridge_renders_the_same_for_a_seed_and_differently_for_another(
     meshes = []
     for run, seed in enumerate((0, 0, 7)):
         monkeypatch.setenv("ROACHPLAN_CACHE", str(tmp_path / f"cache{run}"))
-        meshes.append(trimesh.load(render_scad(
-            LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed), backend="cgal"
-        )))  # fmt: skip
+        meshes.append(
+            trimesh.load(
+                render_scad(
+                    LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed), backend="cgal"
+                )
+            )
+        )
     same, other = peaks(meshes[1]), peaks(meshes[2])
     first = peaks(meshes[0])
     for side in ("left", "right"):
@@ -234,9 +237,12 @@ def test_the_heightmap_worlds_height_field_reproduces_the_data_file():
 def scad_scene(folder: Path, obj: dict) -> Path:
     """A scene file in folder with one terrain object (start and goal on a 1 x 1 m top)."""
     data = {
-        "terrain": [obj], "ground": None, "robot": {"start": [0.5, 0.2, 90]},
-        "goal": [0.5, 0.8, 90], "bounds": [[0.3, 0.1], [0.7, 0.9]],
-    }  # fmt: skip
+        "terrain": [obj],
+        "ground": None,
+        "robot": {"start": [0.5, 0.2, 90]},
+        "goal": [0.5, 0.8, 90],
+        "bounds": [[0.3, 0.1], [0.7, 0.9]],
+    }
     path = folder / "scene.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -292,7 +298,7 @@ def test_module_and_call_arguments_are_not_parameters(tmp_path, fresh_cache):
 def test_variables_of_an_included_file_are_parameters_and_the_last_assignment_wins(tmp_path):
     (tmp_path / "settings.scad").write_text('label = "A";\nrows = 3;\nmodule m(k = 1) { j = 2; }\n')
     (tmp_path / "m.scad").write_text(
-        'include <settings.scad>\nuse <lib.scad>\nrows = 4;\nif (rows > 3) { inside = 1; }\n'
+        "include <settings.scad>\nuse <lib.scad>\nrows = 4;\nif (rows > 3) { inside = 1; }\n"
     )
     (tmp_path / "lib.scad").write_text("hidden = 1;\n")
     assert scad_variables(tmp_path / "m.scad") == {"label": '"A"', "rows": "4"}
@@ -331,8 +337,11 @@ def test_string_and_boolean_defaults_take_their_own_type_only(tmp_path):
 @pytest.mark.parametrize("timeout", [1.0e9, 0, -5, float("inf"), "slow", True])
 def test_an_absurd_time_limit_is_refused_cleanly(tmp_path, fresh_cache, timeout):
     (tmp_path / "m.scad").write_text("cube(1);\n")
-    with pytest.raises(SceneError, match=r"terrain\[0\]\.timeout: expected a number of seconds "
-                       r"above 0 and at most 86400 \(24 h\)"):  # fmt: skip
+    with pytest.raises(
+        SceneError,
+        match=r"terrain\[0\]\.timeout: expected a number of seconds "
+        r"above 0 and at most 86400 \(24 h\)",
+    ):
         load_scene(scad_scene(tmp_path, {"scad": "m.scad", "timeout": timeout}))
     if not isinstance(timeout, str):
         with pytest.raises(SceneError, match=r"m\.scad: render time limit: expected a number"):
@@ -342,6 +351,7 @@ def test_an_absurd_time_limit_is_refused_cleanly(tmp_path, fresh_cache, timeout)
 def test_the_default_time_limit_suits_slow_public_models_and_a_scene_can_set_one(tmp_path):
     (tmp_path / "m.scad").write_text("cube(1);\n")
     assert load_scene(scad_scene(tmp_path, {"scad": "m.scad"})).terrain[0].timeout >= 600
-    assert load_scene(scad_scene(tmp_path, {"scad": "m.scad", "timeout": 3600})).terrain[
-        0
-    ].timeout == 3600.0
+    assert (
+        load_scene(scad_scene(tmp_path, {"scad": "m.scad", "timeout": 3600})).terrain[0].timeout
+        == 3600.0
+    )

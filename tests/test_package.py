@@ -22,8 +22,17 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = sorted((ROOT / "examples").glob("[0-9][0-9]_*.py"))
-_SKIP = shutil.ignore_patterns(".venv", ".git", "tests", "test-artifacts", "__pycache__",
-                               "*.egg-info", "build", "docs", "benchmarks")  # fmt: skip
+_SKIP = shutil.ignore_patterns(
+    ".venv",
+    ".git",
+    "tests",
+    "test-artifacts",
+    "__pycache__",
+    "*.egg-info",
+    "build",
+    "docs",
+    "benchmarks",
+)
 
 
 def _site_packages(venv: Path) -> Path:
@@ -37,21 +46,37 @@ def installed(tmp_path_factory) -> Path:
     src = tmp / "src"
     shutil.copytree(ROOT, src, ignore=_SKIP)
     venv = tmp / "venv"
-    subprocess.run([getattr(sys, "_base_executable", sys.executable), "-m", "venv", str(venv)],
-                   check=True)  # fmt: skip
+    subprocess.run(
+        [getattr(sys, "_base_executable", sys.executable), "-m", "venv", str(venv)], check=True
+    )
     site = _site_packages(venv)
     before = {p.name for p in site.iterdir()}
     (site / "zz_borrowed_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     # The wheel is built as `make` installs the project (pip's isolated build, setuptools from
     # the package index), then installed by the fresh environment's own pip.
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp / "dist"),
-         str(src)],
-        check=True, cwd=tmp, env=_clean_env(),
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "-w",
+            str(tmp / "dist"),
+            str(src),
+        ],
+        check=True,
+        cwd=tmp,
+        env=_clean_env(),
+    )
     (wheel,) = (tmp / "dist").glob("roachplan-*.whl")
-    subprocess.run([venv / "bin/python", "-m", "pip", "install", "-q", "--no-deps", "--no-index",
-                    str(wheel)], check=True, cwd=tmp, env=_clean_env())  # fmt: skip
+    subprocess.run(
+        [venv / "bin/python", "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)],
+        check=True,
+        cwd=tmp,
+        env=_clean_env(),
+    )
     added = {p.name for p in site.iterdir()} - before - {"zz_borrowed_dependencies.pth"}
     (tmp / "added.txt").write_text("\n".join(sorted(added)))
     return venv
@@ -77,27 +102,58 @@ def test_the_install_adds_one_top_level_name_roachplan(installed):
 
 def test_python_dash_m_roachplan_is_the_command(installed, tmp_path):
     py = installed / "bin/python"
-    out = subprocess.run([py, "-m", "roachplan", "scene", "list"], capture_output=True,
-                         text=True, cwd=tmp_path, env=_clean_env())  # fmt: skip
+    out = subprocess.run(
+        [py, "-m", "roachplan", "scene", "list"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_clean_env(),
+        check=False,
+    )
     assert out.returncode == 0, out.stderr
     assert "double_bridge" in out.stdout
-    cmd = subprocess.run([installed / "bin/roachplan", "scene", "list"], capture_output=True,
-                         text=True, cwd=tmp_path, env=_clean_env())  # fmt: skip
+    cmd = subprocess.run(
+        [installed / "bin/roachplan", "scene", "list"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_clean_env(),
+        check=False,
+    )
     assert cmd.stdout == out.stdout
-    where = subprocess.run([py, "-c", "import roachplan.sim as s; print(s.__file__)"],
-                           capture_output=True, text=True, cwd=tmp_path, env=_clean_env())  # fmt: skip
+    where = subprocess.run(
+        [py, "-c", "import roachplan.sim as s; print(s.__file__)"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_clean_env(),
+        check=False,
+    )
     assert str(_site_packages(installed)) in where.stdout, where.stdout  # the installed copy
     for name in ("app", "sim", "planning", "perception", "scenes", "experiments"):
-        gone = subprocess.run([py, "-c", f"import {name}"], capture_output=True, text=True,
-                              cwd=tmp_path, env=_clean_env())  # fmt: skip
+        gone = subprocess.run(
+            [py, "-c", f"import {name}"],
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            env=_clean_env(),
+            check=False,
+        )
         assert gone.returncode != 0 and "No module named" in gone.stderr, name
 
 
 @pytest.mark.parametrize("example", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_the_examples_run_against_the_installed_package(installed, example, tmp_path):
     assert len(EXAMPLES) >= 5
-    run = subprocess.run([installed / "bin/python", example], capture_output=True, text=True,
-                         cwd=tmp_path, env=_clean_env(), timeout=600)  # fmt: skip
+    run = subprocess.run(
+        [installed / "bin/python", example],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_clean_env(),
+        timeout=600,
+        check=False,
+    )
     assert run.returncode == 0, run.stderr[-2000:]
     assert "Traceback" not in run.stderr
     assert run.stdout.strip(), "an example prints what it found"

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from conftest import ROOT
 from test_app import CHROMIUM, browser_pages, set_value, upload
 from test_page_view import dropdown
@@ -26,8 +27,8 @@ PACKAGES = ("perception", "scenes", "planning", "sim")
 NOT_SHOWN_IN_THE_PAGE = {
     "scenes/_scene.py": "validates a scene file its author wrote: its keys are where to fix it",
     "scenes/_adjust.py": "checks --scale, --scad-timeout, --scad-backend values, which only the "
-                         "command line passes (the page's controls give valid ones)",
-}  # fmt: skip
+    "command line passes (the page's controls give valid ones)",
+}
 FLAG = re.compile(r"(?<![\w-])--[a-z][\w-]*")
 SCENE_SYNTAX = re.compile(r"`[a-z_][\w.]*:|\bin a scene\b")
 """A scene file's syntax in a message: a `key:` in backticks, or "(key: value in a scene)"."""
@@ -48,8 +49,11 @@ def _scene_keys() -> set[str]:
         f.name for f in dataclasses.fields(TerrainObject)
     }
     return (keys | set(SETTING_KEYS) | {"robot", "terrain", "scad", "mesh", "perception"}) - {
-        "name", "path", "source", "key"
-    }  # fmt: skip
+        "name",
+        "path",
+        "source",
+        "key",
+    }
 
 
 def _render(node: ast.AST, constants: dict[str, str]) -> str:
@@ -78,9 +82,15 @@ def advice_in_the_code() -> list[tuple[str, str]]:
             if where in NOT_SHOWN_IN_THE_PAGE:
                 continue
             tree = ast.parse(path.read_text())
-            constants = {t.id: n.value.value for n in tree.body if isinstance(n, ast.Assign)
-                         and isinstance(n.value, ast.Constant) and isinstance(n.value.value, str)
-                         for t in n.targets if isinstance(t, ast.Name)}  # fmt: skip
+            constants = {
+                t.id: n.value.value
+                for n in tree.body
+                if isinstance(n, ast.Assign)
+                and isinstance(n.value, ast.Constant)
+                and isinstance(n.value.value, str)
+                for t in n.targets
+                if isinstance(t, ast.Name)
+            }
             skip = set()
             for n in ast.walk(tree):
                 if isinstance(n, ast.JoinedStr):
@@ -89,7 +99,8 @@ def advice_in_the_code() -> list[tuple[str, str]]:
                     skip.add(id(n.value))  # docstrings
             for n in ast.walk(tree):
                 literal = isinstance(n, ast.JoinedStr) or (
-                    isinstance(n, ast.Constant) and isinstance(n.value, str))
+                    isinstance(n, ast.Constant) and isinstance(n.value, str)
+                )
                 if not literal or id(n) in skip:
                     continue
                 text = _render(n, constants)
@@ -134,9 +145,21 @@ def test_every_advice_in_the_code_is_said_with_the_pages_own_controls(app, tmp_p
     advice = advice_in_the_code()
     # The walk finds what it is meant to (the kinds of advice the code gives today).
     said = " ".join(text for _, text in advice)
-    for kind in ("--up", "--units mm", "--depth-scale", "`scale: 0.001`", "`position: [x, y, z]`",
-                 "`ground: null`", "give bounds", "give start and goal", "the camera pose",
-                 "--crop", "`timeout: SECONDS`", "`backend: cgal`", "--depth-units"):  # fmt: skip
+    for kind in (
+        "--up",
+        "--units mm",
+        "--depth-scale",
+        "`scale: 0.001`",
+        "`position: [x, y, z]`",
+        "`ground: null`",
+        "give bounds",
+        "give start and goal",
+        "the camera pose",
+        "--crop",
+        "`timeout: SECONDS`",
+        "`backend: cgal`",
+        "--depth-units",
+    ):
         assert kind in said, kind
     pairs, keys = page_controls(app), _scene_keys()
     scene_key = re.compile(rf"\b(?:{'|'.join(sorted(keys, key=len, reverse=True))}):")
@@ -152,12 +175,20 @@ def test_every_advice_in_the_code_is_said_with_the_pages_own_controls(app, tmp_p
 def test_the_controls_the_advice_names_are_where_it_says(app):
     """The page's own words for its controls, as the advice and the hints use them."""
     pairs = page_controls(app)
-    for pair in [("Loaded capture", "Up direction"), ("Loaded capture", "Pick ground"),
-                 ("Loaded model", "Position [m]"), ("Loaded model", "Ground plane"),
-                 ("Loaded model", "Reload model with these"), ("Planning area", "Min x, y [m]"),
-                 ("Planning area", "Reload with this area"), ("Meshing (captures)", "Cloud units"),
-                 ("Camera (next capture)", "Depth units"), ("Start and goal", "Click places"),
-                 ("View", "Show where it can stand"), ("Scene", "Scale x0.001")]:  # fmt: skip
+    for pair in [
+        ("Loaded capture", "Up direction"),
+        ("Loaded capture", "Pick ground"),
+        ("Loaded model", "Position [m]"),
+        ("Loaded model", "Ground plane"),
+        ("Loaded model", "Reload model with these"),
+        ("Planning area", "Min x, y [m]"),
+        ("Planning area", "Reload with this area"),
+        ("Meshing (captures)", "Cloud units"),
+        ("Camera (next capture)", "Depth units"),
+        ("Start and goal", "Click places"),
+        ("View", "Show where it can stand"),
+        ("Scene", "Scale x0.001"),
+    ]:
         assert pair in pairs, pair
 
 

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+
 from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value
 
@@ -36,8 +37,12 @@ def _race_processes(app) -> set[int]:
     import os
 
     host = {app._host._proc.pid} if app._host is not None else set()
-    return {pid for server in _descendants(os.getpid()) if _is_forkserver(server)
-            for pid in _descendants(server)} - host  # fmt: skip
+    return {
+        pid
+        for server in _descendants(os.getpid())
+        if _is_forkserver(server)
+        for pid in _descendants(server)
+    } - host
 
 
 def _running(pid: int) -> bool:
@@ -140,8 +145,12 @@ def test_cancel_stops_the_race_and_a_moved_marker_is_refused(artifacts):
 
             app.controls["start"].position = (0.2, -1.5, 0.0)
             page.get_by_role("button", name="Choose path", exact=True).last.click()
-            page.get_by_text(re.compile(r"races from the scene's start and goal; the start "
-                                        r"marker is at \(0\.20, -1\.50")).first.wait_for(timeout=30_000)  # fmt: skip
+            page.get_by_text(
+                re.compile(
+                    r"races from the scene's start and goal; the start "
+                    r"marker is at \(0\.20, -1\.50"
+                )
+            ).first.wait_for(timeout=30_000)
             assert app.running is None and app.plans == []
     finally:
         app.stop()

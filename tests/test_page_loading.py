@@ -10,6 +10,7 @@ import shutil
 import numpy as np
 import pytest
 import yaml
+
 from conftest import free_port
 from roachplan.app._jobs import load_world
 from roachplan.app._relevel import adopt_capture_scene, rewrite_capture_settings
@@ -24,6 +25,7 @@ RTAB = REAL / "rtabmap"
 def count_meshing(monkeypatch):
     """Calls of perception.mesh_capture made through scenes (where a load meshes)."""
     import roachplan.scenes._world as world_module
+
     calls = []
     original = world_module.mesh_capture
 
@@ -59,8 +61,13 @@ def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
 
     page_settings = {}  # the load panel passes only what differs from DEFAULTS
     assert DEFAULTS.voxel[0] == pytest.approx(0.01) and DEFAULTS.method == "sensor"
-    path = scene_from_upload("depth_154.png", (RTAB / "depth_154.png").read_bytes(), tmp_path,
-                             page_settings, calibration=RTAB / "calib_154.yaml")  # fmt: skip
+    path = scene_from_upload(
+        "depth_154.png",
+        (RTAB / "depth_154.png").read_bytes(),
+        tmp_path,
+        page_settings,
+        calibration=RTAB / "calib_154.yaml",
+    )
     page = prepare_upload_scene(path)
     assert page.scene.start == pytest.approx(cli.scene.start, abs=1e-3)
     assert page.scene.goal == pytest.approx(cli.scene.goal, abs=1e-3)
@@ -114,8 +121,9 @@ def test_a_multi_path_plan_keeps_one_budget(world):
     from roachplan.experiments import plan_many
 
     attempts = []
-    plans = plan_many(world, 20, seed=0, budget=1.5,
-                      on_attempt=lambda seed, lp: attempts.append((seed, lp)))  # fmt: skip
+    plans = plan_many(
+        world, 20, seed=0, budget=1.5, on_attempt=lambda seed, lp: attempts.append((seed, lp))
+    )
     assert len(plans) < 20 and len(attempts) < 3 * 20 + 10  # the budget ended it
     assert [s for s, _ in attempts] == list(range(len(attempts)))
     assert [lp for _, lp in attempts if lp is not None] == plans

@@ -9,6 +9,7 @@ import time
 import zipfile
 
 import pytest
+
 from test_app import CHROMIUM, browser_pages, upload
 from test_perception import REAL
 

@@ -13,6 +13,7 @@ import re
 import numpy as np
 import pytest
 import trimesh
+
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_page_view import dropdown
 
@@ -42,8 +43,10 @@ def _switch(page, current: str, to: str) -> None:
 def _table_rows(page) -> list[list[str]]:
     """The trials table's rows (the header first), as the page shows them."""
     table = page.locator(".roachplan-trials table")
-    return [[c.inner_text().strip() for c in row.locator("th, td").all()]
-            for row in table.get_by_role("row").all()]  # fmt: skip
+    return [
+        [c.inner_text().strip() for c in row.locator("th, td").all()]
+        for row in table.get_by_role("row").all()
+    ]
 
 
 def _visible(page, locator) -> bool:
@@ -57,8 +60,9 @@ def _visible(page, locator) -> bool:
     cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
     return locator.evaluate(
         "(el, [x, y]) => { const hit = document.elementFromPoint(x, y); "
-        "return hit !== null && (el === hit || el.contains(hit)); }", [cx, cy],
-    )  # fmt: skip
+        "return hit !== null && (el === hit || el.contains(hit)); }",
+        [cx, cy],
+    )
 
 
 def test_seeds_continue_across_a_scene_switch_and_results_read_well(app, artifacts, tmp_path):
@@ -112,8 +116,10 @@ def _cloud_in_millimetres(path, rng) -> None:
     """An ASCII PCD of a floor 1.5 m in front of the sensor, written in millimetres."""
     xy = rng.uniform(-1000.0, 1000.0, (600, 2))
     pts = np.column_stack([xy, 1500.0 + rng.normal(0.0, 5.0, len(xy))])
-    head = (f"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {len(pts)}\n"
-            f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(pts)}\nDATA ascii\n")  # fmt: skip
+    head = (
+        f"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {len(pts)}\n"
+        f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(pts)}\nDATA ascii\n"
+    )
     path.write_text(head + "".join(f"{x:.2f} {y:.2f} {z:.2f}\n" for x, y, z in pts))
 
 
@@ -149,7 +155,8 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
         assert "double_bridge" in title(page)
         # As the notification says: the same cloud, read in millimetres, loads.
         page.locator(".mantine-Notification-root").filter(has_text="Could not load").locator(
-            "button").first.click()  # (closed: it covers the 3D view)  # fmt: skip
+            "button"
+        ).first.click()  # (closed: it covers the 3D view)
         dropdown(page, "Cloud units", "mm")
         upload(page, cloud)
         page.get_by_text(re.compile(r"Loaded `?cloud_mm")).first.wait_for(timeout=120_000)
@@ -173,13 +180,15 @@ def _floor_seen_by_a_tum_camera(path) -> None:
     """A 16-bit depth PNG of a floor seen from 1.2 m up (kinect2-qhd intrinsics), in the TUM
     RGB-D dataset's units: 5000 per metre (the page's default is 1000)."""
     from PIL import Image
+
     from roachplan.perception import PRESETS
     from roachplan.perception._synthetic import NO_NOISE, look_at, render_depth
 
     floor = trimesh.creation.box((8.0, 8.0, 0.02))
     floor.apply_translation((0.0, 0.0, -0.01))
-    depth = render_depth(floor, PRESETS["kinect2-qhd"], look_at((0.0, -1.2, 1.2), (0, 0, 0)),
-                         NO_NOISE)  # fmt: skip
+    depth = render_depth(
+        floor, PRESETS["kinect2-qhd"], look_at((0.0, -1.2, 1.2), (0, 0, 0)), NO_NOISE
+    )
     Image.fromarray(np.round(depth * 5000.0).astype(np.uint16)).save(path)
 
 

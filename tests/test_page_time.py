@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from conftest import ROACHPLAN, ROOT, free_port
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_page_view import dropdown
@@ -42,9 +43,14 @@ def moat(tmp_path):
     b = a.copy()
     b.apply_translation((2.0, 0.0, 0.0))
     trimesh.util.concatenate([a, b]).export(tmp_path / "moat.stl")
-    scene = {"description": "Two platforms with a moat between them.",
-             "terrain": [{"mesh": "moat.stl"}], "ground": None, "robot": {"start": [-1.0, 0.0, 0]},
-             "goal": [1.0, 0.0, 0], "bounds": [[-1.4, -0.4], [1.4, 0.4]]}  # fmt: skip
+    scene = {
+        "description": "Two platforms with a moat between them.",
+        "terrain": [{"mesh": "moat.stl"}],
+        "ground": None,
+        "robot": {"start": [-1.0, 0.0, 0]},
+        "goal": [1.0, 0.0, 0],
+        "bounds": [[-1.4, -0.4], [1.4, 0.4]],
+    }
     (tmp_path / "moat.yaml").write_text(yaml.safe_dump(scene))
     app = _app(tmp_path / "moat.yaml")
     yield app
@@ -64,8 +70,9 @@ def test_cancel_a_long_plan_then_a_budgeted_plan_ends_on_time(moat, artifacts):
         set_value(page, "Time budget [s]", "300")
         page.get_by_role("button", name="Plan").click()
         # Progress: the tries so far and the time spent of the budget, as it runs.
-        page.get_by_text(re.compile(r"Planning with prm: 0 of 1 path\(s\).* of the 300 s budget"))\
-            .wait_for(timeout=30_000)  # fmt: skip
+        page.get_by_text(
+            re.compile(r"Planning with prm: 0 of 1 path\(s\).* of the 300 s budget")
+        ).wait_for(timeout=30_000)
         page.get_by_role("button", name="Reset").click()  # behind the plan: queued, and says so
         page.get_by_text(re.compile(r"Queued: Reset")).wait_for(timeout=10_000)
         page.get_by_text("Reset queued").wait_for(timeout=10_000)
@@ -131,8 +138,9 @@ def test_an_openscad_load_shows_its_time_and_is_cancelled_while_the_scene_stays_
             page.get_by_text(re.compile(pattern)).scroll_into_view_if_needed()
             page.screenshot(path=artifacts / "time-04-openscad-loading-plan-meanwhile.png")
             page.get_by_role("button", name="Cancel load").click()
-            page.get_by_text(re.compile(rf"Loading upload: {name}\.scad cancelled after"))\
-                .wait_for(timeout=10_000)  # fmt: skip
+            page.get_by_text(re.compile(rf"Loading upload: {name}\.scad cancelled after")).wait_for(
+                timeout=10_000
+            )
             page.screenshot(path=artifacts / "time-05-openscad-cancelled.png")
             for _ in range(50):  # the render is killed with the load (it has a session of its own)
                 if not _openscad_running(name):
@@ -209,10 +217,13 @@ def test_serve_a_capture_file_from_outside_the_library(artifacts):
     capture = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
     port = free_port()
     proc = subprocess.Popen(
-        [*ROACHPLAN, "serve", "--scene", str(capture), "--port", str(port)], cwd=ROOT,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        [*ROACHPLAN, "serve", "--scene", str(capture), "--port", str(port)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )  # fmt: skip
+    )
     try:
         lines = []
         for line in proc.stdout:

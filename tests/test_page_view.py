@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pytest
+
 from test_app import CHROMIUM, browser_pages, set_value
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
@@ -182,8 +183,10 @@ def test_a_new_plan_clears_the_old_and_the_toggles_act_at_once(app, artifacts):
         assert nodes(app, "/plans/") and not app.view._roots["/plans"].visible
         page.get_by_text("Show paths").click()
         page.get_by_text("Show trajectories").click()
-        wait_until(lambda: app.view._roots["/plans"].visible
-                   and app.view._roots["/trajectories"].visible, 10)  # fmt: skip
+        wait_until(
+            lambda: app.view._roots["/plans"].visible and app.view._roots["/trajectories"].visible,
+            10,
+        )
 
 
 def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts):
@@ -247,8 +250,11 @@ def in_view(camera, points) -> np.ndarray:
     rel = np.asarray(points, dtype=float) - position
     depth = rel @ forward
     tan_v, tan_h = np.tan(fov / 2), aspect * np.tan(fov / 2)
-    return ((depth > 0) & (np.abs(rel @ up) <= tan_v * depth + 1e-9)
-            & (np.abs(rel @ right) <= tan_h * depth + 1e-9))  # fmt: skip
+    return (
+        (depth > 0)
+        & (np.abs(rel @ up) <= tan_v * depth + 1e-9)
+        & (np.abs(rel @ right) <= tan_h * depth + 1e-9)
+    )
 
 
 def framed(cameras, lo, hi, points) -> bool:
@@ -273,9 +279,16 @@ def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, arti
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         (client,) = app.server.get_clients().values()
         reported = []
-        client.camera.on_update(lambda cam: reported.append(
-            (cam.position.copy(), cam.look_at.copy(), cam.fov, cam.image_width / cam.image_height)
-        ))  # fmt: skip
+        client.camera.on_update(
+            lambda cam: reported.append(
+                (
+                    cam.position.copy(),
+                    cam.look_at.copy(),
+                    cam.fov,
+                    cam.image_width / cam.image_height,
+                )
+            )
+        )
         set_value(page, "Voxel [m]", "0.02")  # (a lighter mesh for software WebGL)
         for k, step in enumerate(("load", "re-mesh")):
             with client.atomic():  # inside the terrain to come, looking away from it
@@ -291,15 +304,19 @@ def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, arti
             world, n = app.world, len(reported)
             assert "kinect_bridge_depth" in world.scene.name
             lo, hi = world.mesh.bounds
-            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                for z in (lo[2], hi[2])])  # fmt: skip
+            corners = np.array(
+                [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+            )
             markers = [on_surface(world, p) for p in (world.scene.start, world.scene.goal)]
 
             shown = [*corners, *markers]
-            wait_until(lambda: framed(reported[n - 1:], lo, hi, shown), 30)  # noqa: B023
+            wait_until(lambda: framed(reported[n - 1 :], lo, hi, shown), 30)  # noqa: B023
             page.wait_for_timeout(1000)
             page.screenshot(path=artifacts / f"view-10-framed-after-{step}.png")
-            assert not in_view(((0.3, 0.2, 0.05), np.array([40.0, -30.0, 0.05]), 1.0, 1.4),
-                               corners).all()  # (the camera set before did not show it) # fmt: skip
-            print(f"{step} {k + 1}: framed; camera {np.round(client.camera.position, 2)} -> "
-                  f"{np.round(client.camera.look_at, 2)}")
+            assert not in_view(
+                ((0.3, 0.2, 0.05), np.array([40.0, -30.0, 0.05]), 1.0, 1.4), corners
+            ).all()  # (the camera set before did not show it)
+            print(
+                f"{step} {k + 1}: framed; camera {np.round(client.camera.position, 2)} -> "
+                f"{np.round(client.camera.look_at, 2)}"
+            )

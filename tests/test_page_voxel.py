@@ -9,6 +9,7 @@ import re
 
 import numpy as np
 import pytest
+
 from test_app import CHROMIUM, browser_pages, set_value, upload
 from test_perception import REAL
 
@@ -105,8 +106,9 @@ def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artif
         # Typed voxel sizes are checked before any work, in one line naming the field.
         set_value(page, "Voxel sizes [cm]", "1,x")
         page.get_by_role("button", name="Run voxel study").click()
-        page.get_by_text(re.compile(r"Voxel sizes \[cm\] '1,x': expected 1 to \d+ numbers > 0")
-                         ).first.wait_for(timeout=30_000)  # fmt: skip
+        page.get_by_text(
+            re.compile(r"Voxel sizes \[cm\] '1,x': expected 1 to \d+ numbers > 0")
+        ).first.wait_for(timeout=30_000)
         set_value(page, "Voxel sizes [cm]", ",".join(map(str, sizes)))
 
         # A square on the floor, just right of the view's centre (screenshot voxel-01).

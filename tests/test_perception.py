@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+
 from conftest import ROOT, roachplan
 from roachplan.perception import (
     NO_NOISE,
@@ -32,8 +33,11 @@ from roachplan.perception import (
 def _real_data() -> Path:
     """The project's real sensor files: $ROACHPLAN_TESTDATA, or ../shared/testdata/real beside
     the repository (the team's layout), or the workplace copy."""
-    candidates = [os.environ.get("ROACHPLAN_TESTDATA"), ROOT.parent / "shared" / "testdata" / "real",
-                  "/work/shared/testdata/real"]  # fmt: skip
+    candidates = [
+        os.environ.get("ROACHPLAN_TESTDATA"),
+        ROOT.parent / "shared" / "testdata" / "real",
+        "/work/shared/testdata/real",
+    ]
     for c in candidates:
         if c and (Path(c) / "frame_20121214T142255.814212.pcd").is_file():
             return Path(c)
@@ -68,8 +72,9 @@ def box_capture(tmp_path_factory) -> tuple[Path, np.ndarray]:
     """A noisy Kinect v2 QHD capture of the box on the floor, as a depth PNG + sidecar JSON."""
     out = tmp_path_factory.mktemp("capture") / "box.png"
     pose = look_at(EYE, TARGET)
-    depth = render_depth(box_scene(), PRESETS["kinect2-qhd"], pose, NoiseModel(),
-                         np.random.default_rng(0))  # fmt: skip
+    depth = render_depth(
+        box_scene(), PRESETS["kinect2-qhd"], pose, NoiseModel(), np.random.default_rng(0)
+    )
     save_depth(out, depth, PRESETS["kinect2-qhd"], world_from_camera=pose)
     return out, pose
 
@@ -125,8 +130,10 @@ def test_ros2_bag_written_here_with_an_organized_pointcloud2(tmp_path, storage, 
     h, w = 4, 5
     pts = np.random.default_rng(1).uniform(0.5, 2.0, (h * w, 3)).astype(np.float32)
     pts[7] = np.nan
-    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
-              for i, n in enumerate("xyz")]  # fmt: skip
+    fields = [
+        T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+        for i, n in enumerate("xyz")
+    ]
     header = T["std_msgs/msg/Header"](
         stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="kinect"
     )
@@ -134,9 +141,16 @@ def test_ros2_bag_written_here_with_an_organized_pointcloud2(tmp_path, storage, 
     data = np.zeros((h * w, 4), np.float32)
     data[:, :3] = pts
     msg = T["sensor_msgs/msg/PointCloud2"](
-        header=header, height=h, width=w, fields=fields, is_bigendian=False, point_step=16,
-        row_step=16 * w, data=data.view(np.uint8).reshape(-1), is_dense=False,
-    )  # fmt: skip
+        header=header,
+        height=h,
+        width=w,
+        fields=fields,
+        is_bigendian=False,
+        point_step=16,
+        row_step=16 * w,
+        data=data.view(np.uint8).reshape(-1),
+        is_dense=False,
+    )
     bag = tmp_path / "cloud_bag"
     with Writer(bag, version=8, storage_plugin=StoragePlugin[storage]) as writer:
         conn = writer.add_connection("/kinect2/qhd/points", msg.__msgtype__, typestore=ts)
@@ -157,19 +171,33 @@ def test_ros1_bag_written_here_with_a_depth_image_and_camera_info(tmp_path):
     from PIL import Image
 
     depth_mm = np.asarray(Image.open(FRAME_PNG), dtype=np.uint16)
-    header = T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
-                                      frame_id="depth")  # fmt: skip
+    header = T["std_msgs/msg/Header"](
+        seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="depth"
+    )
     img = T["sensor_msgs/msg/Image"](
-        header=header, height=480, width=640, encoding="16UC1", is_bigendian=0, step=1280,
+        header=header,
+        height=480,
+        width=640,
+        encoding="16UC1",
+        is_bigendian=0,
+        step=1280,
         data=depth_mm.view(np.uint8).reshape(-1),
-    )  # fmt: skip
+    )
     info = T["sensor_msgs/msg/CameraInfo"](
-        header=header, height=480, width=640, distortion_model="plumb_bob",
-        D=np.zeros(5), K=np.array([525.0, 0, 320, 0, 525, 240, 0, 0, 1]), R=np.eye(3).ravel(),
-        P=np.zeros(12), binning_x=0, binning_y=0,  # ROS 1 spells them D, K, R, P
-        roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
-                                                  do_rectify=False),
-    )  # fmt: skip
+        header=header,
+        height=480,
+        width=640,
+        distortion_model="plumb_bob",
+        D=np.zeros(5),
+        K=np.array([525.0, 0, 320, 0, 525, 240, 0, 0, 1]),
+        R=np.eye(3).ravel(),
+        P=np.zeros(12),
+        binning_x=0,
+        binning_y=0,  # ROS 1 spells them D, K, R, P
+        roi=T["sensor_msgs/msg/RegionOfInterest"](
+            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+        ),
+    )
     bag = tmp_path / "depth.bag"
     with Writer(bag) as writer:
         for topic, msg in (("/camera/depth/image_raw", img), ("/camera/depth/camera_info", info)):
@@ -334,11 +362,18 @@ def test_voxel_study_of_a_wall_at_6_m(tmp_path):
     wall = trimesh.creation.box((4.0, 0.05, 4.0))
     wall.apply_translation((0, 6.025, 0))
     intr = PRESETS["kinect2-qhd"]
-    depth = render_depth(wall, intr, look_at((0, 0, 0), (0, 6, 0)), NoiseModel(),
-                         np.random.default_rng(3))  # fmt: skip
+    depth = render_depth(
+        wall, intr, look_at((0, 0, 0), (0, 6, 0)), NoiseModel(), np.random.default_rng(3)
+    )
     save_depth(tmp_path / "wall.png", depth, intr)
-    done = roachplan("voxel-study", str(tmp_path / "wall.png"), "--square", "2",
-                     "--csv", str(tmp_path / "study.csv"))  # fmt: skip
+    done = roachplan(
+        "voxel-study",
+        str(tmp_path / "wall.png"),
+        "--square",
+        "2",
+        "--csv",
+        str(tmp_path / "study.csv"),
+    )
     assert done.returncode == 0, done.stderr
     rows = [r.split(",") for r in (tmp_path / "study.csv").read_text().splitlines()[1:]]
     points = [int(r[1]) for r in rows]
@@ -386,8 +421,20 @@ def test_mesh_cli_on_the_real_depth_png(tmp_path):
 def test_synth_capture_cli_is_seeded(tmp_path):
     a, b = tmp_path / "a.npy", tmp_path / "b.npy"
     for out in (a, b):
-        done = roachplan("synth-capture", "plywood_bridge", "-o", str(out), "--eye", "0,-2.2,1.5",
-                         "--target", "0,0,0", "--intrinsics", "kinect2-sd", "--seed", "4")  # fmt: skip
+        done = roachplan(
+            "synth-capture",
+            "plywood_bridge",
+            "-o",
+            str(out),
+            "--eye",
+            "0,-2.2,1.5",
+            "--target",
+            "0,0,0",
+            "--intrinsics",
+            "kinect2-sd",
+            "--seed",
+            "4",
+        )
         assert done.returncode == 0, done.stderr
     np.testing.assert_array_equal(np.load(a), np.load(b))
 

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+
 from conftest import roachplan
 from roachplan.experiments import plan, plan_many
 from roachplan.planning import PLANNER_NAMES, homology_signature
@@ -189,13 +190,22 @@ def test_simplify_and_smooth_keep_the_path_valid(world):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (("--start=-0.46,0,0",), "start (-0.460, 0.000, yaw 0 deg) is invalid: a foot has no ground under it (leg L"),
-        (("--goal=5,5,90",), "goal (5.000, 5.000) is invalid: outside the planning area x in [-1, 1]"),
-        (("--scene", "heightmap", "--start=-0.62,0,0"), "start (-0.620, 0.000, yaw 0 deg) is invalid: ground too steep"),
+        (
+            ("--start=-0.46,0,0",),
+            "start (-0.460, 0.000, yaw 0 deg) is invalid: a foot has no ground under it (leg L",
+        ),
+        (
+            ("--goal=5,5,90",),
+            "goal (5.000, 5.000) is invalid: outside the planning area x in [-1, 1]",
+        ),
+        (
+            ("--scene", "heightmap", "--start=-0.62,0,0"),
+            "start (-0.620, 0.000, yaw 0 deg) is invalid: ground too steep",
+        ),
         (("--start", "1,2"), "--start '1,2': expected x,y,yaw_deg"),
         (("--count", "0"), "--count 0: expected a whole number from 1 to 100"),
     ],
-)  # fmt: skip
+)
 def test_invalid_requests_name_what_failed(args, message):
     out = roachplan("plan", *args)
     assert out.returncode == 2
@@ -260,7 +270,9 @@ def test_keep_roadmap_returns_the_planners_graph(world, name):
     """The graph the app can show: edges between states in the planning area, the start among
     them, and more edges than the path has."""
     # The planner's own path (a drivable one is sampled every 5 cm: more states than edges).
-    cfg = dataclasses.replace(world.scene.planner, name=name, keep_roadmap=True, turning_radius=None)
+    cfg = dataclasses.replace(
+        world.scene.planner, name=name, keep_roadmap=True, turning_radius=None
+    )
     planned = plan(world, seed=2, planner=cfg)
     graph = planned.roadmap
     assert planned.found and graph.shape[1:] == (2, 2) and len(graph) >= len(planned.states) - 1

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+
 from conftest import roachplan
 from test_perception import REAL
 
@@ -20,10 +21,15 @@ GROUND_FACTS = [
     ("tutorials_region_growing_rgb_tutorial.pcd", (), (0.06, -0.84, -0.53), 0.80),
     ("table_scene_mug_stereo_textured.pcd", (), (0.02, -0.84, -0.54), 0.53),
     ("tutorials_pairwise_capture0002.pcd", (), (-0.01, -1.00, -0.07), 0.85),
-    ("rtabmap/depth_154.png", ("--intrinsics", str(RTAB / "calib_154.yaml")), (0.01, -1.00, 0.06), 0.42),
+    (
+        "rtabmap/depth_154.png",
+        ("--intrinsics", str(RTAB / "calib_154.yaml")),
+        (0.01, -1.00, 0.06),
+        0.42,
+    ),
     ("frame_20121214T142255.814212.pcd", (), (0.07, -0.69, -0.72), 0.72),
     ("office_desk_160x120.pcd", (), (-0.10, -0.92, -0.39), 1.25),
-]  # fmt: skip
+]
 # file, least start-goal distance picked [m]: a room's or the ground's 1 m; a table's or a
 # desk's 0.5 m, or what the captured surface holds (its README: the mug's table is seen over
 # 0.5 m x 0.4 m, the mug in its middle; the office's floor is a strip 1 m long in front of
@@ -49,8 +55,9 @@ def _mesh_json(tmp_path, name: str, *flags: str) -> dict:
     return report
 
 
-@pytest.mark.parametrize(("name", "flags", "up", "height"), GROUND_FACTS,
-                         ids=[g[0] for g in GROUND_FACTS])  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "flags", "up", "height"), GROUND_FACTS, ids=[g[0] for g in GROUND_FACTS]
+)
 def test_the_ground_found_matches_the_measured_ground(tmp_path, name, flags, up, height):
     """Within 5 deg and 3 cm of the README's plane, although on the staircase room the wall
     has three times the floor's points and on the table capture a background surface has
@@ -114,7 +121,9 @@ def test_long_range_lidar_in_metres_is_not_millimetres(tmp_path):
     rng = np.random.default_rng(0)
     az = rng.uniform(-np.pi, np.pi, 40000)
     rad = rng.uniform(5.0, 110.0, 40000)
-    pts = np.column_stack([rad * np.cos(az), rad * np.sin(az), -1.8 + 0.02 * rng.standard_normal(40000)])
+    pts = np.column_stack(
+        [rad * np.cos(az), rad * np.sin(az), -1.8 + 0.02 * rng.standard_normal(40000)]
+    )
     m = tmp_path / "sweep_m.xyz"
     np.savetxt(m, pts, fmt="%.4f")
     r = _mesh_json(tmp_path, str(m), "--voxel", "0.2")
@@ -123,8 +132,9 @@ def test_long_range_lidar_in_metres_is_not_millimetres(tmp_path):
     np.savetxt(mm, pts * 1000, fmt="%.1f")
     done = roachplan("mesh", str(mm), "-o", str(tmp_path / "x.ply"))
     assert done.returncode == 2 and "--units mm" in done.stderr and "Traceback" not in done.stderr
-    ok = roachplan("mesh", str(mm), "-o", str(tmp_path / "x.ply"), "--units", "mm",
-                   "--voxel", "0.2")  # fmt: skip
+    ok = roachplan(
+        "mesh", str(mm), "-o", str(tmp_path / "x.ply"), "--units", "mm", "--voxel", "0.2"
+    )
     assert ok.returncode == 0, ok.stderr
 
 
@@ -144,11 +154,19 @@ def test_a_capture_with_a_floor_or_table_is_a_scene_that_plans_and_drives(tmp_pa
     capture = REAL / name
     if name.endswith(".png"):  # its calibration has another stem: a scene file names it
         scene = tmp_path / "depth.yaml"
-        scene.write_text(yaml.safe_dump({
-            "terrain": [{"capture": str(capture),
-                         "perception": {"intrinsics": str(RTAB / "calib_154.yaml")}}],
-            "ground": None,
-        }))  # fmt: skip
+        scene.write_text(
+            yaml.safe_dump(
+                {
+                    "terrain": [
+                        {
+                            "capture": str(capture),
+                            "perception": {"intrinsics": str(RTAB / "calib_154.yaml")},
+                        }
+                    ],
+                    "ground": None,
+                }
+            )
+        )
         capture = scene
     done = roachplan("trial", "--scene", str(capture), "--json", timeout=600)
     assert done.returncode == 0, done.stderr
@@ -166,8 +184,9 @@ def test_a_scene_file_may_omit_start_goal_and_bounds(tmp_path):
     from roachplan.scenes import build_world, load_scene, pose_problem
 
     scene = tmp_path / "floor.yaml"
-    scene.write_text(yaml.safe_dump({"terrain": [{"scad": str(tmp_path / "slab.scad")}],
-                                     "ground": None}))  # fmt: skip
+    scene.write_text(
+        yaml.safe_dump({"terrain": [{"scad": str(tmp_path / "slab.scad")}], "ground": None})
+    )
     (tmp_path / "slab.scad").write_text("translate([-1.5, -0.4, -0.02]) cube([3, 0.8, 0.02]);")
     a, b = build_world(load_scene(scene)), build_world(load_scene(scene))
     assert a.scene.start == b.scene.start and a.scene.goal == b.scene.goal
@@ -178,8 +197,10 @@ def test_a_scene_file_may_omit_start_goal_and_bounds(tmp_path):
 
 def test_nowhere_to_stand_is_a_clear_error(tmp_path):
     scene = tmp_path / "spikes.scad"
-    scene.write_text("for (i = [0:20]) for (j = [0:20]) translate([i * 0.05, j * 0.05, 0]) "
-                     "cylinder(h = 0.3, r = 0.01, $fn = 6);")  # fmt: skip
+    scene.write_text(
+        "for (i = [0:20]) for (j = [0:20]) translate([i * 0.05, j * 0.05, 0]) "
+        "cylinder(h = 0.3, r = 0.01, $fn = 6);"
+    )
     y = tmp_path / "spikes.yaml"
     y.write_text(yaml.safe_dump({"terrain": [{"scad": "spikes.scad"}], "ground": None}))
     done = roachplan("trial", "--scene", str(y))
@@ -220,12 +241,21 @@ def _tilted_room_bag(path, with_imu: bool) -> np.ndarray:
     header = T["std_msgs/msg/Header"](
         stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="sensor"
     )
-    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
-              for i, n in enumerate("xyz")]  # fmt: skip
+    fields = [
+        T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+        for i, n in enumerate("xyz")
+    ]
     cloud = T["sensor_msgs/msg/PointCloud2"](
-        header=header, height=1, width=len(pts), fields=fields, is_bigendian=False,
-        point_step=12, row_step=12 * len(pts), data=pts.view(np.uint8).reshape(-1), is_dense=True,
-    )  # fmt: skip
+        header=header,
+        height=1,
+        width=len(pts),
+        fields=fields,
+        is_bigendian=False,
+        point_step=12,
+        row_step=12 * len(pts),
+        data=pts.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
     vec = T["geometry_msgs/msg/Vector3"]
     quat = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
     rng = np.random.default_rng(0)
@@ -237,11 +267,14 @@ def _tilted_room_bag(path, with_imu: bool) -> np.ndarray:
             for k in range(20):
                 acc = 9.81 * up + rng.normal(0, 0.05, 3)  # at rest: the reaction to gravity
                 msg = T["sensor_msgs/msg/Imu"](
-                    header=header, orientation=quat, orientation_covariance=np.zeros(9),
-                    angular_velocity=vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
+                    header=header,
+                    orientation=quat,
+                    orientation_covariance=np.zeros(9),
+                    angular_velocity=vec(x=0.0, y=0.0, z=0.0),
+                    angular_velocity_covariance=np.zeros(9),
                     linear_acceleration=vec(x=float(acc[0]), y=float(acc[1]), z=float(acc[2])),
                     linear_acceleration_covariance=np.zeros(9),
-                )  # fmt: skip
+                )
                 writer.write(i, 2 + k, ts.serialize_cdr(msg, msg.__msgtype__))
     return up
 
@@ -275,8 +308,20 @@ def test_a_capture_is_a_scene_for_plan_and_for_an_experiment_spec(tmp_path):
     spec = tmp_path / "room.yaml"
     spec.write_text(yaml.safe_dump({"scene": str(capture), "trials_per_route": 2, "seed": 0}))
     out = tmp_path / "results"
-    done = roachplan("experiment", str(spec), "--trials", "2", "--workers", "1", "--out",
-                     str(out), "--repeats", "0", "--quiet", timeout=900)  # fmt: skip
+    done = roachplan(
+        "experiment",
+        str(spec),
+        "--trials",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        "--repeats",
+        "0",
+        "--quiet",
+        timeout=900,
+    )
     assert done.returncode == 0, done.stderr
     records = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     trials = [t for t in records if t.get("kind") == "trial"]

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
+
 from roachplan.perception import (
     PRESETS,
     NoiseModel,
@@ -86,15 +87,18 @@ def test_a_floor_seen_from_a_low_camera_is_a_surface_not_holes():
     grid: with the grid method most of it is holes and the robot stands on 1.5 m^2 in pieces;
     meshed pixel to pixel, the floor the plane fit finds is a surface, and the largest region
     the robot can stand in is more than twice as large."""
-    sensor, grid = _capture_world(REAL / "rtabmap" / "depth_154.png", RTAB), _capture_world(
-        REAL / "rtabmap" / "depth_154.png", {**RTAB, "method": "grid"})  # fmt: skip
+    sensor, grid = (
+        _capture_world(REAL / "rtabmap" / "depth_154.png", RTAB),
+        _capture_world(REAL / "rtabmap" / "depth_154.png", {**RTAB, "method": "grid"}),
+    )
     cap = load_capture(REAL / "rtabmap" / "depth_154.png", intrinsics=RTAB["intrinsics"])
     rec = mesh_capture(REAL / "rtabmap" / "depth_154.png", capture_settings(RTAB))
     pts = cap.finite_points() @ rec.world_from_camera[:3, :3].T + rec.world_from_camera[:3, 3]
     floor = pts[np.abs(pts[:, 2]) < 0.03]
     cells = np.unique(np.floor(floor[:, :2] / 0.04).astype(int), axis=0)  # 4 cm cells seen
-    covered = [np.mean(np.isfinite(w.heightfield.sample((cells + 0.5) * 0.04)))
-               for w in (sensor, grid)]  # fmt: skip
+    covered = [
+        np.mean(np.isfinite(w.heightfield.sample((cells + 0.5) * 0.04))) for w in (sensor, grid)
+    ]
     assert covered[0] >= 0.8 and covered[0] >= 1.6 * covered[1], covered  # here 0.88 vs 0.46
     areas = []
     for world in (sensor, grid):
@@ -159,8 +163,9 @@ def step_scene(tmp_path_factory):
     box = trimesh.creation.box((0.6, 0.6, 0.04))
     box.apply_translation((0.0, 2.0, 0.02))
     intr, pose = PRESETS["kinect2-qhd"], look_at((0.0, 0.0, 0.8), (0.0, 2.0, 0.0))
-    depth = render_depth(trimesh.util.concatenate([floor, box]), intr, pose, NoiseModel(),
-                         np.random.default_rng(2))  # fmt: skip
+    depth = render_depth(
+        trimesh.util.concatenate([floor, box]), intr, pose, NoiseModel(), np.random.default_rng(2)
+    )
     save_depth(out / "step.png", depth, intr)
     world = _capture_world(out / "step.png")
     rec = mesh_capture(out / "step.png")
@@ -175,11 +180,17 @@ def test_a_noisy_floor_is_flat_to_the_checks_and_a_step_is_still_a_step(step_sce
     world, (cx, cy) = step_scene
     fp, vcfg, hf = world.footprint, world.scene.planner.validity, world.heightfield
     rng = np.random.default_rng(0)
-    floor = np.column_stack([rng.uniform(-0.6, 0.6, 300), rng.uniform(cy - 1.2, cy - 0.6, 300),
-                             rng.uniform(-np.pi, np.pi, 300)])  # fmt: skip
+    floor = np.column_stack(
+        [
+            rng.uniform(-0.6, 0.6, 300),
+            rng.uniform(cy - 1.2, cy - 0.6, 300),
+            rng.uniform(-np.pi, np.pi, 300),
+        ]
+    )
     assert check_states(hf, fp, vcfg, floor).valid.mean() >= 0.95
-    edge = np.column_stack([rng.uniform(cx - 0.2, cx + 0.2, 50), np.full(50, cy - 0.3),
-                            np.zeros(50)])  # centred on the near edge, along it  # fmt: skip
+    edge = np.column_stack(
+        [rng.uniform(cx - 0.2, cx + 0.2, 50), np.full(50, cy - 0.3), np.zeros(50)]
+    )  # centred on the near edge, along it
     assert not check_states(hf, fp, vcfg, edge).valid.any()
     assert hf.noise is not None and np.nanmax(hf.noise) > 0  # the checks had noise to allow
 
@@ -246,8 +257,9 @@ def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
             leg.apply_translation((dx, 2.0 + dy, 0.35))
             parts.append(leg)
     intr, pose = PRESETS["kinect2-qhd"], look_at((0.0, 0.0, 0.4), (0.0, 2.0, 0.2))
-    depth = render_depth(trimesh.util.concatenate(parts), intr, pose, NoiseModel(),
-                         np.random.default_rng(4))  # fmt: skip
+    depth = render_depth(
+        trimesh.util.concatenate(parts), intr, pose, NoiseModel(), np.random.default_rng(4)
+    )
     save_depth(tmp_path / "table.png", depth, intr)
     world = _capture_world(tmp_path / "table.png")
     rec = mesh_capture(tmp_path / "table.png")
@@ -271,12 +283,14 @@ def test_a_public_style_model_in_millimetres_is_crossed_from_the_ground(tmp_path
     import shutil
 
     import yaml
+
     from conftest import ROOT, roachplan
 
     shutil.copytree(ROOT / "tests" / "data" / "public_tile", tmp_path / "tile")
     scene = tmp_path / "tile" / "tile.yaml"
-    scene.write_text(yaml.safe_dump({"terrain": [{"scad": "tile.scad", "scale": 0.02}],
-                                     "ground": 0.0}))  # fmt: skip
+    scene.write_text(
+        yaml.safe_dump({"terrain": [{"scad": "tile.scad", "scale": 0.02}], "ground": 0.0})
+    )
     done = roachplan("trial", "--scene", str(scene), "--json", timeout=600)
     assert done.returncode == 0, done.stderr
     r = json.loads(done.stdout)

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+
 from conftest import roachplan
 from roachplan.app._replay import END_HOLD, HTML_MARK
 from test_app import ARGS, CHROMIUM
@@ -23,8 +24,19 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not in
 def experiment(tmp_path_factory):
     """Two real trials (one over each bridge), one worker, no best-path re-drives."""
     out = tmp_path_factory.mktemp("replay") / "exp"
-    done = roachplan("experiment", "bridge_rough", "--trials", "2", "--repeats", "0",
-                     "--workers", "1", "--out", str(out), "--quiet")  # fmt: skip
+    done = roachplan(
+        "experiment",
+        "bridge_rough",
+        "--trials",
+        "2",
+        "--repeats",
+        "0",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     return out
 
@@ -159,8 +171,11 @@ def test_whole_experiment_and_viser_recording(experiment, tmp_path):
     header = msgspec.msgpack.decode(inner[8 : 8 + int.from_bytes(inner[:8], "little")])
     names = {m[1].get("name") for m in header["messages"] if isinstance(m[1], dict)}
     assert {"/terrain/mesh", "/plans/0", "/plans/1", "/trajectories/0", "/robot"} <= names
-    trial = next(t for t in map(json.loads, (experiment / "trials.jsonl").read_text().splitlines())
-                 if t["kind"] == "trial" and t["index"] == best)  # fmt: skip
+    trial = next(
+        t
+        for t in map(json.loads, (experiment / "trials.jsonl").read_text().splitlines())
+        if t["kind"] == "trial" and t["index"] == best
+    )
     # Recorded at the drive's frame rate for as long as the trial's drive, then a pause.
     assert header["durationSeconds"] == pytest.approx(trial["drive_time"] + END_HOLD, abs=0.05)
     again = roachplan("replay", str(experiment), "-o", str(out))  # its own output: replaced
@@ -223,8 +238,9 @@ def test_share_on_the_page_downloads_the_shown_trial(server_url, tmp_path):
 
 def test_a_choice_replays_its_chosen_path(tmp_path):
     folder = tmp_path / "choice"
-    done = roachplan("choose", "--candidates", "1", "--rollouts", "1", "--workers", "1",
-                     "--out", str(folder))  # fmt: skip
+    done = roachplan(
+        "choose", "--candidates", "1", "--rollouts", "1", "--workers", "1", "--out", str(folder)
+    )
     assert done.returncode == 0, done.stderr
     choice = json.loads((folder / "choice.json").read_text())
     row = next(r for r in choice["ranking"] if r["candidate"] == choice["chosen"])

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+
 from conftest import roachplan
 from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
 from roachplan.sim._calibration import walk
@@ -88,8 +89,12 @@ def test_calibrate_turning_fits_the_curve_the_driver_and_the_plans_use(tmp_path)
     assert model["curve_rms_residual_per_m"] < 0.3 and model["curve_max_residual_per_m"] < 0.6
     # What the tracking driver uses is this calibration's curve, recorded with its source.
     recorded = DriverConfig().turning
-    for key, field in (("kappa_sat_per_m", "kappa_sat"), ("rate", "rate"),
-                       ("lock_per_m", "lock"), ("lock_ratio", "lock_ratio")):  # fmt: skip
+    for key, field in (
+        ("kappa_sat_per_m", "kappa_sat"),
+        ("rate", "rate"),
+        ("lock_per_m", "lock"),
+        ("lock_ratio", "lock_ratio"),
+    ):
         assert model[key] == pytest.approx(getattr(recorded, field), rel=2e-3), key
     # Drivable plans' radius follows from it: 1 / (headroom * curvature at the largest ratio).
     assert model["min_turning_radius_m"] == pytest.approx(
@@ -124,16 +129,28 @@ def test_the_turning_curve_inverts_and_clips_to_the_drivers_range():
     assert curve.min_turning_radius(3.0) == pytest.approx(1 / (0.75 * curve.curvature(3.0)))
 
 
-@pytest.mark.parametrize("true", [dict(kappa_sat=4.0, rate=2.0, lock=0.15, lock_ratio=3.1),
-                                  dict(kappa_sat=6.0, rate=0.7, lock=0.05, lock_ratio=3.5),
-                                  dict(kappa_sat=3.0, rate=5.0, lock=0.0, lock_ratio=5.0)])  # fmt: skip
+@pytest.mark.parametrize(
+    "true",
+    [
+        dict(kappa_sat=4.0, rate=2.0, lock=0.15, lock_ratio=3.1),
+        dict(kappa_sat=6.0, rate=0.7, lock=0.05, lock_ratio=3.5),
+        dict(kappa_sat=3.0, rate=5.0, lock=0.0, lock_ratio=5.0),
+    ],
+)
 def test_the_fit_recovers_a_known_curve(true):
     from roachplan.sim import TurningCurve, TurningSample, fit_turning_curve
 
     curve = TurningCurve(**true)
     ratios = [1.0 + 0.1 * i for i in range(21)]
-    samples = [TurningSample(ratio=r, distance=2.0, revolutions=curve.curvature(r) * 2.0
-                             / (2 * math.pi), duration=10.0) for r in ratios]  # fmt: skip
+    samples = [
+        TurningSample(
+            ratio=r,
+            distance=2.0,
+            revolutions=curve.curvature(r) * 2.0 / (2 * math.pi),
+            duration=10.0,
+        )
+        for r in ratios
+    ]
     fit = fit_turning_curve(samples)
     assert fit.r_squared > 0.9999 and fit.max_residual < 0.02
     for r in ratios:

@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from conftest import ROOT, roachplan
 from roachplan.scenes import (
     LIBRARY,
@@ -46,7 +47,7 @@ from roachplan.scenes._openscad import (
     _sandbox_available,
     confined,
     manifold_version,
-)  # fmt: skip
+)
 
 AGREE = 1e-4
 """Largest surface distance between the two meshes [fraction of the bounding-box diagonal]."""
@@ -56,8 +57,13 @@ few close points but the whole surface."""
 AGREE_BOUNDS = 1e-5
 """Largest difference of the bounding boxes [fraction of the diagonal]."""
 
-ROUGH = {"bump_columns": 20, "bump_rows": 40, "left_bump_height": 0.015,
-         "right_bump_height": 0.010, "bump_seed": 0}  # fmt: skip
+ROUGH = {
+    "bump_columns": 20,
+    "bump_rows": 40,
+    "left_bump_height": 0.015,
+    "right_bump_height": 0.010,
+    "bump_seed": 0,
+}
 """double_bridge_rough's params: 1,600 pyramids from OpenSCAD's seeded rands()."""
 
 CSG_BOX = """// A vented box with softened edges: hull, minkowski, difference, intersection. Millimetres.
@@ -92,10 +98,6 @@ def fresh_cache(tmp_path, monkeypatch):
     """An empty render cache per test, so both programs really run."""
     monkeypatch.setenv("ROACHPLAN_CACHE", str(tmp_path / "cache"))
     monkeypatch.delenv("ROACHPLAN_UNSAFE_SCAD", raising=False)
-
-
-
-
 
 
 def _csg_box(tmp_path: Path) -> Path:
@@ -146,8 +148,13 @@ def _library_objects() -> dict:
     return {name: obj for name, obj in out.values()}
 
 
-LIBRARY_BACKENDS = {"double_bridge": "manifold", "double_bridge_rough": "manifold",
-                    "heightmap": "cgal", "plywood_bridge": "cgal", "voxel_wall": "manifold"}  # fmt: skip
+LIBRARY_BACKENDS = {
+    "double_bridge": "manifold",
+    "double_bridge_rough": "manifold",
+    "heightmap": "cgal",
+    "plywood_bridge": "cgal",
+    "voxel_wall": "manifold",
+}
 """Who auto picks for each library model: surface() (heightmap) and solids touching face to
 face (plywood_bridge) go to the binary."""
 
@@ -175,13 +182,18 @@ def test_a_public_style_tile_loads_with_manifold_by_default_and_says_what_it_may
     for f in PUBLIC_TILE.iterdir():
         (tmp_path / "tile" / f.name).write_bytes(f.read_bytes())
     scene = tmp_path / "tile" / "scene.yaml"
-    scene.write_text(yaml.safe_dump({"terrain": [{"scad": "tile.scad", "scale": 0.02}], "ground": 0}))
+    scene.write_text(
+        yaml.safe_dump({"terrain": [{"scad": "tile.scad", "scale": 0.02}], "ground": 0})
+    )
     terrain = build_terrain(load_scene(scene))
     (note,) = terrain.notes
-    assert re.fullmatch(r"tile\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, "
-                        r"manifold3d 3\.5\.4\) in [\d.]+ s; text\(\): glyphs may sit up to "
-                        r"0\.009 model units from OpenSCAD's \(0\.15% of their size, up to 6 "
-                        r"here\), 0\.18 mm of terrain at scale 0\.02", note), note  # fmt: skip
+    assert re.fullmatch(
+        r"tile\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, "
+        r"manifold3d 3\.5\.4\) in [\d.]+ s; text\(\): glyphs may sit up to "
+        r"0\.009 model units from OpenSCAD's \(0\.15% of their size, up to 6 "
+        r"here\), 0\.18 mm of terrain at scale 0\.02",
+        note,
+    ), note
     # 80 x 60 mm at 0.02 m per mm; the hills at most 3 + 6 mm up.
     np.testing.assert_allclose(terrain.mesh.bounds[:, :2], [[0, 0], [1.6, 1.2]], atol=1e-6)
     assert 0.02 * 3 < terrain.mesh.bounds[1][2] <= 0.02 * 9
@@ -207,8 +219,14 @@ def test_the_tolerance_catches_a_real_difference():
 @pytest.mark.parametrize("seed", [0, 7, 42, -3, 123456])
 def test_seeded_rands_draws_what_openscad_draws(seed, tmp_path):
     (tmp_path / "r.scad").write_text(f"echo(rands(-2, 5, 6, {seed}));\ncube(1);\n")
-    proc = subprocess.run(["openscad", "-o", str(tmp_path / "r.stl"), "r.scad"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=60, check=True)  # fmt: skip
+    proc = subprocess.run(
+        ["openscad", "-o", str(tmp_path / "r.stl"), "r.scad"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
     echoed = re.search(r"ECHO: \[(.*)\]", proc.stderr).group(1)
     reference = [float(v) for v in echoed.split(",")]
     assert openscad_rands(-2, 5, 6, seed) == pytest.approx(reference, abs=1e-5)  # 6 digits
@@ -224,11 +242,11 @@ def _model(tmp_path: Path, code: str) -> Path:
 TEXTS = {
     "default-font": 'text("Roach terrain 42", size = 2);',
     "bold-fallback-font": 'text("GITHUB.COM/ORSOERIC", size = 3, spacing = 1.1, '
-                          'font = "Futura:style=Bold");',
+    'font = "Futura:style=Bold");',
     "centred": 'text("Tile #7 - grass", size = 5, halign = "center", valign = "center");',
     "right-top": 'text("Wq@&%$ Roach 42", size = 10, halign = "right", valign = "top");',
     "bottom-fn": 'text("Sg", size = 20, valign = "bottom", $fn = 24);',
-}  # fmt: skip
+}
 """text() calls of public models: OpenSCAD's default font (fontconfig's DejaVu Sans here), a
 font this system lacks (fontconfig's fallback, DejaVu Sans Bold), alignments, $fn."""
 
@@ -264,14 +282,18 @@ def test_the_text_bound_catches_glyphs_moved_by_more(tmp_path):
 def test_text_is_rendered_by_manifold_with_its_deviation_in_metres_of_terrain(tmp_path):
     src = _model(tmp_path, 'cube([60, 20, 2]);\nlinear_extrude(4) text("ROACH", size = 8);\n')
     out = tmp_path / "out.stl"
-    proc = roachplan("scene", "build", str(src), "-o", str(out), "--scale", "0.02",
-                     "--scad-backend", "manifold")  # fmt: skip
+    proc = roachplan(
+        "scene", "build", str(src), "-o", str(out), "--scale", "0.02", "--scad-backend", "manifold"
+    )
     assert proc.returncode == 0, proc.stderr
     # 0.15 % of size 8 is 0.012 model units; at 0.02 m per unit, 0.24 mm of terrain.
-    assert re.search(r"m\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
-                     r"3\.5\.4\) in [\d.]+ s; text\(\): glyphs may sit up to 0\.012 model units "
-                     r"from OpenSCAD's \(0\.15% of their size, up to 8 here\), 0\.24 mm of terrain "
-                     r"at scale 0\.02", proc.stderr), proc.stderr  # fmt: skip
+    assert re.search(
+        r"m\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
+        r"3\.5\.4\) in [\d.]+ s; text\(\): glyphs may sit up to 0\.012 model units "
+        r"from OpenSCAD's \(0\.15% of their size, up to 8 here\), 0\.24 mm of terrain "
+        r"at scale 0\.02",
+        proc.stderr,
+    ), proc.stderr
     assert trimesh.load(out).extents[0] == pytest.approx(1.2, abs=1e-6)
 
 
@@ -295,7 +317,9 @@ def test_a_polyhedron_wound_the_other_way_is_made_a_solid_as_the_binary_makes_it
     """In a union the binary's CGAL makes a solid of an inward polyhedron (measured: 508 =
     500 + the 8 of the cube outside it); the evaluator's union with it was an open shell of
     volume -484 before _manifold_main.py turned its faces round."""
-    src = _model(tmp_path, INWARD_CUBE + "union() { inward(); translate([5, 5, 4]) cube([2, 2, 3]); }\n")
+    src = _model(
+        tmp_path, INWARD_CUBE + "union() { inward(); translate([5, 5, 4]) cube([2, 2, 3]); }\n"
+    )
     reference = trimesh.load(render_scad(src, backend="cgal"))
     fast = trimesh.load(render_scad(src, backend="manifold"))
     assert reference.volume == pytest.approx(508.0)
@@ -331,13 +355,23 @@ def _height_field(seed: int, cells: int = 10, inward: bool = False) -> str:
     top = np.column_stack([xy, rng.uniform(2, 8, len(xy))])
     pts = np.vstack([top, np.column_stack([xy, np.zeros(len(xy))])])
     k = lambda i, j: j * n + i  # noqa: E731
-    faces = [[k(i, j + 1), k(i + 1, j + 1), k(i + 1, j), k(i, j)]  # clockwise from above
-             for j in range(cells) for i in range(cells)]  # fmt: skip
-    faces.append([n * n + k(i, 0) for i in range(n)] + [n * n + k(cells, j) for j in range(1, n)]
-                 + [n * n + k(i, cells) for i in range(cells - 1, -1, -1)]
-                 + [n * n + k(0, j) for j in range(cells - 1, 0, -1)])  # fmt: skip
-    ring = [k(i, 0) for i in range(n)] + [k(cells, j) for j in range(1, n)] + [
-        k(i, cells) for i in range(cells - 1, -1, -1)] + [k(0, j) for j in range(cells - 1, 0, -1)]
+    faces = [
+        [k(i, j + 1), k(i + 1, j + 1), k(i + 1, j), k(i, j)]  # clockwise from above
+        for j in range(cells)
+        for i in range(cells)
+    ]
+    faces.append(
+        [n * n + k(i, 0) for i in range(n)]
+        + [n * n + k(cells, j) for j in range(1, n)]
+        + [n * n + k(i, cells) for i in range(cells - 1, -1, -1)]
+        + [n * n + k(0, j) for j in range(cells - 1, 0, -1)]
+    )
+    ring = (
+        [k(i, 0) for i in range(n)]
+        + [k(cells, j) for j in range(1, n)]
+        + [k(i, cells) for i in range(cells - 1, -1, -1)]
+        + [k(0, j) for j in range(cells - 1, 0, -1)]
+    )
     for a, b in zip(ring, ring[1:] + ring[:1]):  # the sides, clockwise from outside
         faces.append([a, b, n * n + b, n * n + a])
     if inward:
@@ -354,8 +388,12 @@ def test_a_height_fields_quadrilaterals_are_cut_as_the_binary_cuts_them(inward, 
     of the public tile's cells (surfaces 0.09 of 80 model units apart); cut as the binary
     does (_manifold_main.openscad_quad_diagonal) they agree. In a union, as public models put
     them."""
-    src = _model(tmp_path, "union() {\n" + _height_field(seed=5, inward=inward)
-                 + "translate([-5, -5, 0]) cube([10, 10, 3]);\n}\n")  # fmt: skip
+    src = _model(
+        tmp_path,
+        "union() {\n"
+        + _height_field(seed=5, inward=inward)
+        + "translate([-5, -5, 0]) cube([10, 10, 3]);\n}\n",
+    )
     reference = trimesh.load(render_scad(src, backend="cgal"))
     fast = trimesh.load(render_scad(src, backend="manifold"))
     assert fast.is_watertight and fast.volume > 0
@@ -380,8 +418,12 @@ def test_the_quad_rule_picks_the_binarys_diagonal_on_recorded_faces():
     assert cut(skew) == [(0, 0), (11, 10)]
     # A public fractal terrain's cell, twisted so far that it crosses itself seen along x,
     # libtess2's axis for it: the binary joins the first and third corners listed.
-    twisted = [[-43.75, 31.25, 36.284], [-43.75, 37.5, 38.475], [-37.5, 37.5, 32.163],
-               [-37.5, 31.25, 37.078]]  # fmt: skip
+    twisted = [
+        [-43.75, 31.25, 36.284],
+        [-43.75, 37.5, 38.475],
+        [-37.5, 37.5, 32.163],
+        [-37.5, 31.25, 37.078],
+    ]
     assert cut(twisted) == [(-43.75, 31.25), (-37.5, 37.5)]
     assert cut(twisted[1:] + twisted[:1]) == [(-43.75, 37.5), (-37.5, 31.25)]
 
@@ -391,8 +433,11 @@ def test_solids_touching_face_to_face_go_to_the_binary():
     """plywood_bridge's blocks, plank and ramps touch face to face: Manifold leaves walls
     between them inside the solid, the binary merges them. manifold refuses; auto says why and
     renders with the binary."""
-    with pytest.raises(SceneError, match=r"plywood_bridge.scad: solids that touch face to face "
-                       r"\(near \[.*\]\) stay apart in backend manifold.*backend: auto"):  # fmt: skip
+    with pytest.raises(
+        SceneError,
+        match=r"plywood_bridge.scad: solids that touch face to face "
+        r"\(near \[.*\]\) stay apart in backend manifold.*backend: auto",
+    ):
         render_scad(LIBRARY / "plywood_bridge.scad", backend="manifold")
     auto = render_scad_result(LIBRARY / "plywood_bridge.scad")
     assert auto.backend == "cgal" and auto.asked == "auto"
@@ -407,8 +452,9 @@ def test_a_non_integer_rands_seed_is_refused_and_auto_remembers_it(tmp_path):
         render_scad(src, backend="manifold")
     auto = render_scad_result(src)
     assert auto.backend == "cgal" and not auto.cached
-    assert auto.why.startswith("backend manifold could not render it alike: rands() with the "
-                               "seed 0.5")  # fmt: skip
+    assert auto.why.startswith(
+        "backend manifold could not render it alike: rands() with the seed 0.5"
+    )
     assert "rendered with the openscad binary in" in auto.note()
     # Next time straight to the binary's cached mesh, for the same reason.
     again = render_scad_result(src)
@@ -423,8 +469,11 @@ def test_auto_renders_a_plain_model_with_manifold_and_says_so(tmp_path):
     src = _model(tmp_path, PLATFORM)
     auto = render_scad_result(src)
     assert (auto.asked, auto.backend, auto.why) == ("auto", "manifold", "")
-    assert re.fullmatch(r"m\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, "
-                        r"manifold3d 3\.5\.4\) in \d+\.\d s", auto.note()), auto.note()  # fmt: skip
+    assert re.fullmatch(
+        r"m\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, "
+        r"manifold3d 3\.5\.4\) in \d+\.\d s",
+        auto.note(),
+    ), auto.note()
     reference = trimesh.load(render_scad(src, backend="cgal"))
     assert disagreement(reference, trimesh.load(auto.path))["hausdorff"] <= AGREE
     again = render_scad_result(src)
@@ -439,9 +488,11 @@ def test_auto_renders_surface_with_the_binary_and_says_why(tmp_path):
     auto = render_scad_result(src)
     assert auto.backend == "cgal" and auto.asked == "auto"
     assert auto.note().startswith("m.scad: rendered with the openscad binary in ")
-    assert auto.note().endswith(": surface() (m.scad, line 2) is rendered differently by "
-                                "manifold (its base is at z = 0, not 1 below the lowest height "
-                                "as in OpenSCAD)")  # fmt: skip
+    assert auto.note().endswith(
+        ": surface() (m.scad, line 2) is rendered differently by "
+        "manifold (its base is at z = 0, not 1 below the lowest height "
+        "as in OpenSCAD)"
+    )
     assert not list((tmp_path / "cache" / "openscad").glob("*-manifold-*"))  # never tried
 
 
@@ -451,13 +502,13 @@ def test_the_cache_keys_the_backend_that_rendered(tmp_path):
     binary = render_scad_result(src, backend="cgal")
     fast = render_scad_result(src, backend="manifold")
     assert binary.path != fast.path
-    assert fast.path.name.startswith("m-manifold-") and not binary.path.name.startswith("m-manifold")
+    assert fast.path.name.startswith("m-manifold-") and not binary.path.name.startswith(
+        "m-manifold"
+    )
     auto = render_scad_result(src)  # auto took manifold: its cached mesh, not the binary's
     assert auto.cached and auto.path == fast.path and auto.backend == "manifold"
     src.write_text("cube([2, 3, 5]);\n")  # a changed model is a new key for both
     assert render_scad_result(src).path not in (binary.path, fast.path)
-
-
 
 
 @needs_jail
@@ -472,8 +523,9 @@ def test_a_syntax_error_is_shown_with_its_line(tmp_path):
 
 @needs_jail
 def test_the_time_limit_stops_the_evaluator(tmp_path):
-    src = _model(tmp_path, "x = [for (i = [0:999]) for (j = [0:999]) for (k = [0:999]) i];\n"
-                           "cube(1);\n")  # fmt: skip
+    src = _model(
+        tmp_path, "x = [for (i = [0:999]) for (j = [0:999]) for (k = [0:999]) i];\ncube(1);\n"
+    )
     t0 = time.monotonic()
     with pytest.raises(SceneError, match="did not finish within its time limit of 3 s"):
         render_scad(src, timeout=3, backend="manifold")
@@ -495,8 +547,9 @@ def _outside(tmp_path: Path) -> Path:
 
 
 @needs_jail
-@pytest.mark.parametrize("code", ["import(\"../outside/secret.stl\");",
-                                  "include <../outside/secret.scad>"])  # fmt: skip
+@pytest.mark.parametrize(
+    "code", ['import("../outside/secret.stl");', "include <../outside/secret.scad>"]
+)
 def test_the_scan_refuses_an_outside_file(code, tmp_path):
     _outside(tmp_path)
     src = _model(tmp_path, "cube(1);\n" + code + "\n")
@@ -526,8 +579,9 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
         target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
         argv, layout = _manifold_argv(model, target)
         cmd = confined(argv, src.parent, work, jail=jail, layout=layout)
-        proc = subprocess.run(cmd, cwd=src.parent, capture_output=True, text=True, timeout=120,
-                              check=False)  # fmt: skip
+        proc = subprocess.run(
+            cmd, cwd=src.parent, capture_output=True, text=True, timeout=120, check=False
+        )
         mesh = work / "out" / "mesh.stl"
         if not jail:
             assert proc.returncode == 0, proc.stderr
@@ -552,15 +606,28 @@ def test_the_jail_shows_the_evaluator_only_its_own_packages(tmp_path):
         "    except ImportError:\n        print('hidden', name)\n"
         f"print(os.path.exists({str(ROOT / 'README.md')!r}), os.path.exists('/etc/passwd'))\n"
     )
-    cmd = confined([python, "-I", "-S", "-c", probe, paths], tmp_path / "model", tmp_path / "work",
-                   layout=layout)  # fmt: skip
+    cmd = confined(
+        [python, "-I", "-S", "-c", probe, paths],
+        tmp_path / "model",
+        tmp_path / "work",
+        layout=layout,
+    )
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split("\n")[:4] == ["hidden trimesh", "hidden roachplan", "hidden yaml",
-                                           "False False"]  # fmt: skip
+    assert proc.stdout.split("\n")[:4] == [
+        "hidden trimesh",
+        "hidden roachplan",
+        "hidden yaml",
+        "False False",
+    ]
     # The same probe outside the jail does see them: the jail hides them, not their absence.
-    outside = subprocess.run([python, "-I", "-S", "-c", probe, paths], capture_output=True,
-                             text=True, timeout=60, check=False)  # fmt: skip
+    outside = subprocess.run(
+        [python, "-I", "-S", "-c", probe, paths],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert "imported trimesh" in outside.stdout and "True True" in outside.stdout
 
 
@@ -595,8 +662,9 @@ def test_a_bad_backend_flag_is_refused():
 @needs_jail
 def test_scene_build_with_the_manifold_backend(tmp_path):
     out = tmp_path / "out.stl"
-    proc = roachplan("scene", "build", "double_bridge", "-o", str(out), "--scad-backend",
-                     "manifold")  # fmt: skip
+    proc = roachplan(
+        "scene", "build", "double_bridge", "-o", str(out), "--scad-backend", "manifold"
+    )
     assert proc.returncode == 0, proc.stderr
     built = trimesh.load(out)
     assert np.allclose(built.bounds[1][2], 0.2, atol=1e-6)
@@ -637,8 +705,10 @@ def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, art
     app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
     try:
         label = tmp_path / "label.scad"  # metres: a plate with a letter on it
-        label.write_text('cube([1, 1, 0.02]);\n'
-                         'translate([0.2, 0.2, 0.02]) linear_extrude(0.01) text("R", size = 0.5);\n')
+        label.write_text(
+            "cube([1, 1, 0.02]);\n"
+            'translate([0.2, 0.2, 0.02]) linear_extrude(0.01) text("R", size = 0.5);\n'
+        )
         heights = tmp_path / "heights.zip"
         with zipfile.ZipFile(heights, "w") as z:
             z.writestr("heights.scad", 'cube([1, 1, 0.02]);\nsurface(file = "h.dat");\n')
@@ -647,21 +717,33 @@ def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, art
             # auto, the default: manifold draws the label, and the page says so.
             upload(page, label)
             # In the notification, and in the status, which stays.
-            rendered_by = page.get_by_test_id("floating-panel").get_by_text(re.compile(
-                r"label\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
-                r"3\.5\.4\) in"))  # fmt: skip
+            rendered_by = page.get_by_test_id("floating-panel").get_by_text(
+                re.compile(
+                    r"label\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
+                    r"3\.5\.4\) in"
+                )
+            )
             rendered_by.wait_for(timeout=120_000)
-            page.get_by_text(re.compile(r"text\(\): glyphs may sit up to 0\.00075 model units "
-                                        r"from OpenSCAD's")).first.wait_for()  # fmt: skip
+            page.get_by_text(
+                re.compile(
+                    r"text\(\): glyphs may sit up to 0\.00075 model units "
+                    r"from OpenSCAD's"
+                )
+            ).first.wait_for()
             page.screenshot(path=artifacts / "backend-01-auto-manifold-text.png")
             assert "label" in title(page)
             # manifold asked for, on a model using surface(): refused, and the page names auto.
             _dropdown(page, "OpenSCAD backend", "manifold")
             upload(page, heights)
-            page.get_by_text(re.compile(r"line 2: surface\(\) is not rendered alike by backend "
-                                        r"manifold")).wait_for(timeout=60_000)  # fmt: skip
-            page.get_by_text(re.compile(r"set Scene → OpenSCAD backend to auto \(or cgal\)"))\
-                .first.wait_for()  # fmt: skip
+            page.get_by_text(
+                re.compile(
+                    r"line 2: surface\(\) is not rendered alike by backend "
+                    r"manifold"
+                )
+            ).wait_for(timeout=60_000)
+            page.get_by_text(
+                re.compile(r"set Scene → OpenSCAD backend to auto \(or cgal\)")
+            ).first.wait_for()
             page.screenshot(path=artifacts / "backend-02-manifold-refuses-surface.png")
             assert "label" in title(page)  # the scene loaded before stays
         raw = yaml.safe_load(app.world.scene.path.read_text())

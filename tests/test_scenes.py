@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from conftest import roachplan
 from roachplan.scenes import (
     LIBRARY,
@@ -199,8 +200,13 @@ def test_meshes_are_cleaned_and_turned_to_face_up(tmp_path):
     faces += [[0, 1, 1], [0, 10, 1]]
     faces[0] = [0, 9, 1]  # was [0, 4, 1]: now on the duplicate of the centre
     trimesh.Trimesh(vertices, faces, process=False).export(tmp_path / "block.ply")
-    data = edited(terrain__0__mesh="block.ply", robot__start=[0.0, -0.2, 90], goal=[0.0, 0.2, 90],
-                  bounds=[[-0.1, -0.3], [0.1, 0.3]], ground=-1.0)  # fmt: skip
+    data = edited(
+        terrain__0__mesh="block.ply",
+        robot__start=[0.0, -0.2, 90],
+        goal=[0.0, 0.2, 90],
+        bounds=[[-0.1, -0.3], [0.1, 0.3]],
+        ground=-1.0,
+    )
     mesh = build_world(load_scene(write_scene(tmp_path, data))).mesh
     assert len(mesh.faces) == 8 and len(mesh.vertices) == 9
     assert np.all(mesh.face_normals[:, 2] > 0.99)
@@ -289,8 +295,10 @@ def test_scale_applies_per_axis_before_the_placement(tmp_path, box_stl):
         terrain__0__scale=[2, 1, 0.5],
         terrain__0__position=[0.5, 0, 1],
         terrain__0__orientation=[0, 0, 0.7071068, 0.7071068],  # 90 deg about z: x -> y
-        bounds=[[0.2, -0.6], [0.8, 0.6]], robot__start=[0.5, -0.5, 90], goal=[0.5, 0.5, 90],
-    )  # fmt: skip
+        bounds=[[0.2, -0.6], [0.8, 0.6]],
+        robot__start=[0.5, -0.5, 90],
+        goal=[0.5, 0.5, 90],
+    )
     mesh = build_world(load_scene(write_scene(tmp_path, data))).mesh
     # The 2 x 1 x 0.05 m block, turned to lie along y, its centre moved to (0.5, 0).
     np.testing.assert_allclose(mesh.bounds, [[0, -1, 1], [1, 1, 1.05]], atol=1e-6)
@@ -323,17 +331,27 @@ def test_scene_build_takes_scale_and_scad_timeout(tmp_path, millimetre_stl):
     assert out.returncode == 2
     assert "add `scale: 0.001` to this terrain object (or --scale 0.001)" in out.stderr
     out = roachplan(
-        "scene", "build", str(path), "-o", str(tmp_path / "m.stl"), "--scale", "0.001",
-        "--scad-timeout", "900",
-    )  # fmt: skip
+        "scene",
+        "build",
+        str(path),
+        "-o",
+        str(tmp_path / "m.stl"),
+        "--scale",
+        "0.001",
+        "--scad-timeout",
+        "900",
+    )
     assert out.returncode == 0, out.stderr
     mesh = trimesh.load(tmp_path / "m.stl", force="mesh")
     np.testing.assert_allclose(mesh.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 0.1]], atol=1e-6)
     for flag, value, expected in (
         ("--scale", "-1", "--scale: expected a positive number"),
-        ("--scad-timeout", "1e9", "--scad-timeout: expected a number of seconds above 0 and at "
-         "most 86400"),
-    ):  # fmt: skip
+        (
+            "--scad-timeout",
+            "1e9",
+            "--scad-timeout: expected a number of seconds above 0 and at most 86400",
+        ),
+    ):
         out = roachplan("scene", "build", str(path), "-o", str(tmp_path / "x.stl"), flag, value)
         assert out.returncode == 2 and f"roachplan: error: {expected}" in out.stderr
         assert "Traceback" not in out.stderr

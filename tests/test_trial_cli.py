@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+
 from conftest import roachplan
 
 GAP_HALF_WIDTH = 0.5  # table C.1: bridges 1.0 m apart, centred on x = 0
@@ -34,8 +35,17 @@ def trial_seed3() -> dict:
 
 def test_trial_json_has_the_documented_fields(trial_seed3):
     d = trial_seed3
-    for key in ("seed", "planner", "path_found", "outcome", "drive_time", "energy",
-                "relative_energy", "path", "trajectory"):  # fmt: skip
+    for key in (
+        "seed",
+        "planner",
+        "path_found",
+        "outcome",
+        "drive_time",
+        "energy",
+        "relative_energy",
+        "path",
+        "trajectory",
+    ):
         assert key in d, key
     assert d["seed"] == 3 and d["planner"] == "prm"
     assert d["outcome"] in ("success", "fell", "flipped", "stuck", "timeout", "no_path")
@@ -102,7 +112,10 @@ def test_reference_flag_gives_the_reports_raw_path_and_driver(trial_seed3, world
     assert ref["turning_radius"] is None
     d = trial_seed3  # the same seed without the flag: drivable plans and the tracking driver
     assert (d["driver"], d["planner_space"], d["smoothing"]) == (
-        "tracking", "se2", "dubins_shortcuts")  # fmt: skip
+        "tracking",
+        "se2",
+        "dubins_shortcuts",
+    )
     assert d["turning_radius"] == PlannerConfig().turning_radius
     # The raw path is the planner's own, as the library plans it with turning_radius None;
     # the default one is another (arcs), from the same seed.
@@ -152,15 +165,28 @@ def test_a_spec_with_reference_true_runs_and_records_the_reports_setting(tmp_pat
     # Everything else of the driver is the scene's, the report's gain included.
     assert dataclasses.replace(spec.driver, kind="tracking") == default.driver
     out = tmp_path / "results"
-    run = roachplan("experiment", str(_spec(tmp_path, True)), "--trials", "2", "--workers", "1",
-                    "--out", str(out), "--quiet")  # fmt: skip
+    run = roachplan(
+        "experiment",
+        str(_spec(tmp_path, True)),
+        "--trials",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert run.returncode == 0, run.stderr
     records = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     trials = [r for r in records if r["kind"] == "trial"]
     assert len(trials) == 2
     for r in trials:
         assert (r["driver"], r["planner_space"], r["smoothing"], r["turning_radius"]) == (
-            "reference", "se2", "none", None)  # fmt: skip
+            "reference",
+            "se2",
+            "none",
+            None,
+        )
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["spec"]["driver"]["kind"] == "reference"
     assert manifest["spec"]["planner"]["turning_radius"] is None

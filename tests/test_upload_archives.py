@@ -9,6 +9,7 @@ import zipfile
 
 import pytest
 import yaml
+
 from roachplan.app._jobs import capture_view
 from roachplan.app._uploads import prepare_upload_scene, public_message, scene_from_upload
 from roachplan.scenes import SceneError
@@ -51,19 +52,25 @@ def test_a_zip_with_a_scad_and_its_data_file_builds(tmp_path):
 
 @pytest.mark.parametrize(
     ("files", "links", "why"),
-    [({"../evil.scad": b"cube(1);"}, (), "outside the archive"),
-     ({"/abs.scad": b"cube(1);"}, (), "outside the archive"),
-     ({"a.scad": b"cube(1);"}, ("link.dat",), "symbolic link"),
-     ({"a.scad": b"cube(1);", "b.scad": b"cube(2);"}, (), "exactly one .scad")],
-)  # fmt: skip
+    [
+        ({"../evil.scad": b"cube(1);"}, (), "outside the archive"),
+        ({"/abs.scad": b"cube(1);"}, (), "outside the archive"),
+        ({"a.scad": b"cube(1);"}, ("link.dat",), "symbolic link"),
+        ({"a.scad": b"cube(1);", "b.scad": b"cube(2);"}, (), "exactly one .scad"),
+    ],
+)
 def test_unsafe_or_unclear_archives_are_refused(tmp_path, files, links, why):
     with pytest.raises(SceneError, match=why):
         scene_from_upload("m.zip", _zip(files, links), tmp_path, {})
 
 
 def test_the_model_is_the_file_no_other_includes(tmp_path):
-    data = _zip({"main.scad": b"include <lib.scad>\nblock();\n",
-                 "lib.scad": b"module block() cube([1, 1, 0.1]);\n"})  # fmt: skip
+    data = _zip(
+        {
+            "main.scad": b"include <lib.scad>\nblock();\n",
+            "lib.scad": b"module block() cube([1, 1, 0.1]);\n",
+        }
+    )
     path = scene_from_upload("m.zip", data, tmp_path, {})
     assert yaml.safe_load(path.read_text())["terrain"][0]["scad"] == "main.scad"
     world = prepare_upload_scene(path)
@@ -77,8 +84,12 @@ def test_messages_name_the_file_not_the_upload_folder(tmp_path):
 
 def test_a_zip_of_a_depth_image_with_its_calibration_loads_them_together(tmp_path):
     rtab = REAL / "rtabmap"  # the calibration's name differs from the image's
-    data = _zip({"capture/depth_154.png": (rtab / "depth_154.png").read_bytes(),
-                 "capture/calib_154.yaml": (rtab / "calib_154.yaml").read_bytes()})  # fmt: skip
+    data = _zip(
+        {
+            "capture/depth_154.png": (rtab / "depth_154.png").read_bytes(),
+            "capture/calib_154.yaml": (rtab / "calib_154.yaml").read_bytes(),
+        }
+    )
     path = scene_from_upload("room.zip", data, tmp_path, {"voxel": 0.02})
     obj = yaml.safe_load(path.read_text())["terrain"][0]
     assert obj["capture"] == "capture/depth_154.png"
@@ -102,19 +113,33 @@ def test_the_announcement_says_what_is_really_done_with_each_upload(tmp_path):
     from roachplan.app._uploads import load_announcement
 
     rtab = REAL / "rtabmap"
-    capture = _zip({"depth_154.png": (rtab / "depth_154.png").read_bytes(),
-                    "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes()})  # fmt: skip
-    model = _zip({"example010.scad": (REAL / "openscad" / "example010.scad").read_bytes(),
-                  "example010.dat": (REAL / "openscad" / "example010.dat").read_bytes()})  # fmt: skip
+    capture = _zip(
+        {
+            "depth_154.png": (rtab / "depth_154.png").read_bytes(),
+            "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes(),
+        }
+    )
+    model = _zip(
+        {
+            "example010.scad": (REAL / "openscad" / "example010.scad").read_bytes(),
+            "example010.dat": (REAL / "openscad" / "example010.dat").read_bytes(),
+        }
+    )
     cases = {
         "room.zip": (capture, "upload: room.zip: reading and meshing the capture depth_154.png"),
-        "terrain.zip": (model, "upload: terrain.zip: rendering example010.scad with Manifold or, "
-                               "where it must, OpenSCAD (limit 120 s)"),
-        "depth_154.png": ((rtab / "depth_154.png").read_bytes(),
-                          "Reading and meshing the capture depth_154.png"),
-        "example010.scad": ((REAL / "openscad" / "example010.scad").read_bytes(),
-                            "Rendering example010.scad with Manifold or, where it must, OpenSCAD "
-                            "(limit 120 s)"),
+        "terrain.zip": (
+            model,
+            "upload: terrain.zip: rendering example010.scad with Manifold or, "
+            "where it must, OpenSCAD (limit 120 s)",
+        ),
+        "depth_154.png": (
+            (rtab / "depth_154.png").read_bytes(),
+            "Reading and meshing the capture depth_154.png",
+        ),
+        "example010.scad": (
+            (REAL / "openscad" / "example010.scad").read_bytes(),
+            "Rendering example010.scad with Manifold or, where it must, OpenSCAD (limit 120 s)",
+        ),
     }
     for name, (data, said) in cases.items():
         path = scene_from_upload(name, data, tmp_path, {}, scad_timeout=120.0)
@@ -136,8 +161,12 @@ def test_the_page_announces_a_capture_zip_as_meshing_while_it_loads(app, tmp_pat
     from roachplan.app._jobs import UploadCmd
 
     rtab = REAL / "rtabmap"
-    data = _zip({"depth_154.png": (rtab / "depth_154.png").read_bytes(),
-                 "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes()})  # fmt: skip
+    data = _zip(
+        {
+            "depth_154.png": (rtab / "depth_154.png").read_bytes(),
+            "calib_154.yaml": (rtab / "calib_154.yaml").read_bytes(),
+        }
+    )
     app.commands.put(UploadCmd(None, "room.zip", data))
     deadline = time.monotonic() + 60
     while not app.loading.status.content and time.monotonic() < deadline:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+
 from conftest import ROOT
 from roachplan.app._uploads import prepare_upload_scene, safe_name, scene_from_upload
 from roachplan.scenes import LIBRARY, SceneError
@@ -15,9 +16,14 @@ CAPTURE = {"method": "grid", "voxel": 0.02, "intrinsics": "kinect2-qhd"}
 
 @pytest.mark.parametrize(
     ("given", "safe"),
-    [("../../etc/passwd", "passwd"), ("C:\\x\\rock.stl", "rock.stl"), ("a b;c.pcd", "a_b_c.pcd"),
-     (".hidden.scad", "hidden.scad"), ("", "upload")],
-)  # fmt: skip
+    [
+        ("../../etc/passwd", "passwd"),
+        ("C:\\x\\rock.stl", "rock.stl"),
+        ("a b;c.pcd", "a_b_c.pcd"),
+        (".hidden.scad", "hidden.scad"),
+        ("", "upload"),
+    ],
+)
 def test_upload_names_cannot_leave_their_folder(given, safe):
     assert safe_name(given) == safe
 

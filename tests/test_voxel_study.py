@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+
 from conftest import roachplan
 from roachplan.perception import CaptureError
 from roachplan.perception._voxel_study import (
@@ -83,8 +84,9 @@ def test_a_whole_room_warns_and_its_planes_do_not():
 
 
 def test_the_text_table_and_csv(tmp_path):
-    done = roachplan("voxel-study", str(ROOM), "--plane", "--sizes", "2,10",
-                     "--csv", str(tmp_path / "s.csv"))  # fmt: skip
+    done = roachplan(
+        "voxel-study", str(ROOM), "--plane", "--sizes", "2,10", "--csv", str(tmp_path / "s.csv")
+    )
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     assert lines[0].endswith("points: the dominant plane of the whole capture (seed 0)")

@@ -56,8 +56,7 @@ def test_a_fork_of_the_host_plans_what_a_child_sent_the_world_plans(world, host)
 
 def test_cancel_kills_the_fork_and_the_host_serves_the_next_job(world, host):
     # Fifty distinct paths asked for: it plans for seconds, up to 160 tries.
-    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300,
-              host=host)  # fmt: skip
+    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300, host=host)
     time.sleep(0.5)
     assert host.is_parent_of(job.pid) and not job.done
     job.cancel()
@@ -109,8 +108,7 @@ def test_cancel_kills_a_fork_whose_host_has_closed_meanwhile(world):
     # A new scene loaded while a plan runs closes the old world's host; Cancel must still
     # reach the plan, now a child of init's.
     old = WorldHost(world)
-    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300,
-              host=old)  # fmt: skip
+    job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300, host=old)
     time.sleep(0.3)
     old.close()
     assert not old.is_parent_of(job.pid) and not _gone(job.pid), "it runs on, orphaned"

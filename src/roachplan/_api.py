@@ -65,8 +65,13 @@ def plan(
     from roachplan.experiments import plan as plan_trial
 
     scene = world.scene
-    return plan_trial(world, seed=scene.seed if seed is None else seed, start=start, goal=goal,
-                      planner=_planner(world, planner, time_limit))  # fmt: skip
+    return plan_trial(
+        world,
+        seed=scene.seed if seed is None else seed,
+        start=start,
+        goal=goal,
+        planner=_planner(world, planner, time_limit),
+    )
 
 
 def drive(
@@ -87,8 +92,11 @@ def trial(
     """Plan, then drive: `roachplan trial` (the same seed gives the same trial)."""
     from roachplan.experiments import run_trial
 
-    return run_trial(world, seed=world.scene.seed if seed is None else seed,
-                     planner=_planner(world, planner, None))  # fmt: skip
+    return run_trial(
+        world,
+        seed=world.scene.seed if seed is None else seed,
+        planner=_planner(world, planner, None),
+    )
 
 
 def choose(
@@ -109,8 +117,14 @@ def choose(
     from roachplan.experiments._choose import ChooseConfig
     from roachplan.experiments._choose import choose as race_candidates
 
-    cfg = ChooseConfig(candidates=candidates, rollouts=rollouts, budget_s=budget_s,
-                       confidence=confidence, min_success=min_success, seed=seed)  # fmt: skip
+    cfg = ChooseConfig(
+        candidates=candidates,
+        rollouts=rollouts,
+        budget_s=budget_s,
+        confidence=confidence,
+        min_success=min_success,
+        seed=seed,
+    )
     choice, _ = race_candidates(world.scene, cfg, workers=workers)
     return choice
 
@@ -129,8 +143,14 @@ def experiment(
     an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`."""
     from roachplan.experiments import load_experiment, run_experiment
 
-    return run_experiment(load_experiment(os.fspath(spec)), trials=trials, out=Path(out),
-                          workers=workers, resume=resume, progress=progress)  # fmt: skip
+    return run_experiment(
+        load_experiment(os.fspath(spec)),
+        trials=trials,
+        out=Path(out),
+        workers=workers,
+        resume=resume,
+        progress=progress,
+    )
 
 
 def mesh(capture: str | os.PathLike, **settings) -> Reconstruction:

@@ -28,12 +28,16 @@ def _member_path(label: str, info: zipfile.ZipInfo) -> PurePosixPath | None:
     name = info.filename.replace("\\", "/")
     mode = info.external_attr >> 16
     if stat.S_ISLNK(mode):
-        raise SceneError(f"{label}: {info.filename!r} is a symbolic link; archives may hold only files")
+        raise SceneError(
+            f"{label}: {info.filename!r} is a symbolic link; archives may hold only files"
+        )
     path = PurePosixPath(name)
     if (
-        name.startswith("/") or (len(name) > 1 and name[1] == ":") or "\x00" in name
+        name.startswith("/")
+        or (len(name) > 1 and name[1] == ":")
+        or "\x00" in name
         or any(part == ".." for part in path.parts)
-    ):  # fmt: skip
+    ):
         raise SceneError(
             f"{label}: {info.filename!r} points outside the archive (absolute or '..'); "
             f"archives may hold only relative paths"
@@ -78,9 +82,10 @@ def scad_model(label: str, paths: list[PurePosixPath], folder: Path) -> str:
     tops = {rel.parts[0] for rel in paths}
     base = PurePosixPath(next(iter(tops))) if len(tops) == 1 and len(paths[0].parts) > 1 else None
     models = [
-        rel for rel in paths
+        rel
+        for rel in paths
         if rel.suffix.lower() == ".scad" and rel.parent == (base or PurePosixPath("."))
-    ]  # fmt: skip
+    ]
     if len(models) > 1:  # the model is the one no other file includes or uses
         used = set()
         for rel in paths:

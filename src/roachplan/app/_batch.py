@@ -36,8 +36,10 @@ class Batch:
     def progress(self) -> str:
         """What the panel says while it runs."""
         eta = self.elapsed / max(self.done, 1) * (self.total - self.done)
-        return (f"{self.done}/{self.total} trials, {self.successes} successes, ETA {eta:.0f} s "
-                f"({self.elapsed:.0f} s so far)")  # fmt: skip
+        return (
+            f"{self.done}/{self.total} trials, {self.successes} successes, ETA {eta:.0f} s "
+            f"({self.elapsed:.0f} s so far)"
+        )
 
     def cancel(self) -> None:
         """Stop now: no more trials are recorded; the workers are killed."""
@@ -49,8 +51,9 @@ class Batch:
 def start_batch(spec: ExperimentSpec, calls: list, workers: int) -> Batch:
     """Run the calls on a pool of workers in a thread; returns the batch to follow."""
     batch = Batch(total=len(calls))
-    threading.Thread(target=_feed, args=(batch, spec, calls, workers), name="roachplan-batch",
-                     daemon=True).start()  # fmt: skip
+    threading.Thread(
+        target=_feed, args=(batch, spec, calls, workers), name="roachplan-batch", daemon=True
+    ).start()
     return batch
 
 
@@ -93,8 +96,10 @@ class BatchPanel:
     def start(self, spec: ExperimentSpec, start, goal) -> None:
         """spec.trials_per_route trials from spec.seed on, between these poses."""
         n, workers = spec.trials_per_route, int(self.workers.value)
-        calls = [("trial", (k, spec.seed + k, "", None), {"start": start, "goal": goal})
-                 for k in range(n)]  # fmt: skip
+        calls = [
+            ("trial", (k, spec.seed + k, "", None), {"start": start, "goal": goal})
+            for k in range(n)
+        ]
         self.batch = start_batch(spec, calls, workers)
         self.run_button.disabled, self.cancel_button.disabled = True, False
         self.progress.value = 0.0

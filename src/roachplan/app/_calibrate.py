@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from roachplan.experiments import atomic_path, atomic_write
 from roachplan.sim import (
     PLAN_HEADROOM,
@@ -64,11 +65,27 @@ def calibrate_turning(
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_dir / "turning.csv") as tmp, tmp.open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["motor_speed_ratio", "log_ratio", "distance_m", "revolutions",
-                    "curvature_per_m", "duration_s"])  # fmt: skip
+        w.writerow(
+            [
+                "motor_speed_ratio",
+                "log_ratio",
+                "distance_m",
+                "revolutions",
+                "curvature_per_m",
+                "duration_s",
+            ]
+        )
         for s in samples:
-            w.writerow([f"{s.ratio:g}", f"{np.log(s.ratio):.6f}", f"{s.distance:.6f}",
-                        f"{s.revolutions:.6f}", f"{s.curvature:.6f}", f"{s.duration:g}"])  # fmt: skip
+            w.writerow(
+                [
+                    f"{s.ratio:g}",
+                    f"{np.log(s.ratio):.6f}",
+                    f"{s.distance:.6f}",
+                    f"{s.revolutions:.6f}",
+                    f"{s.curvature:.6f}",
+                    f"{s.duration:g}",
+                ]
+            )
     gain = model.gain_for(driver.r_path)
     atomic_write(
         out_dir / "turning_model.json",
@@ -127,20 +144,39 @@ def calibrate_turning(
         _plot(tmp, samples, model, fit)
     with atomic_path(out_dir / "spin.csv") as tmp, tmp.open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["omega_rad_s", "yaw_rate_rad_s", "drift_m_per_rad", "wander_m",
-                    "energy_j_per_rad", "turned_rad", "duration_s", "half_turn_time_s"])  # fmt: skip
+        w.writerow(
+            [
+                "omega_rad_s",
+                "yaw_rate_rad_s",
+                "drift_m_per_rad",
+                "wander_m",
+                "energy_j_per_rad",
+                "turned_rad",
+                "duration_s",
+                "half_turn_time_s",
+            ]
+        )
         for turn, steady, halves in spun:
-            w.writerow([f"{turn.omega:g}", f"{turn.yaw_rate:.6f}", f"{turn.drift:.6f}",
-                        f"{turn.wander:.6f}", f"{turn.energy_per_radian:.6f}",
-                        f"{steady.turned:.6f}", f"{steady.duration:g}",
-                        f"{np.mean([h.duration for h in halves]):.4f}"])  # fmt: skip
+            w.writerow(
+                [
+                    f"{turn.omega:g}",
+                    f"{turn.yaw_rate:.6f}",
+                    f"{turn.drift:.6f}",
+                    f"{turn.wander:.6f}",
+                    f"{turn.energy_per_radian:.6f}",
+                    f"{steady.turned:.6f}",
+                    f"{steady.duration:g}",
+                    f"{np.mean([h.duration for h in halves]):.4f}",
+                ]
+            )
     with atomic_path(out_dir / "spin.png") as tmp:
         _plot_spins(tmp, spun, driver.spin_speed)
     return samples, model, fit, spins
 
 
-def _plot_spins(path: Path, spun: list[tuple[SpinTurn, SpinSample, list[SpinSample]]],
-                chosen: float) -> None:  # fmt: skip
+def _plot_spins(
+    path: Path, spun: list[tuple[SpinTurn, SpinSample, list[SpinSample]]], chosen: float
+) -> None:
     """Yaw rate and energy per radian against the motor speed; the driver's speed marked."""
     import matplotlib
 
@@ -178,12 +214,21 @@ def _plot(path: Path, samples: list[TurningSample], model: TurningModel, fit: Tu
     c = fit.curve
     on_report = " on its 7 ratios" if set(REPORT_RATIOS) <= {s.ratio for s in samples} else ""
     # Up to the largest swept ratio only: the curve is fitted there and has a pole above it.
-    ax.plot(xs, [c.curvature(v) for v in np.exp(xs)], "-",
-            label=f"curve: {c.kappa_sat:.2f}(1 - r^-{c.rate:.2f}) + {c.lock:.3f} ln r / "
-                  f"(ln {c.lock_ratio:.3f} - ln r)  (R² {fit.r_squared:.3f})")  # fmt: skip
-    ax.plot(xs, model.slope * xs + model.intercept, "--", color="0.5",
-            label=f"report's line: {model.slope:.2f} ln(r) {model.intercept:+.2f}  "
-                  f"(R² {model.r_squared:.3f}{on_report})")  # fmt: skip
+    ax.plot(
+        xs,
+        [c.curvature(v) for v in np.exp(xs)],
+        "-",
+        label=f"curve: {c.kappa_sat:.2f}(1 - r^-{c.rate:.2f}) + {c.lock:.3f} ln r / "
+        f"(ln {c.lock_ratio:.3f} - ln r)  (R² {fit.r_squared:.3f})",
+    )
+    ax.plot(
+        xs,
+        model.slope * xs + model.intercept,
+        "--",
+        color="0.5",
+        label=f"report's line: {model.slope:.2f} ln(r) {model.intercept:+.2f}  "
+        f"(R² {model.r_squared:.3f}{on_report})",
+    )
     ax.set_xlabel("ln(motor speed ratio)  [right / left]")
     ax.set_ylabel("curvature 2πn/d  [1/m]")
     ax.set_title("Turning at various motor ratios (cf. Tong 2018, fig. 3.4)")

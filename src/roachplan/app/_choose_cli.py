@@ -22,35 +22,77 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         "decide something: a candidate leaves the race once it is clearly beaten.",
     )
     p.add_argument("--scene", default="double_bridge_rough", help=terrain_help)
-    p.add_argument("--candidates", type=int, default=8, metavar="K", help="candidate paths (default 8)")
-    p.add_argument("--budget-s", type=float, default=None, metavar="T",
-                   help="wall-time budget [s] (default 60 unless --rollouts is given)")  # fmt: skip
-    p.add_argument("--rollouts", type=int, default=None, metavar="N",
-                   help="cap on rollouts over all candidates; with a cap and no time budget the "
-                        "same seed gives the same choice")  # fmt: skip
+    p.add_argument(
+        "--candidates", type=int, default=8, metavar="K", help="candidate paths (default 8)"
+    )
+    p.add_argument(
+        "--budget-s",
+        type=float,
+        default=None,
+        metavar="T",
+        help="wall-time budget [s] (default 60 unless --rollouts is given)",
+    )
+    p.add_argument(
+        "--rollouts",
+        type=int,
+        default=None,
+        metavar="N",
+        help="cap on rollouts over all candidates; with a cap and no time budget the "
+        "same seed gives the same choice",
+    )
     p.add_argument("--confidence", type=float, default=0.95, help="joint confidence (default 0.95)")
-    p.add_argument("--min-success", type=float, default=None, metavar="P",
-                   help="choose the lowest-energy path whose P(success) lower bound is >= P")
-    p.add_argument("--indifference", default="0.05,0.05", metavar="DP,DE",
-                   help="stop once the chosen path is, at the confidence, within DP of the best "
-                        "P(success) and, among those as safe, within DE (a fraction) of the "
-                        "lowest energy (default 0.05,0.05; 0,0: stop only when separated)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=None, help="seed of every draw (default: the scene's)")
-    p.add_argument("--reference", action="store_true",
-                   help="the report's raw paths and algorithms 1-2 instead of drivable plans "
-                        "and the tracking driver")  # fmt: skip
+    p.add_argument(
+        "--min-success",
+        type=float,
+        default=None,
+        metavar="P",
+        help="choose the lowest-energy path whose P(success) lower bound is >= P",
+    )
+    p.add_argument(
+        "--indifference",
+        default="0.05,0.05",
+        metavar="DP,DE",
+        help="stop once the chosen path is, at the confidence, within DP of the best "
+        "P(success) and, among those as safe, within DE (a fraction) of the "
+        "lowest energy (default 0.05,0.05; 0,0: stop only when separated)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=None, help="seed of every draw (default: the scene's)"
+    )
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="the report's raw paths and algorithms 1-2 instead of drivable plans "
+        "and the tracking driver",
+    )
     p.add_argument("--backend", choices=("local", "ray"), default="local")
-    p.add_argument("--address", default=None, metavar="RAY_ADDRESS",
-                   help="Ray cluster address, with --backend ray (default: start a local Ray "
-                        "instance)")  # fmt: skip
-    p.add_argument("--workers", type=int, default=None,
-                   help="parallel workers (default: this machine's cores, or with --address "
-                        "one per CPU of the Ray cluster)")  # fmt: skip
-    p.add_argument("--validate", type=int, default=0, metavar="R",
-                   help="then drive every candidate R more times with fresh seeds and compare "
-                        "predicted with observed success (Brier score, reliability table)")  # fmt: skip
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="results folder: new, empty, or one an earlier choose wrote")
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="RAY_ADDRESS",
+        help="Ray cluster address, with --backend ray (default: start a local Ray instance)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="parallel workers (default: this machine's cores, or with --address "
+        "one per CPU of the Ray cluster)",
+    )
+    p.add_argument(
+        "--validate",
+        type=int,
+        default=0,
+        metavar="R",
+        help="then drive every candidate R more times with fresh seeds and compare "
+        "predicted with observed success (Brier score, reliability table)",
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="results folder: new, empty, or one an earlier choose wrote",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_choose)
 
@@ -64,7 +106,9 @@ def _check(args: argparse.Namespace) -> None:
     if not 1 <= args.candidates <= 64:
         raise bad("--candidates", args.candidates, "give 1 to 64 candidate paths")
     if args.rollouts is not None and args.rollouts < args.candidates:
-        raise bad("--rollouts", args.rollouts, f"give at least one per candidate ({args.candidates})")
+        raise bad(
+            "--rollouts", args.rollouts, f"give at least one per candidate ({args.candidates})"
+        )
     if args.budget_s is not None and not (math.isfinite(args.budget_s) and args.budget_s > 0):
         raise bad("--budget-s", args.budget_s, "give a positive number of seconds")
     if not 0.5 <= args.confidence < 1:
@@ -101,8 +145,10 @@ def _fmt(v: float, digits: int = 2) -> str:
 
 
 def ranking_table(choice) -> str:
-    rows = ["  #  route            n   P(success) [interval]   rel. energy [interval]   J/m    "
-            "CoT   time s  failures"]  # fmt: skip
+    rows = [
+        "  #  route            n   P(success) [interval]   rel. energy [interval]   J/m    "
+        "CoT   time s  failures"
+    ]
     for r in choice.ranking:
         mark = "*" if r["candidate"] == choice.chosen else " "
         fails = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "-"
@@ -123,8 +169,14 @@ def _csv(ranking: list[dict]) -> str:
     w = csv.writer(buf)
     w.writerow(keys)
     for r in ranking:
-        w.writerow([json.dumps(r[k]) if k == "failures" else
-                    (round(r[k], 6) if isinstance(r[k], float) else r[k]) for k in keys])  # fmt: skip
+        w.writerow(
+            [
+                json.dumps(r[k])
+                if k == "failures"
+                else (round(r[k], 6) if isinstance(r[k], float) else r[k])
+                for k in keys
+            ]
+        )
     return buf.getvalue()
 
 
@@ -154,25 +206,32 @@ def cmd_choose(args: argparse.Namespace) -> int:
     out = None
     if args.out is not None:  # refused before the work, not after it
         out = prepare_output_folder(
-            args.out, flag="--out", owned=lambda p: (p / "choice.json").is_file(),
+            args.out,
+            flag="--out",
+            owned=lambda p: (p / "choice.json").is_file(),
             accepts="a new or empty folder, or one an earlier `roachplan choose` wrote",
-        )  # fmt: skip
+        )
     scene = load_scene(args.scene)
     if args.reference:
         planner, driver = reference_settings(scene.planner, scene.driver)
         scene = dataclasses.replace(scene, planner=planner, driver=driver)
     budget = args.budget_s if args.budget_s is not None else (None if args.rollouts else 60.0)
     cfg = ChooseConfig(
-        candidates=args.candidates, rollouts=args.rollouts, budget_s=budget,
-        confidence=args.confidence, min_success=args.min_success,
+        candidates=args.candidates,
+        rollouts=args.rollouts,
+        budget_s=budget,
+        confidence=args.confidence,
+        min_success=args.min_success,
         indifference=args.indifference,
-        seed=scene.seed if args.seed is None else args.seed, uncertainty=scene.uncertainty,
-    )  # fmt: skip
+        seed=scene.seed if args.seed is None else args.seed,
+        uncertainty=scene.uncertainty,
+    )
 
     from ._progress import bar
 
-    shown = bar(100, "choose", unit="%",
-                bar_format="{desc}: {percentage:3.0f}% |{bar}| {elapsed} {postfix}")  # fmt: skip
+    shown = bar(
+        100, "choose", unit="%", bar_format="{desc}: {percentage:3.0f}% |{bar}| {elapsed} {postfix}"
+    )
 
     def progress(message: str, fraction: float) -> None:
         shown.n = round(100 * min(max(fraction, 0.0), 1.0))
@@ -182,24 +241,44 @@ def cmd_choose(args: argparse.Namespace) -> int:
     cluster = args.backend == "ray" and args.address is not None
     workers = args.workers or (None if cluster else os.cpu_count() or 1)
     choice, checked = choose(
-        scene, cfg, workers=workers, backend=args.backend, address=args.address,
-        validate_repeats=args.validate, progress=progress,
-    )  # fmt: skip
+        scene,
+        cfg,
+        workers=workers,
+        backend=args.backend,
+        address=args.address,
+        validate_repeats=args.validate,
+        progress=progress,
+    )
     shown.close()
-    result = _jsonable({
-        "scene": scene.name, "chosen": choice.chosen, "stopped": choice.stopped,
-        "confidence_reached": choice.confidence_reached,
-        "rollouts": choice.rollouts, "wall_time_s": round(choice.wall_time, 2),
-        "seed": cfg.seed, "confidence": cfg.confidence, "min_success": cfg.min_success,
-        "indifference": list(cfg.indifference),
-        "turning_radius": scene.planner.turning_radius, "driver": scene.driver.kind,
-        "uncertainty": dataclasses.asdict(cfg.uncertainty),
-        "ranking": choice.ranking, "validation": checked,
-        "chosen_path": (choice.candidates[choice.chosen].path_xyz.tolist()
-                        if choice.chosen is not None else None),
-        "chosen_spins": ([list(s) for s in choice.candidates[choice.chosen].spins]
-                         if choice.chosen is not None else None),
-    })  # fmt: skip
+    result = _jsonable(
+        {
+            "scene": scene.name,
+            "chosen": choice.chosen,
+            "stopped": choice.stopped,
+            "confidence_reached": choice.confidence_reached,
+            "rollouts": choice.rollouts,
+            "wall_time_s": round(choice.wall_time, 2),
+            "seed": cfg.seed,
+            "confidence": cfg.confidence,
+            "min_success": cfg.min_success,
+            "indifference": list(cfg.indifference),
+            "turning_radius": scene.planner.turning_radius,
+            "driver": scene.driver.kind,
+            "uncertainty": dataclasses.asdict(cfg.uncertainty),
+            "ranking": choice.ranking,
+            "validation": checked,
+            "chosen_path": (
+                choice.candidates[choice.chosen].path_xyz.tolist()
+                if choice.chosen is not None
+                else None
+            ),
+            "chosen_spins": (
+                [list(s) for s in choice.candidates[choice.chosen].spins]
+                if choice.chosen is not None
+                else None
+            ),
+        }
+    )
     if out is not None:
         atomic_write(out / "choice.json", json.dumps(result, indent=1))
         atomic_write(out / "ranking.csv", _csv(choice.ranking))
@@ -208,8 +287,10 @@ def cmd_choose(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        print(f"{scene.name}: {choice.rollouts} rollouts in {choice.wall_time:.1f} s; "
-              f"{choice.stopped}\n")  # fmt: skip
+        print(
+            f"{scene.name}: {choice.rollouts} rollouts in {choice.wall_time:.1f} s; "
+            f"{choice.stopped}\n"
+        )
         print(ranking_table(choice))
         if choice.chosen is None:
             print("\nno candidate succeeded in any rollout: nothing to choose")
@@ -217,12 +298,16 @@ def cmd_choose(args: argparse.Namespace) -> int:
             print(f"\nchosen: candidate {choice.chosen} (*)")
         if checked is not None:
             inside = sum(r["inside"] for r in checked["candidates"])
-            print(f"\nvalidation, {checked['repeats']} fresh rollouts each: Brier score "
-                  f"{checked['brier']:.3f}; observed success inside the predicted interval for "
-                  f"{inside} of {len(checked['candidates'])} candidates")  # fmt: skip
+            print(
+                f"\nvalidation, {checked['repeats']} fresh rollouts each: Brier score "
+                f"{checked['brier']:.3f}; observed success inside the predicted interval for "
+                f"{inside} of {len(checked['candidates'])} candidates"
+            )
             for row in checked["reliability"]:
-                print(f"  predicted {row['bin']}: mean {row['mean_predicted']:.2f}, observed "
-                      f"{row['observed']:.2f} over {row['rollouts']} rollouts")  # fmt: skip
+                print(
+                    f"  predicted {row['bin']}: mean {row['mean_predicted']:.2f}, observed "
+                    f"{row['observed']:.2f} over {row['rollouts']} rollouts"
+                )
         if out is not None:
             print(f"\nwrote {out}/choice.json, ranking.csv, rollouts.jsonl")
     return 0 if choice.chosen is not None else 1

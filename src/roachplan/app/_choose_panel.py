@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
 
 import numpy as np
+
 from roachplan.experiments._choose import ChooseConfig, ChooseError, plan_candidates, race
 from roachplan.experiments._trial import LabelledPlan
 from roachplan.planning import PlanResult
@@ -71,8 +72,12 @@ def ranking_markdown(ranking: list[dict], chosen: int | None, confidence: float)
         out = r["out"]
         if out:
             fails += ("; out: " if fails else "out: ") + (
-                "costs more" if out.startswith("costs more") else
-                "less likely" if out.startswith("less likely") else out)  # fmt: skip
+                "costs more"
+                if out.startswith("costs more")
+                else "less likely"
+                if out.startswith("less likely")
+                else out
+            )
         mark = " **chosen**" if r["candidate"] == chosen else ""
         rows.append(
             f"| **{r['candidate'] + 1}** {r['route'] or '-'}{mark} "
@@ -81,10 +86,12 @@ def ranking_markdown(ranking: list[dict], chosen: int | None, confidence: float)
             f"{_f(r['relative_energy_high'])}], {_f(r['energy_j_per_m'])} J/m; "
             f"{_f(r['drive_time_s'], 1)} s | {fails or '-'} |"
         )
-    note = (f"Best first. Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} "
-            f"jointly over {k}); n: rollouts; energy: mean over the successes, × a straight walk "
-            f"on the floor; time: their mean drive time; out: left the race, beaten. Lines: red "
-            f"(P = 0) to green (P = 1), grey before their first rollouts; the chosen one thick.")  # fmt: skip
+    note = (
+        f"Best first. Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} "
+        f"jointly over {k}); n: rollouts; energy: mean over the successes, × a straight walk "
+        f"on the floor; time: their mean drive time; out: left the race, beaten. Lines: red "
+        f"(P = 0) to green (P = 1), grey before their first rollouts; the chosen one thick."
+    )
     return "**Ranking**\n\n" + head + "\n".join(rows) + "\n\n" + note
 
 
@@ -94,26 +101,38 @@ class ChoosePanel:
     def __init__(self, gui, put) -> None:
         with gui.add_folder("Choose path"):
             self.candidates = gui.add_number(
-                "Candidates (K)", 4, min=2, max=16, step=1,
+                "Candidates (K)",
+                4,
+                min=2,
+                max=16,
+                step=1,
                 hint="Distinct paths to race (a route each, in turn, where the scene names "
                 "routes); at least 2: a race needs two",
-            )  # fmt: skip
+            )
             self.budget = gui.add_number(
-                "Choose budget [s]", 60.0, min=5.0, max=3600.0, step=5.0,
+                "Choose budget [s]",
+                60.0,
+                min=5.0,
+                max=3600.0,
+                step=5.0,
                 hint="Wall time for planning the candidates and racing them",
-            )  # fmt: skip
+            )
             self.confidence = gui.add_number("Confidence", 0.95, min=0.5, max=0.99, step=0.01)
             self.button = gui.add_button(
                 "Choose path",
                 hint="Drive each candidate many times in worlds drawn from the uncertainty "
                 "model (start pose, friction, motors, mass), from the scene's start and goal; "
                 "Drive then takes the chosen path",
-            )  # fmt: skip
+            )
             # The race's progress and Cancel here too, where the person who clicked is (the
             # ones at the top of the panel may be scrolled out of view).
             self.progress = gui.add_progress_bar(0.0, visible=False)
-            self.cancel = gui.add_button("Cancel choose", color="red", visible=False,
-                                         hint="Stop the race now; nothing is chosen")  # fmt: skip
+            self.cancel = gui.add_button(
+                "Cancel choose",
+                color="red",
+                visible=False,
+                hint="Stop the race now; nothing is chosen",
+            )
             self.summary = gui.add_markdown("")
             self.table = gui.add_markdown("")
         self.button.on_click(lambda ev: put(ChooseCmd(ev.client_id)))
@@ -150,28 +169,46 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
         conn.send(("candidates", [(c.index, c.route, c.seed, c.path_xyz) for c in candidates]))
         conf = 1 - (1 - cfg.confidence) / len(candidates)  # (as race() has it)
         mass = world.robot.mass
-        spec = ExperimentSpec(name=f"choose-{scene.name}", path=scene.path, scene=scene.path,
-                              planner=scene.planner, sim=scene.sim, driver=scene.driver,
-                              uncertainty=cfg.uncertainty)  # fmt: skip
+        spec = ExperimentSpec(
+            name=f"choose-{scene.name}",
+            path=scene.path,
+            scene=scene.path,
+            planner=scene.planner,
+            sim=scene.sim,
+            driver=scene.driver,
+            uncertainty=cfg.uncertainty,
+        )
         pool = _make_pool(spec, workers, "local", None)
         spins = {c.index: c.spins for c in candidates}  # (each candidate's turns on the spot)
         try:
             left = max(cfg.budget_s - (time.monotonic() - t0), 0.0)
             choice = race(
-                candidates, dataclass_replace(cfg, budget_s=left),
-                lambda calls: list(pool.run(
-                    ("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]}) for c in calls
-                )),
+                candidates,
+                dataclass_replace(cfg, budget_s=left),
+                lambda calls: list(
+                    pool.run(
+                        ("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]}) for c in calls
+                    )
+                ),
                 mass=mass,
                 progress=lambda message, _: conn.send(
                     ("round", (message, [c.summary(conf, mass) for c in candidates]))
                 ),
-            )  # fmt: skip
+            )
         finally:
             pool.close()
-        conn.send(("choice", {"chosen": choice.chosen, "ranking": choice.ranking,
-                              "stopped": choice.stopped, "rollouts": choice.rollouts,
-                              "wall_time": time.monotonic() - t0}))  # fmt: skip
+        conn.send(
+            (
+                "choice",
+                {
+                    "chosen": choice.chosen,
+                    "ranking": choice.ranking,
+                    "stopped": choice.stopped,
+                    "rollouts": choice.rollouts,
+                    "wall_time": time.monotonic() - t0,
+                },
+            )
+        )
     except Exception as exc:  # reported to the user as a notification
         conn.send(("error", f"{exc}"))
     conn.close()
@@ -196,8 +233,12 @@ def _at_scene_poses(app) -> None:
 def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
     """Race K candidates in a child followed by the loop; then Drive takes the chosen one."""
     _at_scene_poses(app)
-    cfg = ChooseConfig(candidates=int(panel.candidates.value), budget_s=float(panel.budget.value),
-                       confidence=float(panel.confidence.value), seed=app._next_seed)  # fmt: skip
+    cfg = ChooseConfig(
+        candidates=int(panel.candidates.value),
+        budget_s=float(panel.budget.value),
+        confidence=float(panel.confidence.value),
+        seed=app._next_seed,
+    )
     app._next_seed += 1  # (a second click draws fresh candidates and rollouts)
     workers = os.cpu_count() or 1  # (every core, as `roachplan choose` takes by default)
     app._show_robot_at_start()
@@ -219,11 +260,17 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
                     pts = np.asarray(xyz) + [0, 0, LIFT]
                     paths[index] = (route, seed, np.asarray(xyz))
                     panel.lines[index] = app.server.scene.add_line_segments(
-                        f"/plans/choose/{index}", segments(pts), colors=UNTRIED, thickness=3.0,
+                        f"/plans/choose/{index}",
+                        segments(pts),
+                        colors=UNTRIED,
+                        thickness=3.0,
                         thickness_units="screen",
-                    )  # fmt: skip
-                    app.server.scene.add_label(f"/plans/choose/{index}/label", str(index + 1),
-                                               position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]))  # fmt: skip
+                    )
+                    app.server.scene.add_label(
+                        f"/plans/choose/{index}/label",
+                        str(index + 1),
+                        position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]),
+                    )
                 got["message"] = f"{len(payload)} candidates planned; racing them"
             elif kind == "round":
                 got["message"], ranking = payload
@@ -245,8 +292,9 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
 
     panel.progress.value, panel.progress.visible, panel.cancel.visible = 0.0, True, True
     try:
-        end = app._follow(job, "Choose path", step,
-                          hard_stop=time.monotonic() + cfg.budget_s + GRACE)  # fmt: skip
+        end = app._follow(
+            job, "Choose path", step, hard_stop=time.monotonic() + cfg.budget_s + GRACE
+        )
     finally:
         panel.progress.visible = panel.cancel.visible = False
     if "error" in got:
@@ -275,8 +323,10 @@ def _show_choice(app, panel: ChoosePanel, cfg: ChooseConfig, choice: dict, paths
     """The ranking; the candidates become the plan's paths, the chosen one marked for Drive."""
     ranking, chosen, scene = choice["ranking"], choice["chosen"], app.world.scene
     panel.table.content = ranking_markdown(ranking, chosen, cfg.confidence)
-    again = (f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
-             f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}`")  # fmt: skip
+    again = (
+        f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
+        f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}`"
+    )
     ran = f"{choice['rollouts']} rollouts in {choice['wall_time']:.1f} s ({choice['stopped']})"
     # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
     # marked for Drive (thick, "Drive") and every one keeping its P(success) colour.
@@ -288,8 +338,11 @@ def _show_choice(app, panel: ChoosePanel, cfg: ChooseConfig, choice: dict, paths
     panel.lines = dict(enumerate(app.view.path_nodes))
     _recolour(panel, ranking)
     if chosen is None:
-        why = ("only one candidate path was found: there was nothing to race"
-               if choice["rollouts"] == 0 else "no candidate succeeded in any rollout")  # fmt: skip
+        why = (
+            "only one candidate path was found: there was nothing to race"
+            if choice["rollouts"] == 0
+            else "no candidate succeeded in any rollout"
+        )
         app.status.content = panel.summary.content = (
             f"Nothing chosen: {why}; {ran}. **Drive** drives path 1 (*Drive path* picks another). "
             f"Same race: {again}"
@@ -297,9 +350,11 @@ def _show_choice(app, panel: ChoosePanel, cfg: ChooseConfig, choice: dict, paths
         return
     row = next(r for r in ranking if r["candidate"] == chosen)
     route = paths[chosen][0]
-    text = (f"Chosen: path {chosen + 1} ({route or 'no route'}), P(success) "
-            f"{_f(row['p_success'])} [{_f(row['p_low'])}, {_f(row['p_high'])}], energy "
-            f"{_f(row['relative_energy'])} × a straight walk; {ran}.")  # fmt: skip
+    text = (
+        f"Chosen: path {chosen + 1} ({route or 'no route'}), P(success) "
+        f"{_f(row['p_success'])} [{_f(row['p_low'])}, {_f(row['p_high'])}], energy "
+        f"{_f(row['relative_energy'])} × a straight walk; {ran}."
+    )
     app.status.content = text + " **Drive** drives it (*Drive path* picks another)."
     panel.summary.content = f"{text}  \nSame race from the command line: {again}"
 
@@ -307,7 +362,16 @@ def _show_choice(app, panel: ChoosePanel, cfg: ChooseConfig, choice: dict, paths
 def _labelled(scene, route: str, seed: int, xyz: np.ndarray) -> LabelledPlan:
     """A candidate as the plan Drive takes (its path as planned with the scene's planner)."""
     planner = scene.planner
-    return LabelledPlan(route=route, plan=PlanResult(
-        found=True, planner=planner.name, seed=seed, states=np.zeros((0, 3)), path_xyz=xyz,
-        plan_time=0.0, message="chosen by simulation", turning_radius=planner.turning_radius,
-    ))  # fmt: skip
+    return LabelledPlan(
+        route=route,
+        plan=PlanResult(
+            found=True,
+            planner=planner.name,
+            seed=seed,
+            states=np.zeros((0, 3)),
+            path_xyz=xyz,
+            plan_time=0.0,
+            message="chosen by simulation",
+            turning_radius=planner.turning_radius,
+        ),
+    )

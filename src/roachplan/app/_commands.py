@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+
 from roachplan.experiments import TrialResult
 from roachplan.planning import PlanResult
 
@@ -45,9 +46,12 @@ def do_plan(app, cmd: Cmd) -> None:
             elif kind == "error":
                 errors.append(str(payload))
         t = job.elapsed
-        app._progress(t / budget, f"Planning with {planner.name}: {len(plans)} of {count} "
-                      f"path(s), {len(tried)} tried (seeds from {seed}); {t:.1f} s of the "
-                      f"{budget:g} s budget")  # fmt: skip
+        app._progress(
+            t / budget,
+            f"Planning with {planner.name}: {len(plans)} of {count} "
+            f"path(s), {len(tried)} tried (seeds from {seed}); {t:.1f} s of the "
+            f"{budget:g} s budget",
+        )
         return job.done
 
     end = app._follow(job, "Plan", step, hard_stop=deadline + PLAN_GRACE)
@@ -63,8 +67,9 @@ def do_plan(app, cmd: Cmd) -> None:
     seeds = f"seeds {seed}-{seed + len(tried) - 1}" if len(tried) > 1 else f"seed {seed}"
     tries = f"{len(tried)} {'try' if len(tried) == 1 else 'tries'}"
     routes = ", ".join(lp.route for lp in plans)
-    spent = end == "stopped" or (end == "done" and len(plans) < count
-                                 and len(tried) < 3 * count + 10)  # fmt: skip
+    spent = end == "stopped" or (
+        end == "done" and len(plans) < count and len(tried) < 3 * count + 10
+    )
     if end == "cancelled":
         kept = f"; {len(plans)} path(s) kept" if plans else ""
         text = f"Plan cancelled after {elapsed:.1f} s{kept}."
@@ -72,19 +77,23 @@ def do_plan(app, cmd: Cmd) -> None:
         why = f": the {budget:g} s budget is spent" if spent else ""
         text = f"No path found in {elapsed:.1f} s{why} ({planner.name}, {tries}, {seeds})."
     elif spent:
-        text = (f"{len(plans)} of {count} paths found in {elapsed:.1f} s: the {budget:g} s "
-                f"budget is spent ({seeds}; routes {routes}). **Drive** drives the marked one "
-                f"(choose it in *Drive path*).")  # fmt: skip
+        text = (
+            f"{len(plans)} of {count} paths found in {elapsed:.1f} s: the {budget:g} s "
+            f"budget is spent ({seeds}; routes {routes}). **Drive** drives the marked one "
+            f"(choose it in *Drive path*)."
+        )
     elif count == 1:
         first = plans[0].plan
         text = f"Path found in {first.plan_time:.2f} s (seed {first.seed}). Press **Drive**."
         if len(tried) > 1:
             text += f" ({tries}, {elapsed:.1f} s in all)"
     else:
-        text = (f"{len(plans)} paths found in {elapsed:.1f} s (seeds "
-                f"{', '.join(str(lp.plan.seed) for lp in plans)}; routes {routes}). "
-                f"**Drive** drives the marked one "
-                f"(choose it in *Drive path*).")  # fmt: skip
+        text = (
+            f"{len(plans)} paths found in {elapsed:.1f} s (seeds "
+            f"{', '.join(str(lp.plan.seed) for lp in plans)}; routes {routes}). "
+            f"**Drive** drives the marked one "
+            f"(choose it in *Drive path*)."
+        )
     app.status.content = text
 
 
@@ -128,8 +137,11 @@ def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialR
                 app._draw("/trajectories/current", [g.p_world_body for g in frames[: k + 1]], BLUE)
                 play["drawn"] = now
                 done = path_fraction(path_xy, f.p_world_body)
-                app._progress(done, f"{name}: {100 * done:.0f} % of the path, {f.t:.1f} s "
-                              f"simulated, {job.elapsed:.1f} s")  # fmt: skip
+                app._progress(
+                    done,
+                    f"{name}: {100 * done:.0f} % of the path, {f.t:.1f} s "
+                    f"simulated, {job.elapsed:.1f} s",
+                )
         return job.done and (bool(errors) or play["k"] >= len(frames) - 1)
 
     end = app._follow(job, name, step)
@@ -160,8 +172,9 @@ def do_best_path(app, cmd: Cmd) -> None:
     """The report's best_path: drive the lowest-energy successful path again."""
     ok = [(k, t) for k, t in enumerate(app.scene_trials) if t["outcome"] == "success" and t["path"]]
     if not ok:
-        app._notify(cmd.client_id, "No best path yet", "Drive or run trials until one succeeds.",
-                    error=True)  # fmt: skip
+        app._notify(
+            cmd.client_id, "No best path yet", "Drive or run trials until one succeeds.", error=True
+        )
         return
     k, best = min(ok, key=lambda kt: kt[1]["relative_energy"])
     planned = stub_plan(best)
@@ -175,10 +188,15 @@ def do_best_path(app, cmd: Cmd) -> None:
 def stub_plan(trial: dict):
     """The PlanResult of a stored trial's path (to drive it again)."""
     return PlanResult(
-        found=True, planner=trial["planner"], seed=trial["seed"], states=np.zeros((0, 3)),
-        path_xyz=np.asarray(trial["path"]), plan_time=0.0, message="stored path",
+        found=True,
+        planner=trial["planner"],
+        seed=trial["seed"],
+        states=np.zeros((0, 3)),
+        path_xyz=np.asarray(trial["path"]),
+        plan_time=0.0,
+        message="stored path",
         spins=tuple(tuple(s) for s in trial.get("spins") or ()),
-    )  # fmt: skip
+    )
 
 
 def show_trial(app) -> None:

@@ -8,14 +8,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from roachplan.scenes import World
 
 BLACK, BLUE = (0, 0, 0), (30, 90, 255)
 MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}
 INVALID = (220, 30, 30)
 TERRAIN_COLOUR = (196, 164, 120)
-PATH_COLOURS = ((20, 20, 20), (170, 40, 200), (0, 150, 170), (230, 0, 120), (110, 190, 30),
-                (20, 40, 120), (220, 180, 0), (90, 140, 140))  # fmt: skip
+PATH_COLOURS = (
+    (20, 20, 20),
+    (170, 40, 200),
+    (0, 150, 170),
+    (230, 0, 120),
+    (110, 190, 30),
+    (20, 40, 120),
+    (220, 180, 0),
+    (90, 140, 140),
+)
 """Path k's colour is PATH_COLOURS[k % 8] (none near the legs' orange, the trajectory's blue
 or the invalid red, so each stays readable over the tan terrain); labels 1..K tell them apart
 beyond 8."""
@@ -88,8 +97,7 @@ class SceneView:
         """Remove what is drawn under root ("/plans" or "/trajectories"), keeping the group's
         shown or hidden state for what is drawn there next (a hidden parent hides it)."""
         self.scene.remove_by_name(root)
-        self._roots[root] = self.scene.add_frame(root, show_axes=False,
-                                                 visible=self.shown[root])  # fmt: skip
+        self._roots[root] = self.scene.add_frame(root, show_axes=False, visible=self.shown[root])
 
     def set_shown(self, root: str, shown: bool) -> None:
         """Show or hide a group at once, and what is drawn in it later."""
@@ -108,42 +116,64 @@ class SceneView:
         if len(world.mesh.faces):
             mesh = world.mesh
             filled = np.asarray(mesh.face_attributes.get("filled", np.zeros(len(mesh.faces))))
-            for name, faces, colour in (("mesh", mesh.faces[filled < 0.5], TERRAIN_COLOUR),
-                                        ("filled", mesh.faces[filled >= 0.5], FILLED_COLOUR)):
+            for name, faces, colour in (
+                ("mesh", mesh.faces[filled < 0.5], TERRAIN_COLOUR),
+                ("filled", mesh.faces[filled >= 0.5], FILLED_COLOUR),
+            ):
                 if len(faces):
-                    s.add_mesh_simple(f"/terrain/{name}", mesh.vertices, faces, color=colour,
-                                      flat_shading=True)  # fmt: skip
+                    s.add_mesh_simple(
+                        f"/terrain/{name}", mesh.vertices, faces, color=colour, flat_shading=True
+                    )
         if scene.ground is None:
             unknown = unknown_squares(world)
             if len(unknown[1]):
-                s.add_mesh_simple("/terrain/unknown", *unknown, color=UNKNOWN_COLOUR,
-                                  opacity=0.85, side="double")  # fmt: skip
+                s.add_mesh_simple(
+                    "/terrain/unknown", *unknown, color=UNKNOWN_COLOUR, opacity=0.85, side="double"
+                )
         if scene.ground is not None:
             (lo, hi) = np.asarray(scene.bounds)
             size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
-            s.add_grid("/terrain/ground", width=float(size[0]), height=float(size[1]),
-                       cell_size=0.25, position=(*((lo + hi) / 2), scene.ground))  # fmt: skip
-        self.robot_node = s.add_box("/robot", color=(60, 60, 70),
-                                    dimensions=(r.body_length, r.body_width, r.body_height))  # fmt: skip
+            s.add_grid(
+                "/terrain/ground",
+                width=float(size[0]),
+                height=float(size[1]),
+                cell_size=0.25,
+                position=(*((lo + hi) / 2), scene.ground),
+            )
+        self.robot_node = s.add_box(
+            "/robot", color=(60, 60, 70), dimensions=(r.body_length, r.body_width, r.body_height)
+        )
         self.hip_nodes = []
         for k, hip in enumerate(r.hip_positions):
             hip_node = s.add_frame(f"/robot/hip{k}", show_axes=False, position=tuple(hip))
-            s.add_box(f"/robot/hip{k}/leg", color=(200, 80, 40),
-                      dimensions=(2 * r.leg_radius, 2 * r.leg_radius, r.leg_length),
-                      position=(0.0, 0.0, -r.leg_length / 2))  # fmt: skip
+            s.add_box(
+                f"/robot/hip{k}/leg",
+                color=(200, 80, 40),
+                dimensions=(2 * r.leg_radius, 2 * r.leg_radius, r.leg_length),
+                position=(0.0, 0.0, -r.leg_length / 2),
+            )
             self.hip_nodes.append(hip_node)
         self.controls, self.balls = {}, {}
         self.path_nodes, self.standable_node = [], None
         for which, pose in (("start", scene.start), ("goal", scene.goal)):
             ctl = s.add_transform_controls(
-                f"/markers/{which}", scale=0.25, disable_rotations=True,
-                active_axes=(True, True, False), position=on_surface(world, pose),
+                f"/markers/{which}",
+                scale=0.25,
+                disable_rotations=True,
+                active_axes=(True, True, False),
+                position=on_surface(world, pose),
                 depth_test=False,
-            )  # fmt: skip
-            self.balls[which] = s.add_icosphere(f"/markers/{which}/ball", radius=0.03,
-                                                color=MARKER_COLOURS[which])  # fmt: skip
-            s.add_line_segments(f"/markers/{which}/heading", np.array([[[0, 0, 0.01], [0.12, 0, 0.01]]]),
-                                colors=MARKER_COLOURS[which], thickness=4.0, thickness_units="screen")  # fmt: skip
+            )
+            self.balls[which] = s.add_icosphere(
+                f"/markers/{which}/ball", radius=0.03, color=MARKER_COLOURS[which]
+            )
+            s.add_line_segments(
+                f"/markers/{which}/heading",
+                np.array([[[0, 0, 0.01], [0.12, 0, 0.01]]]),
+                colors=MARKER_COLOURS[which],
+                thickness=4.0,
+                thickness_units="screen",
+            )
             ctl.on_update(on_marker)
             self.controls[which] = ctl
 
@@ -158,16 +188,26 @@ class SceneView:
     def draw(self, name: str, points, colour) -> None:
         """A polyline ((N, 3) [m]) as one node of line segments."""
         if len(points) >= 2:
-            self.scene.add_line_segments(name, segments(np.asarray(points)), colors=colour,
-                                         thickness=3.0, thickness_units="screen")  # fmt: skip
+            self.scene.add_line_segments(
+                name,
+                segments(np.asarray(points)),
+                colors=colour,
+                thickness=3.0,
+                thickness_units="screen",
+            )
 
     def draw_roadmap(self, world: World, graph: np.ndarray) -> None:
         """The planner's roadmap or tree ((E, 2, 2) xy segments [m]), grey, on the surface."""
         if len(graph):
             z = world.heightfield.sample(graph.reshape(-1, 2)).reshape(-1, 2, 1)
             segs = np.concatenate([graph, np.nan_to_num(z) + 0.003], axis=2).astype(np.float32)
-            self.scene.add_line_segments("/plans/roadmap", segs, colors=(150, 150, 150),
-                                         thickness=1.0, thickness_units="screen")  # fmt: skip
+            self.scene.add_line_segments(
+                "/plans/roadmap",
+                segs,
+                colors=(150, 150, 150),
+                thickness=1.0,
+                thickness_units="screen",
+            )
 
     def show_paths(self, paths: list, selected: int) -> None:
         """Paths ((N, 3) [m] each) in distinct colours with labels 1..K at their middle; the
@@ -181,11 +221,16 @@ class SceneView:
         """One more path ((N, 3) [m]), unmarked, in the next colour, labelled with its number."""
         k = len(self.path_nodes)
         pts = np.asarray(points) + [0, 0, 0.005]
-        self.path_nodes.append(self.scene.add_line_segments(
-            f"/plans/{k}", segments(pts), colors=PATH_COLOURS[k % len(PATH_COLOURS)],
-            thickness=3.0, thickness_units="screen"))  # fmt: skip
-        self.scene.add_label(f"/plans/{k}/label", str(k + 1),
-                             position=label_position(pts, k))  # fmt: skip
+        self.path_nodes.append(
+            self.scene.add_line_segments(
+                f"/plans/{k}",
+                segments(pts),
+                colors=PATH_COLOURS[k % len(PATH_COLOURS)],
+                thickness=3.0,
+                thickness_units="screen",
+            )
+        )
+        self.scene.add_label(f"/plans/{k}/label", str(k + 1), position=label_position(pts, k))
 
     def mark_path(self, selected: int) -> None:
         """Make path `selected` (index) the marked one: thick, its label saying Drive takes it."""
@@ -195,8 +240,7 @@ class SceneView:
                 node.thickness = thickness
                 text = f"{k + 1}: Drive" if k == selected else str(k + 1)
                 pts = np.concatenate([node.points[:, 0], node.points[-1:, 1]])
-                self.scene.add_label(f"/plans/{k}/label", text,
-                                     position=label_position(pts, k))  # fmt: skip
+                self.scene.add_label(f"/plans/{k}/label", text, position=label_position(pts, k))
 
     def hide_paths(self) -> None:
         """Remove every path, the roadmap and a shown trial's path."""
@@ -219,9 +263,14 @@ class SceneView:
             vertices = np.column_stack([corners.reshape(-1, 2), z]).astype(np.float32)
             first = 4 * np.arange(len(centres))[:, None]
             faces = np.concatenate([first + [0, 1, 2], first + [0, 2, 3]]).astype(np.uint32)
-            self.scene.add_mesh_simple(f"/standable/{which}", vertices, faces,
-                                       color=STANDABLE_COLOURS[which], opacity=0.7,
-                                       side="double")  # fmt: skip
+            self.scene.add_mesh_simple(
+                f"/standable/{which}",
+                vertices,
+                faces,
+                color=STANDABLE_COLOURS[which],
+                opacity=0.7,
+                side="double",
+            )
 
 
 def unknown_squares(world: World) -> tuple[np.ndarray, np.ndarray]:
@@ -235,8 +284,13 @@ def unknown_squares(world: World) -> tuple[np.ndarray, np.ndarray]:
     j, i = np.nonzero(blocks.all(axis=(1, 3)))
     side = k * hf.resolution
     x0, y0 = hf.x0 + i * side, hf.y0 + j * side
-    corners = np.stack([np.column_stack([x0 + dx * side, y0 + dy * side])
-                        for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)  # fmt: skip
+    corners = np.stack(
+        [
+            np.column_stack([x0 + dx * side, y0 + dy * side])
+            for dx, dy in ((0, 0), (1, 0), (1, 1), (0, 1))
+        ],
+        axis=1,
+    )
     vertices = np.column_stack([corners.reshape(-1, 2), np.full(4 * len(i), -0.002)])
     first = 4 * np.arange(len(i))[:, None]
     faces = np.concatenate([first + [0, 1, 2], first + [0, 2, 3]])

@@ -113,9 +113,16 @@ class ViewCmd(Cmd):
     what: str
 
 
-NAMES = {PlanCmd: "Plan", DriveCmd: "Drive", ResetCmd: "Reset", BestPathCmd: "Best path",
-         PlaceCmd: "Click", MarkersCmd: "Marker check", RunTrialsCmd: "Run trials",
-         ShowTrialCmd: "Show trial"}  # fmt: skip
+NAMES = {
+    PlanCmd: "Plan",
+    DriveCmd: "Drive",
+    ResetCmd: "Reset",
+    BestPathCmd: "Best path",
+    PlaceCmd: "Click",
+    MarkersCmd: "Marker check",
+    RunTrialsCmd: "Run trials",
+    ShowTrialCmd: "Show trial",
+}
 """How the page names a queued command."""
 
 
@@ -131,8 +138,13 @@ def _plan_job(conn, world: World, count: int, request: dict, deadline: float) ->
     on Linux, so the budget counts from the click, not from this child's start)."""
     limit_child_memory()  # a runaway plan ends in a notification, not by taking the machine
     try:
-        plan_many(world, count, **request, budget=max(0.0, deadline - time.monotonic()),
-                  on_attempt=lambda seed, lp: conn.send(("attempt", (seed, lp))))  # fmt: skip
+        plan_many(
+            world,
+            count,
+            **request,
+            budget=max(0.0, deadline - time.monotonic()),
+            on_attempt=lambda seed, lp: conn.send(("attempt", (seed, lp))),
+        )
         conn.send(("done", None))
     except Exception as exc:  # reported to the user as a notification
         conn.send(("error", f"{exc}"))
@@ -159,10 +171,15 @@ def _load_job(conn, ref: str, from_upload: bool) -> None:
     try:
         conn.send(("world", load_world(ref, from_upload=from_upload)))
     except MemoryError:
-        conn.send(("error", f"loading this file needed more memory than the server allows a "
-                            f"load ({limit / 2**30:.1f} GiB): set a larger Meshing "
-                            f"(captures) → Voxel [m], or tick Meshing (captures) → Crop and "
-                            f"set its box, and load it again"))  # fmt: skip
+        conn.send(
+            (
+                "error",
+                f"loading this file needed more memory than the server allows a "
+                f"load ({limit / 2**30:.1f} GiB): set a larger Meshing "
+                f"(captures) → Voxel [m], or tick Meshing (captures) → Crop and "
+                f"set its box, and load it again",
+            )
+        )
     except Exception as exc:
         conn.send(("error", f"{exc}"))
     conn.close()
@@ -274,8 +291,9 @@ class WorldHost:
     def __init__(self, world: World) -> None:
         self.world = world
         self._conn, child = _CTX.Pipe(duplex=True)  # (a socket pair: it can carry an fd)
-        self._proc = _CTX.Process(target=_host_main, args=(child, world), daemon=True,
-                                  name="roachplan-world-host")  # fmt: skip
+        self._proc = _CTX.Process(
+            target=_host_main, args=(child, world), daemon=True, name="roachplan-world-host"
+        )
         self._proc.start()
         child.close()
         self._lock = threading.Lock()
@@ -296,7 +314,6 @@ class WorldHost:
             return _parent(Path(f"/proc/{pid}/stat").read_text()) == self._proc.pid
         except OSError:
             return False
-
 
     def close(self) -> None:
         """End the host (the jobs it started run on until they finish or are cancelled)."""
@@ -329,6 +346,7 @@ def _start_time(pid: int) -> int | None:
         return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19])
     except (OSError, IndexError, ValueError):
         return None
+
 
 def _parent(stat: str) -> int:
     """The parent pid in the text of /proc/PID/stat."""
@@ -379,6 +397,7 @@ def _recording_reconstructions():
     every capture load. scenes has no hook to hand the reconstruction out, so its module's
     reference is wrapped for the duration (in a load's own process)."""
     import roachplan.scenes._world as world_module
+
     made: list = []
     original = getattr(world_module, "mesh_capture", None)
     if original is None:  # scenes changed how it meshes: capture_view meshes once more
@@ -404,10 +423,12 @@ def capture_view(scene, made=()) -> CaptureView | None:
     if len(captures) != 1 or len(scene.terrain) != 1:
         return None
     obj = captures[0]
-    rec = next((r for src, cfg, r in made if src == Path(obj.source) and cfg == obj.capture),
-               None) or mesh_capture(obj.source, obj.capture)  # fmt: skip
-    return CaptureView(scene_path=Path(scene.path), world_from_camera=rec.world_from_camera,
-                       report=rec.report())  # fmt: skip
+    rec = next(
+        (r for src, cfg, r in made if src == Path(obj.source) and cfg == obj.capture), None
+    ) or mesh_capture(obj.source, obj.capture)
+    return CaptureView(
+        scene_path=Path(scene.path), world_from_camera=rec.world_from_camera, report=rec.report()
+    )
 
 
 def load_world(

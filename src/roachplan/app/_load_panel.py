@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+
 from roachplan.perception import (
     DEPTH_UNITS,
     METHODS,
@@ -63,8 +64,14 @@ CAMERA_SUFFIXES = (*DEPTH_IMAGE_SUFFIXES, ".bag")
 """Captures that a camera's intrinsics and depth scale apply to."""
 CALIBRATION_KEYS = ("camera_matrix", "K", "k", "fx", "intrinsic_matrix", "Camera.fx")
 """Keys by which an uploaded YAML is a camera calibration rather than a scene."""
-UP_AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0),
-           "-y": (0.0, -1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}  # fmt: skip
+UP_AXES = {
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
+}
 """The Up direction dropdown's axes of the capture's own frame (a camera's: x right, y down,
 z forward, so a level camera's up is -y; a lidar's or map's: z up)."""
 AUTO = "auto"
@@ -97,7 +104,9 @@ def is_calibration_upload(name: str, data: bytes) -> bool:
         raw = load_yaml(data, name)
     except ValueError:
         return False
-    return isinstance(raw, dict) and "terrain" not in raw and any(k in raw for k in CALIBRATION_KEYS)
+    return (
+        isinstance(raw, dict) and "terrain" not in raw and any(k in raw for k in CALIBRATION_KEYS)
+    )
 
 
 def needs_millimetre_scale(message: str) -> bool:
@@ -116,63 +125,92 @@ class LoadPanel:
         self.view: CaptureView | None = None
         self.mm_offer: tuple[Path, str] | None = None
         """The scene file and label of an upload refused as millimetres."""
-        self.scale_button = gui.add_button("Scale x0.001", visible=False,
-                                           hint="Reload the model with `scale: 0.001` (millimetres to metres)")  # fmt: skip
+        self.scale_button = gui.add_button(
+            "Scale x0.001",
+            visible=False,
+            hint="Reload the model with `scale: 0.001` (millimetres to metres)",
+        )
         self.scad_timeout = gui.add_number(
-            "OpenSCAD limit [s]", DEFAULT_TIMEOUT, min=1.0, max=MAX_TIMEOUT, step=10.0,
+            "OpenSCAD limit [s]",
+            DEFAULT_TIMEOUT,
+            min=1.0,
+            max=MAX_TIMEOUT,
+            step=10.0,
             hint="An uploaded .scad (or .zip) render is stopped after this long",
-        )  # fmt: skip
+        )
         self.scad_backend = gui.add_dropdown(
-            "OpenSCAD backend", BACKENDS, initial_value=DEFAULT_BACKEND,
+            "OpenSCAD backend",
+            BACKENDS,
+            initial_value=DEFAULT_BACKEND,
             hint="auto: manifold unless the model uses something it renders differently "
             "(surface()), then the openscad binary; the load's notification says which and "
             "why. cgal: the openscad binary (the reference). manifold: openscad-evaluator, "
             "several times faster on CSG-heavy and text() models; refuses surface()",
-        )  # fmt: skip
+        )
         with gui.add_folder("Meshing (captures)"):
-            self.mesh_method = gui.add_dropdown("Capture meshing", METHODS,
-                                                initial_value=DEFAULTS.method)  # fmt: skip
-            self.voxel = gui.add_number("Voxel [m]", DEFAULTS.voxel[0], min=0.002, max=2.0,
-                                        step=0.001)  # fmt: skip
-            self.cell = gui.add_number("Grid cell [m]", 0.0, min=0.0, max=5.0, step=0.001,
-                                       hint="Height field cell of the grid method; 0: the voxel")  # fmt: skip
+            self.mesh_method = gui.add_dropdown(
+                "Capture meshing", METHODS, initial_value=DEFAULTS.method
+            )
+            self.voxel = gui.add_number(
+                "Voxel [m]", DEFAULTS.voxel[0], min=0.002, max=2.0, step=0.001
+            )
+            self.cell = gui.add_number(
+                "Grid cell [m]",
+                0.0,
+                min=0.0,
+                max=5.0,
+                step=0.001,
+                hint="Height field cell of the grid method; 0: the voxel",
+            )
             self.near = gui.add_number("Depth near [m]", DEFAULT_RANGE[0], min=0.0, step=0.05)
             self.far = gui.add_number("Depth far [m]", DEFAULT_RANGE[1], min=0.1, step=0.1)
             self.crop = gui.add_checkbox(
-                "Crop", False, hint="Keep only the points inside the box (world frame: z up, the "
+                "Crop",
+                False,
+                hint="Keep only the points inside the box (world frame: z up, the "
                 "ground at z = 0, as drawn; the loaded capture's bounds are filled in)",
-            )  # fmt: skip
+            )
             self.crop_min = gui.add_vector3("Crop min [m]", (-1.0, -1.0, -1.0), step=0.01)
             self.crop_max = gui.add_vector3("Crop max [m]", (1.0, 1.0, 1.0), step=0.01)
             self.cloud_units = gui.add_dropdown(
-                "Cloud units", (AUTO, "m", "mm"), initial_value=AUTO,
+                "Cloud units",
+                (AUTO, "m", "mm"),
+                initial_value=AUTO,
                 hint="Units of a point cloud's coordinates (not a depth image's); auto: metres, "
                 "unless the cloud can only be millimetres (then it is refused: choose one)",
-            )  # fmt: skip
+            )
             self.remesh_button = gui.add_button(
-                "Re-mesh loaded capture", disabled=True,
+                "Re-mesh loaded capture",
+                disabled=True,
                 hint="Mesh the loaded capture again with these settings (no new upload)",
-            )  # fmt: skip
+            )
         with gui.add_folder("Camera (next capture)"):
             self.preset = gui.add_dropdown(
-                "Camera", (*PRESETS, NUMBERS), initial_value="kinect2-qhd",
+                "Camera",
+                (*PRESETS, NUMBERS),
+                initial_value="kinect2-qhd",
                 hint="Intrinsics of a depth image; a pending calibration file wins over this",
-            )  # fmt: skip
+            )
             intr = PRESETS["kinect2-qhd"]
             self.fx = gui.add_number("fx [px]", intr.fx, min=1.0, step=0.01)
             self.fy = gui.add_number("fy [px]", intr.fy, min=1.0, step=0.01)
             self.cx = gui.add_number("cx [px]", intr.cx, min=0.0, step=0.01)
             self.cy = gui.add_number("cy [px]", intr.cy, min=0.0, step=0.01)
             self.depth_scale = gui.add_number(
-                "Depth scale [units/m]", 0.0, min=0.0, step=1.0,
+                "Depth scale [units/m]",
+                0.0,
+                min=0.0,
+                step=1.0,
                 hint="0: the file's or calibration's, else 1000 (millimetres)",
-            )  # fmt: skip
+            )
             self.depth_units = gui.add_dropdown(
-                "Depth units", (AUTO, *DEPTH_UNITS), initial_value=AUTO,
+                "Depth units",
+                (AUTO, *DEPTH_UNITS),
+                initial_value=AUTO,
                 hint="auto: depth in units of the depth scale, or a Kinect v1's raw disparity "
                 "when the image plainly holds it; kinect-disparity: raw 11-bit Kinect v1 "
                 "disparity (NYU Depth v2's raw dumps), converted with NYU's model",
-            )  # fmt: skip
+            )
             self.calibration = gui.add_markdown(
                 "To use a calibration file, load it first (it is kept as the *pending "
                 "calibration*), then load its depth image."
@@ -182,42 +220,54 @@ class LoadPanel:
             self.pick_ground = gui.add_checkbox(
                 "Pick ground", False, hint="The next click on the terrain sets the ground there"
             )
-            self.height = gui.add_number("Camera height [m]", 0.0, min=0.0, step=0.01, disabled=True)
-            self.pitch = gui.add_number("Camera pitch down [deg]", 0.0, min=-90.0, max=90.0,
-                                        step=0.1, disabled=True)  # fmt: skip
-            self.roll = gui.add_number("Camera roll [deg]", 0.0, min=-180.0, max=180.0, step=0.1,
-                                       disabled=True)  # fmt: skip
+            self.height = gui.add_number(
+                "Camera height [m]", 0.0, min=0.0, step=0.01, disabled=True
+            )
+            self.pitch = gui.add_number(
+                "Camera pitch down [deg]", 0.0, min=-90.0, max=90.0, step=0.1, disabled=True
+            )
+            self.roll = gui.add_number(
+                "Camera roll [deg]", 0.0, min=-180.0, max=180.0, step=0.1, disabled=True
+            )
             self.repose_button = gui.add_button(
-                "Re-mesh with this camera pose", disabled=True,
+                "Re-mesh with this camera pose",
+                disabled=True,
                 hint="Pitch: degrees the optical axis points below the horizon; roll: degrees "
                 "about it, positive when the image's right side drops; heading and x, y kept",
-            )  # fmt: skip
+            )
             self.up = gui.add_dropdown(
-                "Up direction", (AUTO, *UP_AXES), initial_value=AUTO, disabled=True,
+                "Up direction",
+                (AUTO, *UP_AXES),
+                initial_value=AUTO,
+                disabled=True,
                 hint="Up in the capture's own frame (a camera's: x right, y down, z forward; a "
                 "level camera's up is -y); auto: a calibration's pose, a bag's IMU, else -y for "
                 "a camera, +z for a lidar or map",
-            )  # fmt: skip
+            )
             self.up_button = gui.add_button(
-                "Re-mesh with this up direction", disabled=True,
+                "Re-mesh with this up direction",
+                disabled=True,
                 hint="Find the ground again, facing this way up (a typed camera pose or a "
                 "picked ground is dropped)",
-            )  # fmt: skip
+            )
             self.capture_info = gui.add_markdown("No capture loaded.")
         with gui.add_folder("Loaded model"):
-            self.position = gui.add_vector3("Position [m]", (0.0, 0.0, 0.0), step=0.01,
-                                            disabled=True)  # fmt: skip
+            self.position = gui.add_vector3(
+                "Position [m]", (0.0, 0.0, 0.0), step=0.01, disabled=True
+            )
             self.ground_on = gui.add_checkbox(
-                "Ground plane", True, disabled=True,
+                "Ground plane",
+                True,
+                disabled=True,
                 hint="An endless floor under the model; off for a model with its own floor",
-            )  # fmt: skip
-            self.ground_height = gui.add_number("Ground height [m]", 0.0, step=0.01,
-                                                disabled=True)  # fmt: skip
+            )
+            self.ground_height = gui.add_number("Ground height [m]", 0.0, step=0.01, disabled=True)
             self.place_button = gui.add_button(
-                "Reload model with these", disabled=True,
+                "Reload model with these",
+                disabled=True,
                 hint="Load the model again at this position, on this ground plane (start, goal "
                 "and planning area are picked again)",
-            )  # fmt: skip
+            )
             self.model_info = gui.add_markdown("No model loaded.")
         self.model: ModelView | None = None
         """The loaded model (or the one that failed to load), to place again."""
@@ -228,7 +278,7 @@ class LoadPanel:
                 "Reload with this area",
                 hint="Load the scene again with the robot's centre kept in this box (world x, "
                 "y as drawn); start and goal are picked again inside it",
-            )  # fmt: skip
+            )
         self.preset.on_update(lambda ev: self._show_preset())
         self.scale_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "scale")))
         self.repose_button.on_click(lambda ev: put(PanelCmd(ev.client_id, "repose")))
@@ -243,8 +293,11 @@ class LoadPanel:
         intr = PRESETS.get(self.preset.value)
         if intr is not None:
             self.fx.value, self.fy.value, self.cx.value, self.cy.value = (
-                intr.fx, intr.fy, intr.cx, intr.cy
-            )  # fmt: skip
+                intr.fx,
+                intr.fy,
+                intr.cx,
+                intr.cy,
+            )
 
     # settings of the next capture ---------------------------------------------------------------
 
@@ -257,11 +310,14 @@ class LoadPanel:
             raise CaptureError(f"depth range: near ({near:g} m) must be below far ({far:g} m)")
         crop = None
         if self.crop.value:
-            lo, hi = (tuple(round(float(v), 4) for v in b.value)
-                      for b in (self.crop_min, self.crop_max))  # fmt: skip
+            lo, hi = (
+                tuple(round(float(v), 4) for v in b.value) for b in (self.crop_min, self.crop_max)
+            )
             if not all(a < b for a, b in zip(lo, hi, strict=True)):
-                raise CaptureError(f"crop box: min {list(lo)} must be below max {list(hi)} in "
-                                   f"x, y and z (metres, as drawn)")  # fmt: skip
+                raise CaptureError(
+                    f"crop box: min {list(lo)} must be below max {list(hi)} in "
+                    f"x, y and z (metres, as drawn)"
+                )
             crop = [list(lo), list(hi)]
         return {
             "method": None if self.mesh_method.value == DEFAULTS.method else self.mesh_method.value,
@@ -282,14 +338,18 @@ class LoadPanel:
     def capture_settings(self, name: str) -> dict:
         """The `perception:` block of an uploaded capture named `name` (plain data): only what
         differs from the pipeline's defaults, and the camera only for depth images and bags."""
-        out = {k: v for k, v in {**self.meshing_changes(), **self.units_change(name)}.items()
-               if v is not None}  # fmt: skip
+        out = {
+            k: v
+            for k, v in {**self.meshing_changes(), **self.units_change(name)}.items()
+            if v is not None
+        }
         if Path(name).suffix.lower() in DEPTH_IMAGE_SUFFIXES and self.depth_units.value != AUTO:
             out["depth_units"] = self.depth_units.value
         if Path(name).suffix.lower() in CAMERA_SUFFIXES:
             if self.preset.value == NUMBERS:
-                out["intrinsics"] = {k: float(getattr(self, k).value)
-                                     for k in ("fx", "fy", "cx", "cy")}  # fmt: skip
+                out["intrinsics"] = {
+                    k: float(getattr(self, k).value) for k in ("fx", "fy", "cx", "cy")
+                }
             else:
                 out["intrinsics"] = self.preset.value
             if float(self.depth_scale.value) > 0:
@@ -316,8 +376,9 @@ class LoadPanel:
             f"{scale}); used for the depth images loaded next, instead of the camera above."
         )
         self.forget_button.visible = True
-        app._notify(client_id, "Calibration kept",
-                    f"{name}: now load its depth image (.png, .pgm).")  # fmt: skip
+        app._notify(
+            client_id, "Calibration kept", f"{name}: now load its depth image (.png, .pgm)."
+        )
 
     def calibration_for(self, name: str) -> Path | None:
         """The pending calibration, when the upload named `name` is a depth image."""
@@ -347,16 +408,22 @@ class LoadPanel:
             self.height.value = rep["camera_height_m"]
             self.pitch.value = rep["pitch_down_deg"]
             self.roll.value = rep["roll_deg"]
-            head = (f"Camera **{rep['camera_height_m']:.2f} m** above the ground, pitched "
-                    f"{rep['pitch_down_deg']:.1f}° down, rolled {rep['roll_deg']:.1f}°.")  # fmt: skip
+            head = (
+                f"Camera **{rep['camera_height_m']:.2f} m** above the ground, pitched "
+                f"{rep['pitch_down_deg']:.1f}° down, rolled {rep['roll_deg']:.1f}°."
+            )
         else:
             head = "A world-frame cloud (no camera pose)."
         ground = rep.get("ground")
         if ground:
-            head += (f"  \nGround: {ground['support_points']} points "
-                     f"({100 * ground['support_fraction']:.0f} %), {ground['area_m2']:.2f} m².")  # fmt: skip
-        head += ("  \nDrawn: tan where the sensor measured, blue where a small hole was filled "
-                 "from its rim, dark where it saw nothing (the robot cannot stand there).")
+            head += (
+                f"  \nGround: {ground['support_points']} points "
+                f"({100 * ground['support_fraction']:.0f} %), {ground['area_m2']:.2f} m²."
+            )
+        head += (
+            "  \nDrawn: tan where the sensor measured, blue where a small hole was filled "
+            "from its rim, dark where it saw nothing (the robot cannot stand there)."
+        )
         warnings = "".join(f"  \n⚠ {w}" for w in rep.get("warnings", ()))
         notes = "".join(f"  \n{n}" for n in rep.get("notes", ()))
         # In the page's words (its warnings advise the command line's --up, ...); the scene's
@@ -368,8 +435,7 @@ class LoadPanel:
         scene file gives (shown as one more choice)."""
         obj = self._capture_object(view) if view is not None else {}
         up = (obj.get("perception") or {}).get("up")
-        axis = next((k for k, v in UP_AXES.items() if up is not None and list(v) == list(up)),
-                    None)  # fmt: skip
+        axis = next((k for k, v in UP_AXES.items() if up is not None and list(v) == list(up)), None)
         label = AUTO if up is None else axis or f"({', '.join(f'{v:g}' for v in up)})"
         options = (AUTO, *UP_AXES) + ((label,) if label not in (AUTO, *UP_AXES) else ())
         if tuple(self.up.options) != options:
@@ -400,14 +466,18 @@ class LoadPanel:
         self.position.value = view.position
         self.ground_on.value = view.ground is not None
         self.ground_height.value = 0.0 if view.ground is None else view.ground
-        ground = ("without a ground plane" if view.ground is None
-                  else f"on a ground plane at z = {view.ground:g} m")  # fmt: skip
+        ground = (
+            "without a ground plane"
+            if view.ground is None
+            else f"on a ground plane at z = {view.ground:g} m"
+        )
         at = ", ".join(f"{v:g}" for v in view.position)
         self.model_info.content = (
-            f"`{view.model}` at ({at}) m, {ground}." if view.loaded else
-            f"**`{view.model}` did not load**: set its position or ground plane here, then "
+            f"`{view.model}` at ({at}) m, {ground}."
+            if view.loaded
+            else f"**`{view.model}` did not load**: set its position or ground plane here, then "
             f"press **Reload model with these**."
-        )  # fmt: skip
+        )
 
     def show_area(self, world) -> None:
         """Fill the Planning area boxes with the loaded world's."""
@@ -435,10 +505,15 @@ class LoadPanel:
         if is_calibration_upload(cmd.name, cmd.data):
             self.keep_calibration(app, cmd.client_id, cmd.name, cmd.data)
             return
-        path = scene_from_upload(cmd.name, cmd.data, app.upload_dir, self.capture_settings(cmd.name),
-                                 calibration=self.calibration_for(cmd.name),
-                                 scad_timeout=float(self.scad_timeout.value),
-                                 scad_backend=self.scad_backend.value)  # fmt: skip
+        path = scene_from_upload(
+            cmd.name,
+            cmd.data,
+            app.upload_dir,
+            self.capture_settings(cmd.name),
+            calibration=self.calibration_for(cmd.name),
+            scad_timeout=float(self.scad_timeout.value),
+            scad_backend=self.scad_backend.value,
+        )
         app._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
 
     def _reload_with(self, app, cmd, changes: dict) -> None:
@@ -458,8 +533,10 @@ class LoadPanel:
         joins the scene picker."""
         path = Path(scene_path)
         if path.resolve().is_relative_to(Path(app.upload_dir).resolve()):
-            label = next((k for k, (v, _) in app.files.items()
-                          if Path(v).resolve() == path.resolve()), f"upload: {path.stem}")  # fmt: skip
+            label = next(
+                (k for k, (v, _) in app.files.items() if Path(v).resolve() == path.resolve()),
+                f"upload: {path.stem}",
+            )
             return path, label
         folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
         return adopt_scene(path, folder), f"edited: {path.stem}"
@@ -467,14 +544,18 @@ class LoadPanel:
     def _place(self, app, cmd) -> None:
         """Load the model again at the typed position, on the typed ground plane (or none)."""
         if self.model is None:
-            app._notify(cmd.client_id, "No model loaded",
-                        "Position and ground plane place a model (a mesh or .scad) loaded from "
-                        "a file.", error=True)  # fmt: skip
+            app._notify(
+                cmd.client_id,
+                "No model loaded",
+                "Position and ground plane place a model (a mesh or .scad) loaded from a file.",
+                error=True,
+            )
             return
         path, label = self._own(app, self.model.scene_path)
         ground = float(self.ground_height.value) if self.ground_on.value else None
-        rewrite_placement(path, position=tuple(float(v) for v in self.position.value),
-                          ground=ground)  # fmt: skip
+        rewrite_placement(
+            path, position=tuple(float(v) for v in self.position.value), ground=ground
+        )
         app._load(cmd, str(path), from_upload=True, label=label)
 
     @staticmethod
@@ -495,8 +576,12 @@ class LoadPanel:
         """Re-mesh the loaded capture with its ground through the clicked world point."""
         self.pick_ground.value = False
         if self.view is None:
-            app._notify(cmd.client_id, "No capture loaded",
-                        "Pick ground re-levels a capture loaded from a file.", error=True)  # fmt: skip
+            app._notify(
+                cmd.client_id,
+                "No capture loaded",
+                "Pick ground re-levels a capture loaded from a file.",
+                error=True,
+            )
             return
         self._reload_with(app, cmd, relevel_at(self.view, p_world))
 
@@ -516,17 +601,25 @@ class LoadPanel:
             path.write_text(yaml.safe_dump(raw, sort_keys=False))
             app._load(cmd, str(path), from_upload=True, label=label)
         elif cmd.action == "repose" and self.view is not None and self.view.has_camera:
-            changes = repose(self.view, float(self.height.value), float(self.pitch.value),
-                             float(self.roll.value))  # fmt: skip
+            changes = repose(
+                self.view, float(self.height.value), float(self.pitch.value), float(self.roll.value)
+            )
             self._reload_with(app, cmd, changes)
         elif cmd.action in ("remesh", "up"):
             if self.view is None:
-                app._notify(cmd.client_id, "No capture loaded",
-                            "Re-mesh works on a capture loaded from a file.", error=True)  # fmt: skip
+                app._notify(
+                    cmd.client_id,
+                    "No capture loaded",
+                    "Re-mesh works on a capture loaded from a file.",
+                    error=True,
+                )
                 return
             name = self._capture_name()
-            changes = (self.up_changes() if cmd.action == "up"
-                       else {**self.meshing_changes(), **self.units_change(name)})  # fmt: skip
+            changes = (
+                self.up_changes()
+                if cmd.action == "up"
+                else {**self.meshing_changes(), **self.units_change(name)}
+            )
             self._reload_with(app, cmd, changes)
         elif cmd.action == "place":
             self._place(app, cmd)

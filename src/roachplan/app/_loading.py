@@ -54,8 +54,14 @@ class BackgroundLoad:
     ) -> Loading | None:
         """Start loading; returns the load it replaced (stopped), if any."""
         replaced = self.stop()
-        self.current = Loading(job=Job(_load_job, ref, from_upload), client_id=cmd.client_id,
-                               ref=ref, label=label, from_upload=from_upload, what=what)  # fmt: skip
+        self.current = Loading(
+            job=Job(_load_job, ref, from_upload),
+            client_id=cmd.client_id,
+            ref=ref,
+            label=label,
+            from_upload=from_upload,
+            what=what,
+        )
         self.cancel_button.visible = True
         self.show()
         return replaced
@@ -157,8 +163,12 @@ def swap_in(app, ld: Loading) -> None:
     if failure is not None:  # (the markers are red, on one point: say why and what to do)
         app.status.content += " Start and goal were not picked: see Start and goal."
         others = public_message(" ".join(world.notes[:-1]), app.upload_dir)
-        app._notify(ld.client_id, f"Loaded {ld.label}: start and goal not picked",
-                    f"{failure} {others}".strip(), error=True)  # fmt: skip
+        app._notify(
+            ld.client_id,
+            f"Loaded {ld.label}: start and goal not picked",
+            f"{failure} {others}".strip(),
+            error=True,
+        )
     elif world.notes:
         notes = " ".join(n if n.endswith(".") else f"{n}." for n in world.notes)
         app._notify(ld.client_id, f"Loaded {ld.label}", public_message(notes, app.upload_dir))

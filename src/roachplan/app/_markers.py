@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from roachplan.planning import PlanningError
 from roachplan.scenes import World, pose_problem
 
@@ -72,8 +73,10 @@ class StartGoal:
             problem = pose_problem(world, pose)
             (lo, hi) = world.scene.bounds
             if not problem and not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
-                problem = (f"outside the planning area x in [{lo[0]:g}, {hi[0]:g}], "
-                           f"y in [{lo[1]:g}, {hi[1]:g}]")  # fmt: skip
+                problem = (
+                    f"outside the planning area x in [{lo[0]:g}, {hi[0]:g}], "
+                    f"y in [{lo[1]:g}, {hi[1]:g}]"
+                )
             colour = INVALID if problem else MARKER_COLOURS[which]
             if tuple(self.view.balls[which].color) != colour:
                 self.view.balls[which].color = colour

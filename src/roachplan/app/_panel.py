@@ -7,13 +7,26 @@ import io
 import math
 
 import numpy as np
+
 from roachplan.experiments import summarize
 from roachplan.experiments._summary import format_markdown
 
-COLUMNS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy",
-           "label")  # fmt: skip
-CSV_FIELDS = ("trial", "label", "scene", "seed", "planner", "route", "outcome", "reason",
-              "drive_time", "energy", "relative_energy", "plan_time", "drive_wall_time")  # fmt: skip
+COLUMNS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "label")
+CSV_FIELDS = (
+    "trial",
+    "label",
+    "scene",
+    "seed",
+    "planner",
+    "route",
+    "outcome",
+    "reason",
+    "drive_time",
+    "energy",
+    "relative_energy",
+    "plan_time",
+    "drive_wall_time",
+)
 DRIVE_LABEL = "drive"
 """The label of a trial from the Drive button (its record may carry ""); the others are "batch"
 and "best (trial K)": table and CSV use the same words."""
@@ -78,9 +91,10 @@ def summary_markdown(trials: list[dict]) -> str:
     if not driven:
         return ""
     table = format_markdown(summarize(driven))
-    return (f"**Summary per route** (relative energy, successes only)\n\n"
-            f'<div class="roachplan-summary" style="{TABLE_STYLE}">\n\n{table}\n\n</div>\n'
-            )  # fmt: skip
+    return (
+        f"**Summary per route** (relative energy, successes only)\n\n"
+        f'<div class="roachplan-summary" style="{TABLE_STYLE}">\n\n{table}\n\n</div>\n'
+    )
 
 
 def energy_plot(
@@ -103,8 +117,15 @@ def energy_plot(
     if len(trials):
         ax.plot(k[ok], e[ok], "o", color="tab:blue", label="success")
         ax.plot(k[~ok], e[~ok], "o", mfc="none", color="tab:red", label="failed")
-        ax.legend(fontsize=11, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=2,
-                  frameon=False, borderaxespad=0.2, handletextpad=0.2)  # fmt: skip
+        ax.legend(
+            fontsize=11,
+            loc="lower left",
+            bbox_to_anchor=(0.0, 1.0),
+            ncol=2,
+            frameon=False,
+            borderaxespad=0.2,
+            handletextpad=0.2,
+        )
         ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("trial", fontsize=12)
     ax.set_ylabel("relative energy", fontsize=12)

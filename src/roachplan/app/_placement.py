@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+
 from roachplan.perception import load_yaml
 from roachplan.scenes import TERRAIN_SUFFIXES, Scene, SceneError, World, load_scene
 
@@ -43,9 +44,13 @@ def model_view(scene: Scene | str | Path, *, loaded: bool = True) -> ModelView |
     if len(scene.terrain) != 1 or scene.terrain[0].kind == "capture":
         return None
     obj = scene.terrain[0]
-    return ModelView(scene_path=Path(scene.path), model=obj.source.name,
-                     position=tuple(float(v) for v in obj.position), ground=scene.ground,
-                     loaded=loaded)  # fmt: skip
+    return ModelView(
+        scene_path=Path(scene.path),
+        model=obj.source.name,
+        position=tuple(float(v) for v in obj.position),
+        ground=scene.ground,
+        loaded=loaded,
+    )
 
 
 def planning_area(lo, hi) -> list[list[float]]:
@@ -54,8 +59,9 @@ def planning_area(lo, hi) -> list[list[float]]:
     load, in the page's words)."""
     (x0, y0), (x1, y1) = (tuple(float(v) for v in lo[:2]), tuple(float(v) for v in hi[:2]))
     if not all(map(math.isfinite, (x0, y0, x1, y1))) or not (x0 < x1 and y0 < y1):
-        raise ValueError(f"Planning area: min ({x0:g}, {y0:g}) must be below max ({x1:g}, "
-                         f"{y1:g}) in x and y [m]")  # fmt: skip
+        raise ValueError(
+            f"Planning area: min ({x0:g}, {y0:g}) must be below max ({x1:g}, {y1:g}) in x and y [m]"
+        )
     return [[round(x0, 4), round(y0, 4)], [round(x1, 4), round(y1, 4)]]
 
 
@@ -67,8 +73,11 @@ def adopt_scene(scene_path: str | Path, folder: Path) -> Path:
     path = Path(scene.path).resolve()
     if path.suffix.lower() in TERRAIN_SUFFIXES:
         obj = scene.terrain[0]
-        raw = {"description": f"{path.name}, placed in the page",
-               "terrain": [{obj.kind: str(path)}], "ground": scene.ground}  # fmt: skip
+        raw = {
+            "description": f"{path.name}, placed in the page",
+            "terrain": [{obj.kind: str(path)}],
+            "ground": scene.ground,
+        }
     else:
         raw = load_yaml(path.read_bytes(), path.name, SceneError)
         for o in raw["terrain"]:

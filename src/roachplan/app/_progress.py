@@ -23,8 +23,16 @@ def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = Non
     # No monitor thread: a thread that fails to start under a child's memory limit leaves
     # Thread.start() waiting forever (the bars refresh on update instead).
     tqdm.monitor_interval = 0
-    return tqdm(total=total, desc=what, unit=unit, file=sys.stderr, mininterval=0.5,
-                smoothing=0.1, disable=not (wanted() if enabled is None else enabled), **kw)  # fmt: skip
+    return tqdm(
+        total=total,
+        desc=what,
+        unit=unit,
+        file=sys.stderr,
+        mininterval=0.5,
+        smoothing=0.1,
+        disable=not (wanted() if enabled is None else enabled),
+        **kw,
+    )
 
 
 @contextmanager
@@ -40,8 +48,13 @@ def render_progress(enabled: bool | None = None) -> Iterator[None]:
     def hear(name: str, elapsed: float, limit: float) -> None:
         b = bars.get(name)
         if b is None:
-            b = bars[name] = bar(round(limit), f"OpenSCAD {name}", unit="s", enabled=True,
-                                 bar_format="{desc}: {n:.0f} of {total} s limit |{bar}| {elapsed}")  # fmt: skip
+            b = bars[name] = bar(
+                round(limit),
+                f"OpenSCAD {name}",
+                unit="s",
+                enabled=True,
+                bar_format="{desc}: {n:.0f} of {total} s limit |{bar}| {elapsed}",
+            )
         b.n = min(elapsed, limit)
         b.refresh()
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+
 from roachplan.perception import load_yaml
 
 _LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -63,9 +64,14 @@ def heading_deg(world_from_camera: np.ndarray) -> float:
 
 
 def camera_pose_from(
-    height: float, pitch_down_deg: float, roll_deg: float, *, x: float = 0.0, y: float = 0.0,
+    height: float,
+    pitch_down_deg: float,
+    roll_deg: float,
+    *,
+    x: float = 0.0,
+    y: float = 0.0,
     yaw_deg: float = 0.0,
-) -> list[float]:  # fmt: skip
+) -> list[float]:
     """[x, y, z, qx, qy, qz, qw] of a camera at height [m] with pitch and roll [deg] (module
     docstring), for the `camera_pose` capture setting."""
     from scipy.spatial.transform import Rotation
@@ -75,9 +81,11 @@ def camera_pose_from(
     if not -90.0 <= pitch_down_deg <= 90.0:
         raise ValueError(f"camera pitch: expected -90 to 90 degrees, got {pitch_down_deg!r}")
     rot = (
-        _rz(math.radians(yaw_deg)) @ _LEVEL @ _rx(-math.radians(pitch_down_deg))
+        _rz(math.radians(yaw_deg))
+        @ _LEVEL
+        @ _rx(-math.radians(pitch_down_deg))
         @ _rz(-math.radians(roll_deg))
-    )  # fmt: skip
+    )
     quat = Rotation.from_matrix(rot).as_quat()
     return [float(x), float(y), float(height), *(round(float(q), 9) for q in quat)]
 
@@ -116,8 +124,11 @@ def adopt_capture_scene(scene_path: Path, folder: Path) -> Path:
 
     scene_path = Path(scene_path).resolve()
     if scene_path.suffix.lower() in TERRAIN_SUFFIXES:  # a capture file as a scene of its own
-        raw = {"description": f"{scene_path.name}, re-meshed in the page",
-               "terrain": [{"capture": str(scene_path)}], "ground": None}  # fmt: skip
+        raw = {
+            "description": f"{scene_path.name}, re-meshed in the page",
+            "terrain": [{"capture": str(scene_path)}],
+            "ground": None,
+        }
     else:
         raw = load_yaml(scene_path.read_bytes(), scene_path.name)
         obj = next(o for o in raw["terrain"] if "capture" in o)
@@ -137,14 +148,22 @@ def adopt_capture_scene(scene_path: Path, folder: Path) -> Path:
 def relevel_at(view: CaptureView, p_world) -> dict:
     """The capture-setting changes that make the ground the plane through a clicked world point:
     the camera pose is then found again (an explicit pose would override the ground)."""
-    return {"ground_point": ground_point_in_capture(view.world_from_camera, p_world),
-            "camera_pose": None}  # fmt: skip
+    return {
+        "ground_point": ground_point_in_capture(view.world_from_camera, p_world),
+        "camera_pose": None,
+    }
 
 
 def repose(view: CaptureView, height: float, pitch_down_deg: float, roll_deg: float) -> dict:
     """The capture-setting changes for a typed-in camera height, pitch and roll (the heading and
     the camera's x, y stay as loaded)."""
     t = np.asarray(view.world_from_camera)[:3, 3]
-    pose = camera_pose_from(height, pitch_down_deg, roll_deg, x=round(float(t[0]), 5),
-                            y=round(float(t[1]), 5), yaw_deg=heading_deg(view.world_from_camera))  # fmt: skip
+    pose = camera_pose_from(
+        height,
+        pitch_down_deg,
+        roll_deg,
+        x=round(float(t[0]), 5),
+        y=round(float(t[1]), 5),
+        yaw_deg=heading_deg(view.world_from_camera),
+    )
     return {"camera_pose": pose, "ground_point": None}

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from roachplan.experiments import ExperimentError, drive, read_manifest, reference_energy
 from roachplan.scenes import World
 from roachplan.sim import Frame
@@ -79,20 +80,28 @@ def redrive(world: World, record: dict) -> tuple[tuple[Frame, ...], str]:
     if not record.get("path"):
         return (), "no path was planned: nothing was driven"
     frames: list[Frame] = []
-    driven = drive(world, np.asarray(record["path"], dtype=float), start=tuple(record["start"]),
-                   on_frame=frames.append, spins=record.get("spins") or ())  # fmt: skip
+    driven = drive(
+        world,
+        np.asarray(record["path"], dtype=float),
+        start=tuple(record["start"]),
+        on_frame=frames.append,
+        spins=record.get("spins") or (),
+    )
     stored = np.asarray(record.get("trajectory") or [], dtype=float).reshape(-1, 4)
     again = np.asarray(driven.trajectory, dtype=float).reshape(-1, 4)
     if len(stored) == 0:
         return tuple(frames), ""
     if len(stored) != len(again):
-        return tuple(frames), (f"the re-drive lasted {again[-1, 0]:.2f} s, the stored one "
-                               f"{stored[-1, 0]:.2f} s: the robot shown may not follow the blue "
-                               f"line")  # fmt: skip
+        return tuple(frames), (
+            f"the re-drive lasted {again[-1, 0]:.2f} s, the stored one "
+            f"{stored[-1, 0]:.2f} s: the robot shown may not follow the blue "
+            f"line"
+        )
     gap = float(np.max(np.linalg.norm(stored[:, 1:] - again[:, 1:], axis=1)))
     if gap > 0.0:
-        return tuple(frames), (f"the re-drive differs from the stored trajectory by up to "
-                               f"{gap * 1000:.2g} mm")  # fmt: skip
+        return tuple(frames), (
+            f"the re-drive differs from the stored trajectory by up to {gap * 1000:.2g} mm"
+        )
     return tuple(frames), ""
 
 
@@ -102,12 +111,16 @@ def load_replay(folder: str | Path, *, trial: int | None = None) -> Replay:
     holds neither, or not that trial."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise ExperimentError(f"{folder}: not a folder; give an experiment's results folder "
-                              f"(`roachplan experiment --out`) or a choice's (`choose --out`)")  # fmt: skip
+        raise ExperimentError(
+            f"{folder}: not a folder; give an experiment's results folder "
+            f"(`roachplan experiment --out`) or a choice's (`choose --out`)"
+        )
     if (folder / "choice.json").is_file() and not (folder / "manifest.json").exists():
         if trial is not None:
-            raise ExperimentError(f"--trial {trial}: {folder} holds a choice, which replays its "
-                                  f"chosen path; drop --trial")  # fmt: skip
+            raise ExperimentError(
+                f"--trial {trial}: {folder} holds a choice, which replays its "
+                f"chosen path; drop --trial"
+            )
         return _choice_replay(folder)
     return _experiment_replay(folder, trial)
 
@@ -121,16 +134,20 @@ def _experiment_replay(folder: Path, trial: int | None) -> Replay:
         manifest = read_manifest(folder)
     except ExperimentError as exc:
         raise ExperimentError(f"{exc} (nor a choice's folder: no choice.json)") from None
-    records = sorted((r for r in ResultStore(folder / "trials.jsonl").records()
-                      if r["kind"] == "trial"), key=lambda r: r["index"])  # fmt: skip
+    records = sorted(
+        (r for r in ResultStore(folder / "trials.jsonl").records() if r["kind"] == "trial"),
+        key=lambda r: r["index"],
+    )
     if not records:
         raise ExperimentError(f"{folder}: no trial is stored yet (trials.jsonl); nothing to replay")
     if trial is not None:
         chosen = [r for r in records if r["index"] == trial]
         if not chosen:
             have = ", ".join(str(r["index"]) for r in records[:20])
-            raise ExperimentError(f"--trial {trial}: {folder} has stored trials {have}"
-                                  + (" ..." if len(records) > 20 else ""))  # fmt: skip
+            raise ExperimentError(
+                f"--trial {trial}: {folder} has stored trials {have}"
+                + (" ..." if len(records) > 20 else "")
+            )
         records = chosen
     spec = spec_from_manifest(manifest, folder / MANIFEST)
     world = build_world(spec.scene_with_settings())
@@ -140,8 +157,14 @@ def _experiment_replay(folder: Path, trial: int | None) -> Replay:
     shown = 0 if trial is not None else _best(folder, records)
     frames, note = redrive(world, records[shown])
     what = records[0]["label"] if trial is not None else f"{len(records)} trials"
-    return Replay(title=f"{spec.name} ({world.scene.name}): {what}", world=world,
-                  trials=tuple(records), shown=shown, frames=frames, note=note)  # fmt: skip
+    return Replay(
+        title=f"{spec.name} ({world.scene.name}): {what}",
+        world=world,
+        trials=tuple(records),
+        shown=shown,
+        frames=frames,
+        note=note,
+    )
 
 
 def _best(folder: Path, records: list[dict]) -> int:
@@ -187,18 +210,33 @@ def _choice_replay(folder: Path) -> Replay:
     frames: list[Frame] = []
     driven = drive(world, path, on_frame=frames.append, spins=spins)
     record = {
-        "label": f"chosen candidate {chosen}", "scene": scene.name, "seed": choice.get("seed"),
-        "planner": scene.planner.name, "route": row.get("route", ""),
-        "outcome": driven.outcome, "reason": driven.reason, "drive_time": driven.drive_time,
+        "label": f"chosen candidate {chosen}",
+        "scene": scene.name,
+        "seed": choice.get("seed"),
+        "planner": scene.planner.name,
+        "route": row.get("route", ""),
+        "outcome": driven.outcome,
+        "reason": driven.reason,
+        "drive_time": driven.drive_time,
         "energy": driven.energy,
         "relative_energy": driven.energy / reference_energy(world, scene.start, scene.goal),
-        "start": list(scene.start), "goal": list(scene.goal), "path": path.tolist(),
-        "spins": [list(s) for s in spins], "trajectory": [list(p) for p in driven.trajectory],
-        "p_success": row.get("p_success"), "p_low": row.get("p_low"), "p_high": row.get("p_high"),
+        "start": list(scene.start),
+        "goal": list(scene.goal),
+        "path": path.tolist(),
+        "spins": [list(s) for s in spins],
+        "trajectory": [list(p) for p in driven.trajectory],
+        "p_success": row.get("p_success"),
+        "p_low": row.get("p_low"),
+        "p_high": row.get("p_high"),
         "rollouts": row.get("rollouts"),
-    }  # fmt: skip
-    return Replay(title=f"{scene.name}: the chosen path (candidate {chosen}, nominal drive)",
-                  world=world, trials=(record,), shown=0, frames=tuple(frames))  # fmt: skip
+    }
+    return Replay(
+        title=f"{scene.name}: the chosen path (candidate {chosen}, nominal drive)",
+        world=world,
+        trials=(record,),
+        shown=0,
+        frames=tuple(frames),
+    )
 
 
 # -- recording ---------------------------------------------------------------------------------
@@ -221,8 +259,12 @@ def numbers(record: dict) -> list[tuple[str, str]]:
     if record.get("p_success") is not None:
         lo, hi = record.get("p_low"), record.get("p_high")
         bounds = f" [{lo:.2f}, {hi:.2f}]" if lo is not None and hi is not None else ""
-        rows.append(("P(success)", f"{record['p_success']:.2f}{bounds} over "
-                                   f"{record.get('rollouts')} rollouts"))  # fmt: skip
+        rows.append(
+            (
+                "P(success)",
+                f"{record['p_success']:.2f}{bounds} over {record.get('rollouts')} rollouts",
+            )
+        )
     return rows
 
 
@@ -242,23 +284,33 @@ def _record(replay: Replay):
         server.scene.remove_by_name("/markers")
         for which in ("start", "goal"):
             pose = tuple(shown.get(which) or getattr(world.scene, which))
-            server.scene.add_icosphere(f"/markers/{which}", radius=0.03, color=MARKER_COLOURS[which],
-                                       position=on_surface(world, pose),
-                                       wxyz=yaw_wxyz(pose[2]))  # fmt: skip
+            server.scene.add_icosphere(
+                f"/markers/{which}",
+                radius=0.03,
+                color=MARKER_COLOURS[which],
+                position=on_surface(world, pose),
+                wxyz=yaw_wxyz(pose[2]),
+            )
         for k, t in enumerate(replay.trials):
             if t.get("path"):
                 view.draw(f"/plans/{k}", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
             if t.get("trajectory"):
                 view.draw(f"/trajectories/{k}", [p[1:] for p in t["trajectory"]], BLUE)
-        lo, hi = np.asarray(world.mesh.bounds) if len(world.mesh.faces) else np.asarray(
-            [[*world.scene.bounds[0], 0.0], [*world.scene.bounds[1], 0.0]])  # fmt: skip
+        lo, hi = (
+            np.asarray(world.mesh.bounds)
+            if len(world.mesh.faces)
+            else np.asarray([[*world.scene.bounds[0], 0.0], [*world.scene.bounds[1], 0.0]])
+        )
         centre, span = (lo + hi) / 2, float(max(hi[0] - lo[0], hi[1] - lo[1], 0.5))
         server.initial_camera.look_at = tuple(centre)
         server.initial_camera.position = tuple(centre + np.array([-0.25, -0.6, 0.5]) * span)
         label = " · ".join(v for _, v in numbers(shown)[3:8])
         start = on_surface(world, tuple(shown.get("start") or world.scene.start))
-        server.scene.add_label("/replay/numbers", f"{shown['label']}: {label}",
-                               position=(start[0], start[1], start[2] + 0.15))  # fmt: skip
+        server.scene.add_label(
+            "/replay/numbers",
+            f"{shown['label']}: {label}",
+            position=(start[0], start[1], start[2] + 0.15),
+        )
         _pose(server, view, world, replay.frames[0] if replay.frames else None, shown)
         serializer = server.get_scene_serializer()
         for prev, f in zip(replay.frames, replay.frames[1:], strict=False):
@@ -277,8 +329,12 @@ def _pose(server, view: SceneView, world: World, f: Frame | None, record: dict) 
         return
     x, y, yaw = tuple(record.get("start") or world.scene.start)
     _, _, z = on_surface(world, (x, y))
-    view.show_robot(server, (x, y, z + world.robot.standing_height), yaw_wxyz(yaw),
-                    (0.0,) * len(world.robot.hip_positions))  # fmt: skip
+    view.show_robot(
+        server,
+        (x, y, z + world.robot.standing_height),
+        yaw_wxyz(yaw),
+        (0.0,) * len(world.robot.hip_positions),
+    )
 
 
 def replay_viser(replay: Replay) -> bytes:
@@ -314,9 +370,12 @@ def _overlay(replay: Replay) -> str:
             for k, t in enumerate(replay.trials[:MAX_TABLE_ROWS])
         )
         more = len(replay.trials) - MAX_TABLE_ROWS
-        table = (f"<details><summary>all {len(replay.trials)} trials (black: planned, blue: "
-                 f"driven)</summary><table>{head}{lines}</table>"
-                 + (f"<div>... and {more} more</div>" if more > 0 else "") + "</details>")  # fmt: skip
+        table = (
+            f"<details><summary>all {len(replay.trials)} trials (black: planned, blue: "
+            f"driven)</summary><table>{head}{lines}</table>"
+            + (f"<div>... and {more} more</div>" if more > 0 else "")
+            + "</details>"
+        )
     note = f"<div class=note>{esc(replay.note)}</div>" if replay.note else ""
     return (
         "<style>#roachplan-replay{position:fixed;left:12px;top:12px;z-index:1000;max-width:420px;"
@@ -359,8 +418,9 @@ def _share_job(conn, world: World, record: dict, title: str) -> None:
     """In a child (a re-drive holds the GIL for seconds): the replay page of one trial."""
     try:
         frames, note = redrive(world, record)
-        replay = Replay(title=title, world=world, trials=(record,), shown=0, frames=frames,
-                        note=note)  # fmt: skip
+        replay = Replay(
+            title=title, world=world, trials=(record,), shown=0, frames=frames, note=note
+        )
         conn.send(("html", replay_html(replay).encode()))
     except Exception as exc:  # reported to the user as a notification
         conn.send(("error", f"{exc}"))
@@ -385,8 +445,9 @@ def share_trial(app, cmd: ShareCmd) -> None:
         for kind, payload in messages:
             (out if kind == "html" else errors).append(payload)
         t, total = job.elapsed, max(record.get("drive_wall_time") or 1.0, 1.0) + 2.0
-        app._progress(min(t / total, 0.99), f"Share: re-driving trial {k} and recording it, "
-                                             f"{t:.1f} s")  # fmt: skip
+        app._progress(
+            min(t / total, 0.99), f"Share: re-driving trial {k} and recording it, {t:.1f} s"
+        )
         return job.done
 
     end = app._follow(job, "Share", step)
@@ -398,5 +459,7 @@ def share_trial(app, cmd: ShareCmd) -> None:
     client = app.server.get_clients().get(cmd.client_id)
     if client is not None:
         client.send_file_download(f"{name}-trial-{k}.html", out[0], save_immediately=True)
-    app.status.content = (f"Trial {k} exported as {name}-trial-{k}.html ({len(out[0]) / 1e6:.1f} "
-                          f"MB): it opens offline in any browser.")  # fmt: skip
+    app.status.content = (
+        f"Trial {k} exported as {name}-trial-{k}.html ({len(out[0]) / 1e6:.1f} "
+        f"MB): it opens offline in any browser."
+    )

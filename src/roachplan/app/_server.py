@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import viser
+
 from roachplan.experiments import ExperimentSpec
 from roachplan.planning import PLANNER_NAMES, PlanningError, standable_map
 from roachplan.scenes import LIBRARY, World, list_scenes
@@ -82,9 +83,15 @@ class RoachApp:
     """Owns the viser server and the state shown in it."""
 
     def __init__(
-        self, world: World, *, host: str, port: int, upload_dir: Path | None = None,
-        max_upload_bytes: int = MAX_UPLOAD_BYTES, view: CaptureView | None = None,
-    ):  # fmt: skip
+        self,
+        world: World,
+        *,
+        host: str,
+        port: int,
+        upload_dir: Path | None = None,
+        max_upload_bytes: int = MAX_UPLOAD_BYTES,
+        view: CaptureView | None = None,
+    ):
         """view: the capture view of world (load_world), to re-mesh and re-level it."""
         self.world = world
         self._host: WorldHost | None = None
@@ -131,8 +138,9 @@ class RoachApp:
         # light, z up, keeps the faces of the terrain apart instead.
         self.server.scene.configure_default_lights(cast_shadow=False)
         self.server.scene.configure_environment_map(hdri=None)
-        self.server.scene.add_light_hemisphere("/lights/sky", ground_color=(120, 110, 100),
-                                               intensity=1.5, position=(0.0, 0.0, 1.0))  # fmt: skip
+        self.server.scene.add_light_hemisphere(
+            "/lights/sky", ground_color=(120, 110, 100), intensity=1.5, position=(0.0, 0.0, 1.0)
+        )
         self._build_gui()
         self._show_world()
         self.load_panel.show_loaded(world, view)
@@ -171,9 +179,11 @@ class RoachApp:
         self.status = gui.add_markdown("Drag the start (green) and goal (blue), then **Plan**.")
         self.job_bar = gui.add_progress_bar(0.0, visible=False)
         self.cancel_job = gui.add_button(
-            "Cancel", visible=False, color="red",
+            "Cancel",
+            visible=False,
+            color="red",
             hint="Stop the running command now, and drop what is queued behind it",
-        )  # fmt: skip
+        )
         with gui.add_folder("Scene"):
             self.scene_picker = gui.add_dropdown(
                 "Scene", (*list_scenes(), *self.files), initial_value=self._picker_label()
@@ -193,9 +203,13 @@ class RoachApp:
                 "Planner", PLANNER_NAMES, initial_value=self.world.scene.planner.name
             )
             self.time_limit = gui.add_number(
-                "Time budget [s]", 20.0, min=0.1, max=3600.0, step=0.5,
+                "Time budget [s]",
+                20.0,
+                min=0.1,
+                max=3600.0,
+                step=0.5,
                 hint="For the whole Plan: every try at every path",
-            )  # fmt: skip
+            )
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
             self.show_roadmap = gui.add_checkbox("Show roadmap", False)
             self.drive_path_picker = gui.add_dropdown(
@@ -207,15 +221,17 @@ class RoachApp:
             self.best_button = gui.add_button("Best path")
             self.speed = gui.add_slider("Playback speed [x real time]", 1, 10, 1, 1)
         with gui.add_folder("View"):
-            self.follow = gui.add_checkbox("Follow robot", False,
-                                           hint="Every browser's camera follows the robot")  # fmt: skip
+            self.follow = gui.add_checkbox(
+                "Follow robot", False, hint="Every browser's camera follows the robot"
+            )
             self.zoom_button = gui.add_button("Zoom to robot")
             self.show_paths = gui.add_checkbox("Show paths", True)
             self.show_trajectories = gui.add_checkbox("Show trajectories", True)
             self.show_standable = gui.add_checkbox(
-                "Show where it can stand", False,
+                "Show where it can stand",
+                False,
                 hint="Green: the region the start is in; yellow: other places it can stand",
-            )  # fmt: skip
+            )
         self.choose_panel = ChoosePanel(gui, put)
         self.batch_panel = BatchPanel(gui, put)
         with gui.add_folder("Results"):
@@ -256,8 +272,11 @@ class RoachApp:
         scene does not orbit on click)."""
         scene = self.server.scene
         scene.remove_click_callback()
-        if (self.click_mode.value != "nothing" or self.load_panel.pick_ground.value
-                or self.voxel_panel.pick_centre.value):
+        if (
+            self.click_mode.value != "nothing"
+            or self.load_panel.pick_ground.value
+            or self.voxel_panel.pick_centre.value
+        ):
             scene.on_click()(
                 lambda ev: self.commands.put(
                     PlaceCmd(ev.client_id, ev.ray_origin, ev.ray_direction)
@@ -269,14 +288,19 @@ class RoachApp:
         if client is not None:
             body = public_message(body, self.upload_dir)  # (the page's words, no server paths)
             client.add_notification(
-                title, body, auto_close_seconds=None if error else 4.0,
+                title,
+                body,
+                auto_close_seconds=None if error else 4.0,
                 color="red" if error else None,
-            )  # fmt: skip
+            )
 
     def _refuse_upload(self, client_id, name: str, size: int) -> None:
-        self._notify(client_id, "File too large",
-                     f"{name}: {size / 1e6:.3f} MB; the limit is {self.max_upload_bytes / 1e6:.3f} MB",
-                     error=True)  # fmt: skip
+        self._notify(
+            client_id,
+            "File too large",
+            f"{name}: {size / 1e6:.3f} MB; the limit is {self.max_upload_bytes / 1e6:.3f} MB",
+            error=True,
+        )
 
     def _progress(self, fraction: float | None, text: str) -> None:
         """The running command's status line and progress bar (fraction 0-1; None: unknown),
@@ -286,7 +310,9 @@ class RoachApp:
             if self.job_bar.value != value:
                 self.job_bar.value = value
         if self.waiting:
-            names = [NAMES.get(type(c), "command") for c in self.waiting if type(c) is not MarkersCmd]
+            names = [
+                NAMES.get(type(c), "command") for c in self.waiting if type(c) is not MarkersCmd
+            ]
             text += f"  \nQueued: {', '.join(names)}" if names else ""
         if self.status.content != text:
             self.status.content = text
@@ -297,8 +323,9 @@ class RoachApp:
         scene = self.world.scene
         self.view.show(self.world, lambda ev: self.commands.put(MarkersCmd(ev.client_id)))
         failure = pick_failure(self.world)
-        self.markers.reset(self.world, None if failure is None
-                           else public_message(failure, self.upload_dir))  # fmt: skip
+        self.markers.reset(
+            self.world, None if failure is None else public_message(failure, self.upload_dir)
+        )
         self.plan_endpoints, self._standable = None, None
         self.set_plans([])
         self.choose_panel.clear()
@@ -316,16 +343,19 @@ class RoachApp:
         frames the terrain the robot plans on (terrain_box) with start and goal: after a load
         or a re-mesh the old camera may be inside the new terrain or looking past it."""
         scene = self.world.scene
-        points = [*terrain_box(self.world),
-                  *(on_surface(self.world, p) for p in (scene.start, scene.goal))]  # fmt: skip
+        points = [
+            *terrain_box(self.world),
+            *(on_surface(self.world, p) for p in (scene.start, scene.goal)),
+        ]
         position, look_at = framing(points, self.server.initial_camera.fov)
         self.server.initial_camera.position = tuple(position)
         self.server.initial_camera.look_at = tuple(look_at)
         for client in self.server.get_clients().values():
             cam = client.camera
             aspect = cam.image_width / cam.image_height if cam.image_height else 1.0
-            position, look_at = framing(points, cam.fov or self.server.initial_camera.fov,
-                                        aspect=aspect)  # fmt: skip
+            position, look_at = framing(
+                points, cam.fov or self.server.initial_camera.fov, aspect=aspect
+            )
             with client.atomic():
                 # Position first: viser moves the look-at along with a new position.
                 cam.position, cam.look_at = position, look_at
@@ -347,8 +377,9 @@ class RoachApp:
         self.view.show_robot(self.server, (x, y, z + r.standing_height), yaw_wxyz(start[2]), q0)
 
     def _show_frame(self, f: Frame) -> None:
-        self.view.show_robot(self.server, f.p_world_body, wxyz_from_xyzw(f.quat_world_body),
-                             f.leg_angles)  # fmt: skip
+        self.view.show_robot(
+            self.server, f.p_world_body, wxyz_from_xyzw(f.quat_world_body), f.leg_angles
+        )
         now = time.monotonic()
         if self.follow.value and now - self._followed > 1 / 20:  # (20 camera moves a second)
             self._followed = now
@@ -367,8 +398,9 @@ class RoachApp:
         offset = self._follow_offsets.get(client.client_id)
         if zoom or offset is None:
             fov = cam.fov or self.server.initial_camera.fov
-            near = robot_distance(self.world.robot.body_length, fov, cam.image_height or 900,
-                                  ROBOT_PIXELS)  # fmt: skip
+            near = robot_distance(
+                self.world.robot.body_length, fov, cam.image_height or 900, ROBOT_PIXELS
+            )
             offset = np.asarray(cam.position) - np.asarray(cam.look_at)
             d = float(np.linalg.norm(offset))
             offset = offset / d if d > 1e-6 and offset[2] > 0.34 * d else VIEW_DIRECTION
@@ -383,8 +415,10 @@ class RoachApp:
         Drive takes: it is drawn thick and labelled Drive, and the Drive path picker shows it.
         Run on the loop thread (a command's handler), like every change of state."""
         if not 0 <= k < len(self.plans):
-            raise PlanningError(f"path {k + 1}: there are {len(self.plans)} planned path(s); "
-                                f"choose 1 to {len(self.plans)} (Plan first if there are none)")  # fmt: skip
+            raise PlanningError(
+                f"path {k + 1}: there are {len(self.plans)} planned path(s); "
+                f"choose 1 to {len(self.plans)} (Plan first if there are none)"
+            )
         self.drive_path = k
         self.view.mark_path(k)
         if self.drive_path_picker.value != str(k + 1):  # (the picker calls back: a no-op)
@@ -430,8 +464,9 @@ class RoachApp:
             if (i, j) == cell or (inside and sm.reachable[j, i]):
                 return
         w = self.world
-        sm = standable_map(w.heightfield, w.footprint, w.scene.planner.validity, w.scene.bounds,
-                           (x, y))  # fmt: skip
+        sm = standable_map(
+            w.heightfield, w.footprint, w.scene.planner.validity, w.scene.bounds, (x, y)
+        )
         self._standable = (sm, (round((x - sm.x0) / sm.cell), round((y - sm.y0) / sm.cell)))
         self.view.show_standable(w, sm)
 
@@ -547,8 +582,9 @@ class RoachApp:
                 cmd = self.commands.get_nowait()
             except queue.Empty:
                 return
-            picking = isinstance(cmd, PlaceCmd) and (self.load_panel.pick_ground.value
-                                                     or self.voxel_panel.pick_centre.value)
+            picking = isinstance(cmd, PlaceCmd) and (
+                self.load_panel.pick_ground.value or self.voxel_panel.pick_centre.value
+            )
             if isinstance(cmd, AT_ONCE) or picking:
                 self._safely(cmd)
             elif isinstance(cmd, MarkersCmd):  # a drag sends many: one re-check afterwards
@@ -557,9 +593,12 @@ class RoachApp:
             else:
                 self.waiting.append(cmd)
                 name = NAMES.get(type(cmd), "Command")
-                self._notify(cmd.client_id, f"{name} queued",
-                             f"It runs when {self.running} ends; Cancel (at the top) stops "
-                             f"{self.running} and drops what is queued.")  # fmt: skip
+                self._notify(
+                    cmd.client_id,
+                    f"{name} queued",
+                    f"It runs when {self.running} ends; Cancel (at the top) stops "
+                    f"{self.running} and drops what is queued.",
+                )
 
     def _follow(self, job: Job, name: str, step, *, hard_stop: float | None = None) -> str:
         """Keep the page live while job runs: step(messages) shows its progress and returns
@@ -590,8 +629,11 @@ class RoachApp:
         while self.waiting:
             cmd = self.waiting.popleft()
             if type(cmd) is not MarkersCmd:
-                self._notify(cmd.client_id, f"{NAMES.get(type(cmd), 'Command')} not run",
-                             f"{name} was cancelled, and what was queued behind it dropped.")  # fmt: skip
+                self._notify(
+                    cmd.client_id,
+                    f"{NAMES.get(type(cmd), 'Command')} not run",
+                    f"{name} was cancelled, and what was queued behind it dropped.",
+                )
         self._check_markers()
 
     def _handle(self, cmd: Cmd) -> None:  # noqa: PLR0912 - one branch per command
@@ -613,8 +655,10 @@ class RoachApp:
             case CancelCmd(what="load"):
                 ld = self.loading.stop()
                 if ld is not None:
-                    self.loading.show(f"Loading {ld.label} cancelled after {ld.job.elapsed:.1f} s; "
-                                      f"the scene `{self.world.scene.name}` stays.")  # fmt: skip
+                    self.loading.show(
+                        f"Loading {ld.label} cancelled after {ld.job.elapsed:.1f} s; "
+                        f"the scene `{self.world.scene.name}` stays."
+                    )
                     self.scene_picker.value = self._picker_label()
             case CancelCmd(what="batch"):
                 self.batch_panel.cancel()
@@ -652,23 +696,30 @@ class RoachApp:
 
     # loading ---------------------------------------------------------------------------------
 
-    def _load(self, cmd: Cmd, ref: str, *, from_upload: bool, label: str,
-              what: str | None = None) -> None:  # fmt: skip
+    def _load(
+        self, cmd: Cmd, ref: str, *, from_upload: bool, label: str, what: str | None = None
+    ) -> None:
         """Start loading a scene in the background (replacing a load still running)."""
         # Said by what the scene holds, not by the file's suffix: a .zip may hold a capture.
         what = what or load_announcement(label, ref)
         replaced = self.loading.start(cmd, ref, from_upload=from_upload, label=label, what=what)
         if replaced is not None:
-            self._notify(replaced.client_id, f"Stopped loading {replaced.label}",
-                         f"{label} is loaded instead.")  # fmt: skip
+            self._notify(
+                replaced.client_id,
+                f"Stopped loading {replaced.label}",
+                f"{label} is loaded instead.",
+            )
         if self.running is None:
-            self.status.content = (f"`{self.world.scene.name}` stays in use while {label} "
-                                   f"loads (Scene folder).")  # fmt: skip
+            self.status.content = (
+                f"`{self.world.scene.name}` stays in use while {label} loads (Scene folder)."
+            )
 
     def _picker_label(self) -> str:
         path = str(Path(self.world.scene.path).resolve())
-        return next((k for k, (v, _) in self.files.items() if str(Path(v).resolve()) == path),
-                    self.world.scene.name)  # fmt: skip
+        return next(
+            (k for k, (v, _) in self.files.items() if str(Path(v).resolve()) == path),
+            self.world.scene.name,
+        )
 
     # commands --------------------------------------------------------------------------------
 
@@ -693,9 +744,12 @@ class RoachApp:
         self.status.content = f"{which.capitalize()} placed at ({hit[0]:.2f}, {hit[1]:.2f})."
 
     def _planner(self):
-        return dataclasses.replace(self.world.scene.planner, name=self.planner.value,
-                                   time_limit=float(self.time_limit.value),
-                                   keep_roadmap=True)  # (Show roadmap shows it at once)  # fmt: skip
+        return dataclasses.replace(
+            self.world.scene.planner,
+            name=self.planner.value,
+            time_limit=float(self.time_limit.value),
+            keep_roadmap=True,
+        )  # (Show roadmap shows it at once)
 
     # batches -----------------------------------------------------------------------------
 
@@ -706,9 +760,15 @@ class RoachApp:
         start, goal = self.markers.valid_poses(self.world)
         scene, n = self.world.scene, int(self.batch_panel.n.value)
         spec = ExperimentSpec(
-            name="app", path=scene.path, scene=scene.path, planner=self._planner(), sim=scene.sim,
-            driver=scene.driver, trials_per_route=n, seed=self._next_seed,
-        )  # fmt: skip
+            name="app",
+            path=scene.path,
+            scene=scene.path,
+            planner=self._planner(),
+            sim=scene.sim,
+            driver=scene.driver,
+            trials_per_route=n,
+            seed=self._next_seed,
+        )
         self._next_seed += n
         self.batch_panel.start(spec, start, goal)
 

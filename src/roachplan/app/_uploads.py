@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import yaml
+
 from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
 from roachplan.scenes import DEFAULT_BACKEND, DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
@@ -39,9 +40,15 @@ def safe_name(name: str) -> str:
 
 
 def scene_from_upload(
-    name: str, data: bytes, root: Path, capture: dict, *, calibration: Path | None = None,
-    scad_timeout: float = SCAD_TIMEOUT, scad_backend: str = DEFAULT_BACKEND,
-) -> Path:  # fmt: skip
+    name: str,
+    data: bytes,
+    root: Path,
+    capture: dict,
+    *,
+    calibration: Path | None = None,
+    scad_timeout: float = SCAD_TIMEOUT,
+    scad_backend: str = DEFAULT_BACKEND,
+) -> Path:
     """Write an uploaded file into a fresh folder under root and return the scene .yaml that
     uses it. capture: perception settings for captures (method, voxel, intrinsics, ...).
     calibration: a calibration file uploaded before a depth image (copied beside it and used as
@@ -62,8 +69,10 @@ def scene_from_upload(
     fname = safe_name(name)
     suffix = Path(fname).suffix.lower()
     if suffix not in UPLOAD_SUFFIXES:
-        raise SceneError(f"{name}: cannot load {suffix or 'a file without extension'}; accepted: "
-                         f"{', '.join(UPLOAD_SUFFIXES)}")  # fmt: skip
+        raise SceneError(
+            f"{name}: cannot load {suffix or 'a file without extension'}; accepted: "
+            f"{', '.join(UPLOAD_SUFFIXES)}"
+        )
     folder = Path(tempfile.mkdtemp(prefix="upload-", dir=root))
     if suffix in (".yaml", ".yml"):
         for f in LIBRARY.iterdir():  # library files an uploaded scene may refer to
@@ -197,8 +206,11 @@ def prepare_upload_scene(scene_path: Path):
     return world
 
 
-RENDERERS = {"cgal": "OpenSCAD", "manifold": "Manifold",
-             "auto": "Manifold or, where it must, OpenSCAD"}
+RENDERERS = {
+    "cgal": "OpenSCAD",
+    "manifold": "Manifold",
+    "auto": "Manifold or, where it must, OpenSCAD",
+}
 """Who renders a model, by its `backend:`, as the page names it."""
 
 
@@ -244,88 +256,135 @@ PLACE_THEM = (
 """What the page offers where the command line says "give start and goal"."""
 PAGE_ADVICE = (
     # perception: units, depth scale, disparity, intrinsics, size
-    (r"pass units mm \(--units mm\), or units m \(--units m\) if it really is in metres",
-     "set Meshing (captures) → Cloud units to mm and load the file again (or to m if it "
-     "really is in metres)"),
-    (r"pass --depth-scale ([0-9.eE+-]+) \(depth_scale: [0-9.eE+-]+ in a scene\)",
-     r"set Camera (next capture) → Depth scale [units/m] to \1 and load the file again"),
-    (r"check the depth scale(?: \(--depth-scale\))?",
-     "check Camera (next capture) → Depth scale [units/m] and Depth units, and load the file "
-     "again"),
-    (r"pass --depth-units kinect-disparity \(depth_units: kinect-disparity in a scene\)",
-     "set Camera (next capture) → Depth units to kinect-disparity and load the file again"),
-    (r"pass its depth scale \(--depth-scale N; 1000 for millimetres\)",
-     "set Camera (next capture) → Depth scale [units/m] (1000 for millimetres) and load the "
-     "file again"),
-    (r"both a depth scale \(([0-9.eE+-]+)\) and depth units \(([\w-]+)\) were given: (.*?); "
-     r"give one of them",
-     r"both Depth scale [units/m] (\1) and Depth units (\2) were set: \3; set Camera (next "
-     r"capture) → Depth scale [units/m] to 0 or Camera (next capture) → Depth units to auto"),
-    (r"pass --intrinsics with a preset \(([^)]*)\) or a calibration file, or the numbers "
-     r"--fx --fy --cx --cy .*? beside it",
-     r"choose its camera in Camera (next capture) → Camera (\1, or numbers below: fx, fy, cx, "
-     r"cy), or load its calibration file first, then the depth image again"),
-    (r"crop it \(crop / --crop\) or use a larger voxel \(--voxel\)",
-     "tick Meshing (captures) → Crop and set its box, or set a larger Meshing (captures) → "
-     "Voxel [m], then press Re-mesh loaded capture (or load the file again)"),
-    (r"a topic \(([^;]*); --topic, `topic:` in a scene\) was given, but only a bag \(([^)]*)\) "
-     r"has topics",
-     r"the scene file gives a topic (\1), but only a bag (\2) has topics: take it out and load "
-     r"the scene again (Scene → Load file)"),
-    (r"depth units \(([^;]*); --depth-units, `depth_units:` in a scene\) were given, but only a "
-     r"depth image \(([^)]*)\) has them",
-     r"the scene file gives depth units (\1), but only a depth image (\2) has them: take them "
-     r"out and load the scene again (Scene → Load file)"),
+    (
+        r"pass units mm \(--units mm\), or units m \(--units m\) if it really is in metres",
+        "set Meshing (captures) → Cloud units to mm and load the file again (or to m if it "
+        "really is in metres)",
+    ),
+    (
+        r"pass --depth-scale ([0-9.eE+-]+) \(depth_scale: [0-9.eE+-]+ in a scene\)",
+        r"set Camera (next capture) → Depth scale [units/m] to \1 and load the file again",
+    ),
+    (
+        r"check the depth scale(?: \(--depth-scale\))?",
+        "check Camera (next capture) → Depth scale [units/m] and Depth units, and load the file "
+        "again",
+    ),
+    (
+        r"pass --depth-units kinect-disparity \(depth_units: kinect-disparity in a scene\)",
+        "set Camera (next capture) → Depth units to kinect-disparity and load the file again",
+    ),
+    (
+        r"pass its depth scale \(--depth-scale N; 1000 for millimetres\)",
+        "set Camera (next capture) → Depth scale [units/m] (1000 for millimetres) and load the "
+        "file again",
+    ),
+    (
+        r"both a depth scale \(([0-9.eE+-]+)\) and depth units \(([\w-]+)\) were given: (.*?); "
+        r"give one of them",
+        r"both Depth scale [units/m] (\1) and Depth units (\2) were set: \3; set Camera (next "
+        r"capture) → Depth scale [units/m] to 0 or Camera (next capture) → Depth units to auto",
+    ),
+    (
+        r"pass --intrinsics with a preset \(([^)]*)\) or a calibration file, or the numbers "
+        r"--fx --fy --cx --cy .*? beside it",
+        r"choose its camera in Camera (next capture) → Camera (\1, or numbers below: fx, fy, cx, "
+        r"cy), or load its calibration file first, then the depth image again",
+    ),
+    (
+        r"crop it \(crop / --crop\) or use a larger voxel \(--voxel\)",
+        "tick Meshing (captures) → Crop and set its box, or set a larger Meshing (captures) → "
+        "Voxel [m], then press Re-mesh loaded capture (or load the file again)",
+    ),
+    (
+        r"a topic \(([^;]*); --topic, `topic:` in a scene\) was given, but only a bag \(([^)]*)\) "
+        r"has topics",
+        r"the scene file gives a topic (\1), but only a bag (\2) has topics: take it out and load "
+        r"the scene again (Scene → Load file)",
+    ),
+    (
+        r"depth units \(([^;]*); --depth-units, `depth_units:` in a scene\) were given, but only a "
+        r"depth image \(([^)]*)\) has them",
+        r"the scene file gives depth units (\1), but only a depth image (\2) has them: take them "
+        r"out and load the scene again (Scene → Load file)",
+    ),
     # perception: the ground
-    (r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
-     "set Loaded capture → Up direction and press Re-mesh with this up direction, or tick "
-     "Loaded capture → Pick ground and click the ground, or type the camera's height, pitch "
-     "and roll in Loaded capture and press Re-mesh with this camera pose"),
-    (r"check the result, or give --up or the camera pose",
-     "check the result; if it is wrong, set Loaded capture → Up direction and press Re-mesh "
-     "with this up direction, or tick Loaded capture → Pick ground and click the ground"),
-    (r"check the up direction",
-     "check Loaded capture → Up direction (then press Re-mesh with this up direction)"),
-    (r"click it in the page or give the camera pose",
-     "tick Loaded capture → Pick ground and click it, or type the camera's height, pitch and "
-     "roll in Loaded capture and press Re-mesh with this camera pose"),
-    (r"study one surface: --plane \(the dominant plane's points\), or a smaller "
-     r"--square/--region",
-     "study one surface: set Voxel study → Region to Ground plane, or a smaller Voxel study → "
-     "Square side [m]"),
+    (
+        r"give the up direction \(--up\) or the camera pose, or click the ground in the page",
+        "set Loaded capture → Up direction and press Re-mesh with this up direction, or tick "
+        "Loaded capture → Pick ground and click the ground, or type the camera's height, pitch "
+        "and roll in Loaded capture and press Re-mesh with this camera pose",
+    ),
+    (
+        r"check the result, or give --up or the camera pose",
+        "check the result; if it is wrong, set Loaded capture → Up direction and press Re-mesh "
+        "with this up direction, or tick Loaded capture → Pick ground and click the ground",
+    ),
+    (
+        r"check the up direction",
+        "check Loaded capture → Up direction (then press Re-mesh with this up direction)",
+    ),
+    (
+        r"click it in the page or give the camera pose",
+        "tick Loaded capture → Pick ground and click it, or type the camera's height, pitch and "
+        "roll in Loaded capture and press Re-mesh with this camera pose",
+    ),
+    (
+        r"study one surface: --plane \(the dominant plane's points\), or a smaller "
+        r"--square/--region",
+        "study one surface: set Voxel study → Region to Ground plane, or a smaller Voxel study → "
+        "Square side [m]",
+    ),
     # scenes: models
-    (r"add `scale: 0\.001` to this terrain object \(or --scale 0\.001\)",
-     "press Scene → Scale x0.001 to load it in metres"),
-    (r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
-     r"at most ([0-9.]+)",
-     r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again"),
-    (r"render this model with `backend: cgal` \(--scad-backend cgal\), the openscad binary, or "
-     r"`backend: auto`, which picks it",
-     "set Scene → OpenSCAD backend to auto (or cgal) and load it again"),
-    (r"(?:render this model with|use) `backend: cgal`(?: \(--scad-backend cgal\))?"
-     r"(?:, the openscad binary)?",
-     "set Scene → OpenSCAD backend to cgal (the openscad binary) and load it again"),
-    (r"raise it with `position: \[x, y, z\]`, or give `ground: null` if it has its own floor"
-     r"(?: in a scene file)?",
-     "raise it with Loaded model → Position [m], or untick Loaded model → Ground plane if it "
-     "has its own floor, and press Loaded model → Reload model with these"),
+    (
+        r"add `scale: 0\.001` to this terrain object \(or --scale 0\.001\)",
+        "press Scene → Scale x0.001 to load it in metres",
+    ),
+    (
+        r"give this terrain object `timeout: SECONDS` \(or --scad-timeout SECONDS\), "
+        r"at most ([0-9.]+)",
+        r"raise Scene → OpenSCAD limit [s] (at most \1) and load it again",
+    ),
+    (
+        r"render this model with `backend: cgal` \(--scad-backend cgal\), the openscad binary, or "
+        r"`backend: auto`, which picks it",
+        "set Scene → OpenSCAD backend to auto (or cgal) and load it again",
+    ),
+    (
+        r"(?:render this model with|use) `backend: cgal`(?: \(--scad-backend cgal\))?"
+        r"(?:, the openscad binary)?",
+        "set Scene → OpenSCAD backend to cgal (the openscad binary) and load it again",
+    ),
+    (
+        r"raise it with `position: \[x, y, z\]`, or give `ground: null` if it has its own floor"
+        r"(?: in a scene file)?",
+        "raise it with Loaded model → Position [m], or untick Loaded model → Ground plane if it "
+        "has its own floor, and press Loaded model → Reload model with these",
+    ),
     # scenes: the planning area, start and goal
-    (r"\(set bounds, or crop\)",
-     "(to plan elsewhere: set Planning area → Min x, y [m] and Max x, y [m] and press Plan in "
-     "this area; for a capture, also Meshing (captures) → Crop)"),
-    (r"give bounds: the scene has no terrain to take them from",
-     "the scene has no terrain to plan on: load a capture, a model or a scene with terrain "
-     "(Scene → Load file)"),
-    (r"\bbounds: ([0-9.]+ m x [0-9.]+ m) is more than",
-     r"the planning area, \1, is more than"),
-    (r"give bounds at most ([0-9.]+ m x [0-9.]+ m) around the part the robot is to cross",
-     r"set Planning area → Min x, y [m] and Max x, y [m] at most \1 apart, around the part "
-     r"the robot is to cross, and press Reload with this area"),
-    (r"check the ground found, or give start and goal",
-     f"check the ground found (for a capture, with Loaded capture → Pick ground), or "
-     f"{PLACE_THEM}"),
+    (
+        r"\(set bounds, or crop\)",
+        "(to plan elsewhere: set Planning area → Min x, y [m] and Max x, y [m] and press Plan in "
+        "this area; for a capture, also Meshing (captures) → Crop)",
+    ),
+    (
+        r"give bounds: the scene has no terrain to take them from",
+        "the scene has no terrain to plan on: load a capture, a model or a scene with terrain "
+        "(Scene → Load file)",
+    ),
+    (r"\bbounds: ([0-9.]+ m x [0-9.]+ m) is more than", r"the planning area, \1, is more than"),
+    (
+        r"give bounds at most ([0-9.]+ m x [0-9.]+ m) around the part the robot is to cross",
+        r"set Planning area → Min x, y [m] and Max x, y [m] at most \1 apart, around the part "
+        r"the robot is to cross, and press Reload with this area",
+    ),
+    (
+        r"check the ground found, or give start and goal",
+        f"check the ground found (for a capture, with Loaded capture → Pick ground), or "
+        f"{PLACE_THEM}",
+    ),
     (r"give start and goal", PLACE_THEM),
-)  # fmt: skip
+)
 """Advice written for the command line and scene files (perception, scenes and planning
 messages) -> the same advice in the page's own controls (folder → control). Every piece of
 advice that code can give has its entry here (tests/test_page_advice.py walks them)."""
@@ -346,8 +405,9 @@ def public_message(message: str, root: Path) -> str:
     text = _PATH.sub(r"\1", text)
     # "x.yaml: terrain[0].capture: x.pcd: ..." -> "x.pcd: ...": the file's own message names
     # it; the scene file around an upload is the app's.
-    text = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.(?:capture|mesh|scad): (?=[\w.-]+: )", "",
-                  text)  # fmt: skip
+    text = re.sub(
+        r"^[\w.-]+\.ya?ml: terrain\[\d+\]\.(?:capture|mesh|scad): (?=[\w.-]+: )", "", text
+    )
     text = re.sub(r"^([\w.-]+: )\1+", r"\1", text)  # (a file named twice over, once)
     for pattern, page in PAGE_ADVICE:
         text = re.sub(pattern, page, text)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+
 from roachplan.perception import CaptureError
 from roachplan.perception._voxel_study import (
     VoxelStudyRow,
@@ -124,8 +125,14 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
     scene = load_scene(req.scene_path)
     obj = next(o for o in scene.terrain if o.kind == "capture")
     s = obj.capture
-    cap = load_capture(obj.source, intrinsics=s.intrinsics, depth_scale=s.depth_scale,
-                       topic=s.topic, units=s.units, depth_units=s.depth_units)  # fmt: skip
+    cap = load_capture(
+        obj.source,
+        intrinsics=s.intrinsics,
+        depth_scale=s.depth_scale,
+        topic=s.topic,
+        units=s.units,
+        depth_units=s.depth_units,
+    )
     raw = cap.finite_points()
     on_stage("read")
     wfc = np.asarray(req.world_from_camera, dtype=np.float64)
@@ -134,29 +141,39 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
             raise CaptureError("Square: tick Pick square centre, then click the terrain")
         world = _placed(obj, wfc, raw)
         half = req.side / 2
-        inside = ((np.abs(world[:, 0] - req.centre[0]) <= half)
-                  & (np.abs(world[:, 1] - req.centre[1]) <= half))  # fmt: skip
+        inside = (np.abs(world[:, 0] - req.centre[0]) <= half) & (
+            np.abs(world[:, 1] - req.centre[1]) <= half
+        )
         where = f"the {req.side:g} m square at ({req.centre[0]:.2f}, {req.centre[1]:.2f})"
         pts = raw[inside]
     else:
         ground_z = raw @ wfc[2, :3] + wfc[2, 3]  # height above the ground found [m]
         near = raw[np.abs(ground_z) <= GROUND_SLAB]
         if len(near) < 4:
-            raise CaptureError(f"{len(near)} points within {GROUND_SLAB * 100:g} cm of the "
-                               f"ground found: too few to study; pick a Square instead")  # fmt: skip
+            raise CaptureError(
+                f"{len(near)} points within {GROUND_SLAB * 100:g} cm of the "
+                f"ground found: too few to study; pick a Square instead"
+            )
         pts = plane_region(near, req.seed)
         where = f"the ground plane (seed {req.seed})"
     if len(pts) < 4:
-        raise CaptureError(f"{len(pts)} points within {where}; 4 or more needed: click the "
-                           f"capture's terrain, or a larger Square side")  # fmt: skip
+        raise CaptureError(
+            f"{len(pts)} points within {where}; 4 or more needed: click the "
+            f"capture's terrain, or a larger Square side"
+        )
     on_stage("region")
     # The study in the capture's own frame about its sensor, as the CLI does: the voxel grid is
     # the camera's (section 3.1), and the range that sets the noise limit is from the sensor.
     pts = pts - np.asarray(cap.sensor_origin)
     rows = voxel_study(pts, list(req.sizes_cm))
     range_m = float(np.median(np.linalg.norm(pts, axis=1)))
-    return StudyResult(rows=tuple(rows), warning=planarity_warning(rows[0], range_m, PAGE_HINT),
-                       points=len(pts), total=len(raw), where=where)  # fmt: skip
+    return StudyResult(
+        rows=tuple(rows),
+        warning=planarity_warning(rows[0], range_m, PAGE_HINT),
+        points=len(pts),
+        total=len(raw),
+        where=where,
+    )
 
 
 def _study_job(conn, req: StudyRequest) -> None:
@@ -167,8 +184,12 @@ def _study_job(conn, req: StudyRequest) -> None:
         result = run_study(req, on_stage=lambda name: conn.send(("stage", name)))
         conn.send(("result", result))
     except MemoryError:
-        conn.send(("error", "the study needed more memory than the server allows a job: "
-                            "pick a smaller square"))  # fmt: skip
+        conn.send(
+            (
+                "error",
+                "the study needed more memory than the server allows a job: pick a smaller square",
+            )
+        )
     except Exception as exc:  # reported to the user as a notification
         conn.send(("error", f"{exc}"))
     conn.close()
@@ -176,8 +197,12 @@ def _study_job(conn, req: StudyRequest) -> None:
 
 def table_markdown(result: StudyResult) -> str:
     """Table 3.1's columns as a markdown table, with the region and the warning."""
-    lines = [f"{result.points} of {result.total} points: {result.where}.", "",
-             "| voxel size [cm] | points | points kept | error [mm] |", "|---:|---:|---:|---:|"]  # fmt: skip
+    lines = [
+        f"{result.points} of {result.total} points: {result.where}.",
+        "",
+        "| voxel size [cm] | points | points kept | error [mm] |",
+        "|---:|---:|---:|---:|",
+    ]
     for r in result.rows:
         size = "N/A" if r.voxel_cm is None else f"{r.voxel_cm:g}"
         lines.append(f"| {size} | {r.points} | {r.kept} | {r.error_mm:.3f} |")
@@ -191,8 +216,9 @@ def square_outline(heightfield, centre, side: float, n: int = 24) -> np.ndarray:
     height field has no surface), lifted SQUARE_LIFT."""
     h = side / 2
     cx, cy = centre
-    corners = np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h],
-                        [cx - h, cy - h]])  # fmt: skip
+    corners = np.array(
+        [[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h], [cx - h, cy - h]]
+    )
     t = np.linspace(0.0, 1.0, n, endpoint=False)[:, None]
     xy = np.concatenate(
         [a + t * (b - a) for a, b in zip(corners[:-1], corners[1:])] + [corners[-1:]]
@@ -212,18 +238,24 @@ class VoxelPanel:
         self.scene_name = ""
         """The scene the last study was of (the CSV's name)."""
         with gui.add_folder("Voxel study"):
-            self.sizes = gui.add_text("Voxel sizes [cm]", DEFAULT_SIZES,
-                                      hint="Edges of the voxels, comma separated (table 3.1)")  # fmt: skip
+            self.sizes = gui.add_text(
+                "Voxel sizes [cm]",
+                DEFAULT_SIZES,
+                hint="Edges of the voxels, comma separated (table 3.1)",
+            )
             self.mode = gui.add_dropdown(
-                "Region", MODES, initial_value=MODES[0],
+                "Region",
+                MODES,
+                initial_value=MODES[0],
                 hint="Square: a square of the terrain; Ground plane: the plane the load found",
-            )  # fmt: skip
+            )
             self.side = gui.add_number("Square side [m]", 0.5, min=0.02, max=20.0, step=0.01)
             self.pick_centre = gui.add_checkbox(
                 "Pick square centre", False, hint="The next click on the terrain centres the square"
             )
-            self.run_button = gui.add_button("Run voxel study",
-                                             hint="Table 3.1 of the loaded capture's region")  # fmt: skip
+            self.run_button = gui.add_button(
+                "Run voxel study", hint="Table 3.1 of the loaded capture's region"
+            )
             self.csv_button = gui.add_button("Download study CSV", disabled=True)
             self.info = gui.add_markdown("Load a capture, pick a region, then **Run voxel study**.")
         self.run_button.on_click(lambda ev: put(VoxelCmd(ev.client_id, "run")))
@@ -240,39 +272,55 @@ class VoxelPanel:
         if self.centre is None:
             return
         pts = square_outline(app.world.heightfield, self.centre, float(self.side.value))
-        app.server.scene.add_line_segments("/markers/voxel_square", segments(pts),
-                                           colors=SQUARE_COLOUR, thickness=4.0,
-                                           thickness_units="screen")  # fmt: skip
+        app.server.scene.add_line_segments(
+            "/markers/voxel_square",
+            segments(pts),
+            colors=SQUARE_COLOUR,
+            thickness=4.0,
+            thickness_units="screen",
+        )
 
     def set_centre(self, app, cmd, hit) -> None:
         """The square's centre at a clicked terrain point (world [m]); one click, one centre."""
         self.pick_centre.value = False
         self.centre = (float(hit[0]), float(hit[1]))
         self._draw_square(app)
-        self.info.content = (f"Square of {float(self.side.value):g} m at ({hit[0]:.2f}, "
-                             f"{hit[1]:.2f}): press **Run voxel study**.")  # fmt: skip
+        self.info.content = (
+            f"Square of {float(self.side.value):g} m at ({hit[0]:.2f}, "
+            f"{hit[1]:.2f}): press **Run voxel study**."
+        )
 
     def handle(self, app, cmd: VoxelCmd) -> None:
         if cmd.action == "csv":
             client = app.server.get_clients().get(cmd.client_id)
             if client is not None and self.result is not None:
-                client.send_file_download(f"{self.scene_name}-voxel-study.csv",
-                                          study_csv(list(self.result.rows)).encode(),
-                                          save_immediately=True)  # fmt: skip
+                client.send_file_download(
+                    f"{self.scene_name}-voxel-study.csv",
+                    study_csv(list(self.result.rows)).encode(),
+                    save_immediately=True,
+                )
         elif cmd.action == "run":
             self._run(app, cmd)
 
     def _run(self, app, cmd: VoxelCmd) -> None:
         view = app.load_panel.view
         if view is None:
-            app._notify(cmd.client_id, "No capture loaded",
-                        "The voxel study works on a capture loaded from a file.", error=True)  # fmt: skip
+            app._notify(
+                cmd.client_id,
+                "No capture loaded",
+                "The voxel study works on a capture loaded from a file.",
+                error=True,
+            )
             return
         sizes = parse_sizes(self.sizes.value)
         mode, side = self.mode.value, float(self.side.value)
         if mode == "Square" and self.centre is None:
-            app._notify(cmd.client_id, "No square yet", "Tick Pick square centre, then click "
-                        "the terrain where the square goes.", error=True)  # fmt: skip
+            app._notify(
+                cmd.client_id,
+                "No square yet",
+                "Tick Pick square centre, then click the terrain where the square goes.",
+                error=True,
+            )
             return
         if mode == "Square" and not (math.isfinite(side) and side > 0):
             raise CaptureError(f"Square side [m] {side!r}: expected a length > 0")
@@ -280,12 +328,20 @@ class VoxelPanel:
             self._draw_square(app)  # (the side may have changed since the click)
         else:
             app.server.scene.remove_by_name("/markers/voxel_square")
-        req = StudyRequest(scene_path=view.scene_path, world_from_camera=view.world_from_camera,
-                           sizes_cm=sizes, mode=mode, centre=self.centre, side=side,
-                           seed=app.world.scene.seed)  # fmt: skip
+        req = StudyRequest(
+            scene_path=view.scene_path,
+            world_from_camera=view.world_from_camera,
+            sizes_cm=sizes,
+            mode=mode,
+            centre=self.centre,
+            side=side,
+            seed=app.world.scene.seed,
+        )
         job, results, errors, stages = Job(_study_job, req), [], [], []
-        steps = {"read": (0.3, "capture read; finding the region"),
-                 "region": (0.5, f"fitting planes at {len(sizes) + 1} voxel sizes")}  # fmt: skip
+        steps = {
+            "read": (0.3, "capture read; finding the region"),
+            "region": (0.5, f"fitting planes at {len(sizes) + 1} voxel sizes"),
+        }
 
         def step(messages) -> bool:
             for kind, payload in messages:
@@ -311,7 +367,9 @@ class VoxelPanel:
         self.result, self.scene_name = results[0], app.world.scene.name
         self.info.content = table_markdown(self.result)
         self.csv_button.disabled = False
-        app.status.content = (f"Voxel study of {self.result.where}: {self.result.points} points, "
-                              f"in {job.elapsed:.1f} s (table in the Voxel study folder).")  # fmt: skip
+        app.status.content = (
+            f"Voxel study of {self.result.where}: {self.result.points} points, "
+            f"in {job.elapsed:.1f} s (table in the Voxel study folder)."
+        )
         if self.result.warning is not None:
             app._notify(cmd.client_id, "Region not planar", self.result.warning)

@@ -10,6 +10,7 @@ import os
 import sys
 
 import numpy as np
+
 from roachplan.app._choose_cli import add_choose_parser
 from roachplan.app._progress import bar, render_progress, stage_progress
 from roachplan.experiments import WRITTEN_BY, ExperimentError, OutputError, check_output_file
@@ -24,8 +25,15 @@ class UsageError(ValueError):
     range."""
 
 
-USER_ERRORS = (SceneError, PlanningError, SimError, ExperimentError, CaptureError, OutputError,
-               UsageError)  # fmt: skip
+USER_ERRORS = (
+    SceneError,
+    PlanningError,
+    SimError,
+    ExperimentError,
+    CaptureError,
+    OutputError,
+    UsageError,
+)
 MESH_WRITTEN = "a mesh roachplan wrote (it says so in its header)"
 """What `mesh -o` and `scene build -o` replace without --force: their own earlier output."""
 FORCE_HELP = (
@@ -87,15 +95,21 @@ def _rerun_trial(args: argparse.Namespace) -> int:
     rec, stored, differ = rerun_trial(args.from_dir, args.trial)
     _print_trial(rec, args.json)
     if stored is None:
-        print(f"roachplan: trial {args.trial} is not in the store yet; nothing to compare",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"roachplan: trial {args.trial} is not in the store yet; nothing to compare",
+            file=sys.stderr,
+        )
         return 0
     if differ:
-        print(f"roachplan: the re-run differs from the stored trial in: {', '.join(differ)}",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"roachplan: the re-run differs from the stored trial in: {', '.join(differ)}",
+            file=sys.stderr,
+        )
         return 1
-    print(f"roachplan: identical to stored trial {args.trial} (apart from wall-clock times)",
-          file=sys.stderr)  # fmt: skip
+    print(
+        f"roachplan: identical to stored trial {args.trial} (apart from wall-clock times)",
+        file=sys.stderr,
+    )
     return 0
 
 
@@ -115,8 +129,10 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     cores = os.cpu_count() or 1
     cluster = args.backend == "ray" and args.address is not None
     if args.workers is not None and not cluster and args.workers > 4 * cores:
-        raise UsageError(f"--workers {args.workers}: this machine has {cores} cores; give at "
-                         f"most {4 * cores} local workers (or a Ray cluster's --address)")  # fmt: skip
+        raise UsageError(
+            f"--workers {args.workers}: this machine has {cores} cores; give at "
+            f"most {4 * cores} local workers (or a Ray cluster's --address)"
+        )
     if args.out is not None:  # refused before the spec's work, not after it
         check_results_folder(Path(args.out), create=False)
     spec = load_experiment(args.spec)
@@ -137,16 +153,26 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     workers = args.workers if args.workers is not None else (None if cluster else cores)
     try:
         report = run_experiment(
-            spec, trials=trials, out=out, workers=workers, resume=args.resume,
-            backend=args.backend, address=args.address, progress=not args.quiet,
-        )  # fmt: skip
+            spec,
+            trials=trials,
+            out=out,
+            workers=workers,
+            resume=args.resume,
+            backend=args.backend,
+            address=args.address,
+            progress=not args.quiet,
+        )
     except (KeyboardInterrupt, BrokenProcessPool) as exc:
         why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"a worker died ({exc})"
-        print(f"roachplan: {why}; every finished trial is stored in {out}; continue with "
-              f"--resume", file=sys.stderr)  # fmt: skip
+        print(
+            f"roachplan: {why}; every finished trial is stored in {out}; continue with --resume",
+            file=sys.stderr,
+        )
         return 130 if isinstance(exc, KeyboardInterrupt) else 1
-    print(f"{spec.name}: {report.trials_stored} trials in {out} "
-          f"({report.trials_run} run now, {report.trials_stored - report.trials_run} stored before)\n")  # fmt: skip
+    print(
+        f"{spec.name}: {report.trials_stored} trials in {out} "
+        f"({report.trials_run} run now, {report.trials_stored - report.trials_run} stored before)\n"
+    )
     print(report.table)
     print()
     print(describe_best(report.best))
@@ -207,8 +233,15 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     planner = _planner_config(scene, args)
     seed = scene.seed if args.seed is None else args.seed
     with bar(args.count, "paths", unit=" path", enabled=None if args.count > 1 else False) as b:
-        plans = plan_many(world, args.count, seed=seed, start=start, goal=goal, planner=planner,
-                          on_attempt=lambda _seed, new: b.update(new is not None))  # fmt: skip
+        plans = plan_many(
+            world,
+            args.count,
+            seed=seed,
+            start=start,
+            goal=goal,
+            planner=planner,
+            on_attempt=lambda _seed, new: b.update(new is not None),
+        )
     rows = [
         {
             "route": lp.route,
@@ -226,8 +259,13 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         for lp in plans
     ]
     if args.json:
-        out = {"scene": scene.name, "planner": planner.name, "seed": seed,
-               **path_settings(planner.turning_radius), "notes": list(world.notes)}
+        out = {
+            "scene": scene.name,
+            "planner": planner.name,
+            "seed": seed,
+            **path_settings(planner.turning_radius),
+            "notes": list(world.notes),
+        }
         if args.count == 1 and rows:
             out.update(rows[0])
         out["paths"] = rows
@@ -254,8 +292,10 @@ def _planner_list(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",")]
     for n in names:
         if n not in PLANNER_NAMES:
-            raise UsageError(f"--planners {_clip(repr(text), 80)}: {_clip(repr(n), 40)} is not a "
-                             f"planner; choose from {', '.join(PLANNER_NAMES)}")  # fmt: skip
+            raise UsageError(
+                f"--planners {_clip(repr(text), 80)}: {_clip(repr(n), 40)} is not a "
+                f"planner; choose from {', '.join(PLANNER_NAMES)}"
+            )
     if len(set(names)) < len(names):
         raise UsageError(f"--planners {_clip(repr(text), 80)}: a planner is named twice")
     return names
@@ -278,19 +318,30 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     seed = scene.seed if args.seed is None else args.seed
     if seed + args.runs - 1 > MAX_SEED:  # run k plans with seed + k
-        raise UsageError(f"--seed {seed} with --runs {args.runs}: the last run's seed "
-                         f"{seed + args.runs - 1} is above {MAX_SEED}; give a smaller --seed")  # fmt: skip
+        raise UsageError(
+            f"--seed {seed} with --runs {args.runs}: the last run's seed "
+            f"{seed + args.runs - 1} is above {MAX_SEED}; give a smaller --seed"
+        )
     # Refused before the runs, not after them; the log and the database never replace each other.
     inputs = _scene_inputs(scene)
-    log_path = check_output_file(args.output, suffixes=(".log",), inputs=inputs,
-                                 kind="a benchmark log roachplan wrote", force=args.force)  # fmt: skip
+    log_path = check_output_file(
+        args.output,
+        suffixes=(".log",),
+        inputs=inputs,
+        kind="a benchmark log roachplan wrote",
+        force=args.force,
+    )
     db_path = None
     if args.db is not None:
         db_path = check_output_file(
-            args.db, flag="--db", suffixes=(".db", ".sqlite", ".sqlite3"),
-            inputs=[*inputs, args.output], replaceable=is_benchmark_db,
-            kind="a benchmark database roachplan wrote", force=args.force,
-        )  # fmt: skip
+            args.db,
+            flag="--db",
+            suffixes=(".db", ".sqlite", ".sqlite3"),
+            inputs=[*inputs, args.output],
+            replaceable=is_benchmark_db,
+            kind="a benchmark database roachplan wrote",
+            force=args.force,
+        )
     world = build_world(_scene_options(scene, args))
     for note in world.notes:
         print(f"roachplan: {note}", file=sys.stderr)
@@ -298,23 +349,34 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
     time_limit = base.time_limit if args.time_limit is None else args.time_limit
     planners = [dataclasses.replace(base, name=n, time_limit=time_limit) for n in names]
     with benchmark_bar(not args.quiet, len(names) * args.runs) as bar:
-        result = run_benchmark(world, planners, runs=args.runs, seed=seed,
-                               simulate=args.simulate, on_run=lambda run: bar.update())  # fmt: skip
+        result = run_benchmark(
+            world,
+            planners,
+            runs=args.runs,
+            seed=seed,
+            simulate=args.simulate,
+            on_run=lambda run: bar.update(),
+        )
     atomic_write(log_path, benchmark_log(result))
     if db_path is not None:
         write_benchmark_db(result, db_path)
     for name in names:
         runs = result.runs_of(name)
         solved = [r for r in runs if r.solved]
-        line = (f"{name:16s} solved {len(solved)}/{len(runs)}  median plan time "
-                f"{float(np.median([r.time for r in runs])):.3f} s")  # fmt: skip
+        line = (
+            f"{name:16s} solved {len(solved)}/{len(runs)}  median plan time "
+            f"{float(np.median([r.time for r in runs])):.3f} s"
+        )
         if args.simulate:
             ok = [r for r in runs if r.simulated_success]
             energy = f"{np.mean([r.energy for r in ok]):.3f} J" if ok else "-"
             line += f"  reached the goal {len(ok)}/{len(runs)}  mean energy (reached) {energy}"
         print(line)
-    print(f"wrote {log_path}" + (f" and {db_path}" if db_path is not None else "")
-          + f" ({result.total_time:.1f} s)")  # fmt: skip
+    print(
+        f"wrote {log_path}"
+        + (f" and {db_path}" if db_path is not None else "")
+        + f" ({result.total_time:.1f} s)"
+    )
     return 0
 
 
@@ -393,8 +455,12 @@ def _export_mesh(mesh, out) -> None:
     if fmt == "obj":
         data = mesh.export(file_type="obj", header=WRITTEN_BY).encode()
     elif fmt == "glb":
-        data = mesh.export(file_type="glb", tree_postprocessor=lambda tree: tree["asset"].update(
-            generator=f"{WRITTEN_BY} (trimesh)"))  # fmt: skip
+        data = mesh.export(
+            file_type="glb",
+            tree_postprocessor=lambda tree: tree["asset"].update(
+                generator=f"{WRITTEN_BY} (trimesh)"
+            ),
+        )
     else:
         data = mesh.export(file_type=fmt)
         if fmt == "stl":  # binary STL: 80 free bytes of header
@@ -420,8 +486,13 @@ def _cmd_scene_build(args: argparse.Namespace) -> int:
     from roachplan.scenes import build_terrain, load_scene
 
     scene = load_scene(args.scene)
-    out = check_output_file(args.output, suffixes=(".stl", ".obj", ".ply", ".glb"),
-                            inputs=_scene_inputs(scene), kind=MESH_WRITTEN, force=args.force)  # fmt: skip
+    out = check_output_file(
+        args.output,
+        suffixes=(".stl", ".obj", ".ply", ".glb"),
+        inputs=_scene_inputs(scene),
+        kind=MESH_WRITTEN,
+        force=args.force,
+    )
     terrain = build_terrain(_scene_options(scene, args))
     for note in terrain.notes:
         print(f"roachplan: {note}", file=sys.stderr)
@@ -451,11 +522,14 @@ def _numbers(
         try:
             values.append(float(part))
         except ValueError:
-            raise error(f"{flag} {_clip(repr(text), 80)}: {expected}; {_clip(repr(part), 40)} "
-                        f"is not a number") from None  # fmt: skip
+            raise error(
+                f"{flag} {_clip(repr(text), 80)}: {expected}; {_clip(repr(part), 40)} "
+                f"is not a number"
+            ) from None
         if not math.isfinite(values[-1]):
-            raise error(f"{flag} {_clip(repr(text), 80)}: {expected}; {part.strip()} is not "
-                        f"a finite number")  # fmt: skip
+            raise error(
+                f"{flag} {_clip(repr(text), 80)}: {expected}; {part.strip()} is not a finite number"
+            )
     return values
 
 
@@ -510,8 +584,10 @@ def _capture_settings(args: argparse.Namespace):
         given["crop"] = [crop[:3], crop[3:]]
     near_far = given["depth_range"]
     if near_far is not None and not 0 <= near_far[0] < near_far[1]:
-        raise CaptureError(f"--depth-range {_clip(args.depth_range, 80)}: expected NEAR,FAR [m] "
-                           f"with 0 <= NEAR < FAR")  # fmt: skip
+        raise CaptureError(
+            f"--depth-range {_clip(args.depth_range, 80)}: expected NEAR,FAR [m] "
+            f"with 0 <= NEAR < FAR"
+        )
     settings = {k: v for k, v in given.items() if v is not None}
     try:
         return capture_settings(settings)
@@ -531,19 +607,23 @@ def _mesh_with_progress(path: str, settings):
 
 def _cmd_mesh(args: argparse.Namespace) -> int:
     settings = _capture_settings(args)
-    out = check_output_file(args.output, suffixes=(".stl", ".ply", ".obj"),
-                            inputs=(args.input, args.intrinsics), kind=MESH_WRITTEN,
-                            force=args.force)  # fmt: skip
+    out = check_output_file(
+        args.output,
+        suffixes=(".stl", ".ply", ".obj"),
+        inputs=(args.input, args.intrinsics),
+        kind=MESH_WRITTEN,
+        force=args.force,
+    )
     import open3d  # noqa: F401 - mapped here, not under the child's address-space limit
-    import roachplan.perception._pipeline  # noqa: F401
     import tqdm  # noqa: F401
+
+    import roachplan.perception._pipeline  # noqa: F401
     from roachplan.planning._isolated import run_isolated
 
     # In a child under the memory limit (issue 15): a capture that needs more ends in a clear
     # error, not by taking the machine; its progress bar is drawn by the child, which inherits
     # the libraries loaded above (loading them under the limit would fail first).
-    rec = run_isolated(_mesh_with_progress, args.input, settings, isolation="fork",
-                       task="meshing")  # fmt: skip
+    rec = run_isolated(_mesh_with_progress, args.input, settings, isolation="fork", task="meshing")
     _export_mesh(rec.mesh, out)
     report = {"input": args.input, "output": str(out), **rec.report()}
     if args.json:
@@ -561,8 +641,10 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
             f"support {100 * g.get('support_fraction', 1.0):.0f} % of the points, "
             f"{g.get('area_m2', 0.0):.2f} m^2 seen"
         )
-        print("camera pose in the world (x,y,z,qx,qy,qz,qw): "
-              + ",".join(f"{v:.5f}" for v in report["camera_pose"]))  # fmt: skip
+        print(
+            "camera pose in the world (x,y,z,qx,qy,qz,qw): "
+            + ",".join(f"{v:.5f}" for v in report["camera_pose"])
+        )
     for note in report["notes"]:
         print(f"note: {note}")
     for warning in report["warnings"]:
@@ -593,19 +675,32 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
     if region is not None:
         x0, y0, x1, y1 = region
         if not (all(map(math.isfinite, region)) and x0 < x1 and y0 < y1):
-            raise CaptureError(f"--region {args.region!r}: expected x0,y0,x1,y1 [m] in the "
-                               f"camera frame with x0 < x1 and y0 < y1")  # fmt: skip
+            raise CaptureError(
+                f"--region {args.region!r}: expected x0,y0,x1,y1 [m] in the "
+                f"camera frame with x0 < x1 and y0 < y1"
+            )
         if args.square is not None:
             raise CaptureError("pass either --square or --region, not both")
     settings = _capture_settings(args)
     if args.csv is not None:  # before the study's work, not after it
         header = study_csv([]).encode()  # a CSV that starts with the study's header: ours
-        check_output_file(args.csv, flag="--csv", suffixes=(".csv",),
-                          inputs=(args.capture, args.intrinsics), kind="a voxel-study table",
-                          replaceable=lambda head: head.startswith(header), force=args.force)  # fmt: skip
-    cap = load_capture(args.capture, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
-                       topic=settings.topic, units=settings.units,
-                       depth_units=settings.depth_units)  # fmt: skip
+        check_output_file(
+            args.csv,
+            flag="--csv",
+            suffixes=(".csv",),
+            inputs=(args.capture, args.intrinsics),
+            kind="a voxel-study table",
+            replaceable=lambda head: head.startswith(header),
+            force=args.force,
+        )
+    cap = load_capture(
+        args.capture,
+        intrinsics=settings.intrinsics,
+        depth_scale=settings.depth_scale,
+        topic=settings.topic,
+        units=settings.units,
+        depth_units=settings.depth_units,
+    )
     pts = cap.finite_points() - cap.sensor_origin
     total, where = len(pts), "the whole capture"
     if args.square is not None:
@@ -620,8 +715,16 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
     rows = voxel_study(pts, sizes)
     warning = planarity_warning(rows[0], float(np.median(np.linalg.norm(pts, axis=1))))
     if args.json:
-        print(json.dumps({"capture": args.capture, "region": where, "capture_points": total,
-                          **study_json(rows, warning)}))  # fmt: skip
+        print(
+            json.dumps(
+                {
+                    "capture": args.capture,
+                    "region": where,
+                    "capture_points": total,
+                    **study_json(rows, warning),
+                }
+            )
+        )
     else:
         print(f"{len(pts)} of {total} points: {where}")
         print(format_study(rows))
@@ -636,6 +739,7 @@ def _cmd_voxel_study(args: argparse.Namespace) -> int:
 def _cmd_synth_capture(args: argparse.Namespace) -> int:
     import numpy as np
     import trimesh
+
     from roachplan.perception import (
         NO_NOISE,
         NoiseModel,
@@ -651,13 +755,23 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
     target = _numbers(args.target, "--target", (3,))
     # A capture may be a real one, not ours to replace: an existing file needs --force.
     inputs = (*_scene_inputs(scene), args.intrinsics)
-    out = check_output_file(args.output, suffixes=(".png", ".pcd", ".ply", ".npy"), inputs=inputs,
-                            replaceable=None, kind="a capture, perhaps a real one, is "
-                            "replaced only with --force", force=args.force)  # fmt: skip
+    out = check_output_file(
+        args.output,
+        suffixes=(".png", ".pcd", ".ply", ".npy"),
+        inputs=inputs,
+        replaceable=None,
+        kind="a capture, perhaps a real one, is replaced only with --force",
+        force=args.force,
+    )
     if out.suffix.lower() == ".png":  # and its calibration beside it
-        check_output_file(out.with_suffix(".json"), flag="-o (the .png's sidecar)", inputs=inputs,
-                          replaceable=None, kind="a capture's calibration is replaced only "
-                          "with --force", force=args.force)  # fmt: skip
+        check_output_file(
+            out.with_suffix(".json"),
+            flag="-o (the .png's sidecar)",
+            inputs=inputs,
+            replaceable=None,
+            kind="a capture's calibration is replaced only with --force",
+            force=args.force,
+        )
     mesh = build_terrain_mesh(scene)
     if scene.ground is not None:  # the endless floor, as a big square
         g = trimesh.creation.box((100.0, 100.0, 0.01))
@@ -668,8 +782,10 @@ def _cmd_synth_capture(args: argparse.Namespace) -> int:
     noise = NO_NOISE if args.no_noise else NoiseModel()
     depth = render_depth(mesh, intr, pose, noise, np.random.default_rng(args.seed))
     written = save_depth(out, depth, intr, world_from_camera=pose)
-    print(f"wrote {', '.join(map(str, written))}: {intr.width}x{intr.height}, "
-          f"{np.mean(depth > 0) * 100:.1f} % of pixels measured, seed {args.seed}")  # fmt: skip
+    print(
+        f"wrote {', '.join(map(str, written))}: {intr.width}x{intr.height}, "
+        f"{np.mean(depth > 0) * 100:.1f} % of pixels measured, seed {args.seed}"
+    )
     return 0
 
 
@@ -677,54 +793,103 @@ def _add_perception_parsers(sub) -> None:
     from roachplan.perception import DEPTH_UNITS, FRAMES, METHODS, PRESETS
 
     def capture_flags(p):
-        p.add_argument("--intrinsics", default=None,
-                       help=f"depth images: a calibration file (.json, PCL .xml, OpenCV or ROS "
-                            f".yaml) or a preset: {', '.join(PRESETS)}")  # fmt: skip
-        for k, what in (("fx", "focal length x"), ("fy", "focal length y"),
-                        ("cx", "principal point x"), ("cy", "principal point y")):  # fmt: skip
-            p.add_argument(f"--{k}", type=float, default=None,
-                           help=f"depth images: {what} [px] (with the other three of "
-                                f"--fx --fy --cx --cy, instead of --intrinsics)")  # fmt: skip
-        p.add_argument("--depth-scale", type=float, default=None,
-                       help="depth images: units per metre (default: the calibration's or "
-                            "preset's, e.g. 5000 for tum-*, else 1000, i.e. mm)")  # fmt: skip
-        p.add_argument("--depth-units", choices=DEPTH_UNITS, default=None,
-                       help="depth images: kinect-disparity for a Kinect v1's raw 11-bit "
-                            "disparity (NYU Depth v2's raw dumps), converted to metres with "
-                            "NYU's model (default: depth in units of --depth-scale; raw "
-                            "disparity is recognised when plain)")  # fmt: skip
+        p.add_argument(
+            "--intrinsics",
+            default=None,
+            help=f"depth images: a calibration file (.json, PCL .xml, OpenCV or ROS "
+            f".yaml) or a preset: {', '.join(PRESETS)}",
+        )
+        for k, what in (
+            ("fx", "focal length x"),
+            ("fy", "focal length y"),
+            ("cx", "principal point x"),
+            ("cy", "principal point y"),
+        ):
+            p.add_argument(
+                f"--{k}",
+                type=float,
+                default=None,
+                help=f"depth images: {what} [px] (with the other three of "
+                f"--fx --fy --cx --cy, instead of --intrinsics)",
+            )
+        p.add_argument(
+            "--depth-scale",
+            type=float,
+            default=None,
+            help="depth images: units per metre (default: the calibration's or "
+            "preset's, e.g. 5000 for tum-*, else 1000, i.e. mm)",
+        )
+        p.add_argument(
+            "--depth-units",
+            choices=DEPTH_UNITS,
+            default=None,
+            help="depth images: kinect-disparity for a Kinect v1's raw 11-bit "
+            "disparity (NYU Depth v2's raw dumps), converted to metres with "
+            "NYU's model (default: depth in units of --depth-scale; raw "
+            "disparity is recognised when plain)",
+        )
         p.add_argument("--units", choices=("m", "mm"), default=None, help="point cloud units")
         p.add_argument("--topic", default=None, help="bags: the topic to read")
 
     p = sub.add_parser("mesh", help="capture (point cloud, depth image, bag) -> terrain mesh")
-    p.add_argument("input", metavar="INPUT",
-                   help=".pcd .ply .xyz .pts .npy .png .pgm .ppm .bag .db3 .mcap")  # fmt: skip
-    p.add_argument("-o", "--output", required=True,
-                   help="mesh file: .stl, .ply or .obj, in an existing folder; an existing file "
-                        "is replaced only if roachplan wrote it (else --force), never the input")  # fmt: skip
+    p.add_argument(
+        "input", metavar="INPUT", help=".pcd .ply .xyz .pts .npy .png .pgm .ppm .bag .db3 .mcap"
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="mesh file: .stl, .ply or .obj, in an existing folder; an existing file "
+        "is replaced only if roachplan wrote it (else --force), never the input",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--voxel", default=None, help="voxel size [m]: d or dx,dy,dz (default 0.01)")
     p.add_argument("--method", choices=METHODS, default=None, help="default: grid")
-    p.add_argument("--camera-pose", default=None,
-                   help="x,y,z,qx,qy,qz,qw of the camera in the world (default: from the ground)")  # fmt: skip
+    p.add_argument(
+        "--camera-pose",
+        default=None,
+        help="x,y,z,qx,qy,qz,qw of the camera in the world (default: from the ground)",
+    )
     p.add_argument("--crop", default=None, help="world box xmin,ymin,zmin,xmax,ymax,zmax [m]")
     p.add_argument("--seed", type=int, default=None, help="RANSAC seed (default 0)")
-    p.add_argument("--frame", choices=FRAMES, default=None,
-                   help="camera: optical frame (x right, y down, z forward); world: z up (or "
-                        "--up), e.g. a lidar or a map; default auto: what the file says")  # fmt: skip
-    p.add_argument("--up", default=None, metavar="X,Y,Z",
-                   help="up in the capture's frame (default: a calibration's pose, a bag's "
-                        "IMU, -y for a camera, +z for a world frame)")  # fmt: skip
-    p.add_argument("--ground-point", default=None, metavar="X,Y,Z",
-                   help="a point on the intended ground, capture frame [m]: the plane through "
-                        "it is the ground")  # fmt: skip
-    p.add_argument("--depth-range", default=None, metavar="NEAR,FAR",
-                   help="keep points this near/far [m] (default: 0.3,8 for a camera, all for "
-                        "a world frame)")  # fmt: skip
-    p.add_argument("--recentre", action=argparse.BooleanOptionalAction, default=None,
-                   help="put the cloud's centre at x = y = 0 (default: when georeferenced)")
-    p.add_argument("--json", action="store_true",
-                   help="print one JSON object: camera pose, ground, triangles, warnings")
+    p.add_argument(
+        "--frame",
+        choices=FRAMES,
+        default=None,
+        help="camera: optical frame (x right, y down, z forward); world: z up (or "
+        "--up), e.g. a lidar or a map; default auto: what the file says",
+    )
+    p.add_argument(
+        "--up",
+        default=None,
+        metavar="X,Y,Z",
+        help="up in the capture's frame (default: a calibration's pose, a bag's "
+        "IMU, -y for a camera, +z for a world frame)",
+    )
+    p.add_argument(
+        "--ground-point",
+        default=None,
+        metavar="X,Y,Z",
+        help="a point on the intended ground, capture frame [m]: the plane through "
+        "it is the ground",
+    )
+    p.add_argument(
+        "--depth-range",
+        default=None,
+        metavar="NEAR,FAR",
+        help="keep points this near/far [m] (default: 0.3,8 for a camera, all for a world frame)",
+    )
+    p.add_argument(
+        "--recentre",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="put the cloud's centre at x = y = 0 (default: when georeferenced)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object: camera pose, ground, triangles, warnings",
+    )
     capture_flags(p)
     p.set_defaults(func=_cmd_mesh)
 
@@ -733,18 +898,31 @@ def _add_perception_parsers(sub) -> None:
     )
     p.add_argument("capture", metavar="CAPTURE")
     p.add_argument("--sizes", default="1,2,5,10,20", help="voxel sizes [cm]")
-    p.add_argument("--square", type=float, default=None,
-                   help="use the points within this square around the optical axis [m]")  # fmt: skip
-    p.add_argument("--region", default=None, metavar="X0,Y0,X1,Y1",
-                   help="use the points with x0<=x<=x1, y0<=y<=y1 in the camera frame "
-                        "(x right, y down) [m]")  # fmt: skip
-    p.add_argument("--plane", action="store_true",
-                   help="use only the dominant plane's points (RANSAC), e.g. a room's wall")
+    p.add_argument(
+        "--square",
+        type=float,
+        default=None,
+        help="use the points within this square around the optical axis [m]",
+    )
+    p.add_argument(
+        "--region",
+        default=None,
+        metavar="X0,Y0,X1,Y1",
+        help="use the points with x0<=x<=x1, y0<=y<=y1 in the camera frame (x right, y down) [m]",
+    )
+    p.add_argument(
+        "--plane",
+        action="store_true",
+        help="use only the dominant plane's points (RANSAC), e.g. a room's wall",
+    )
     p.add_argument("--seed", type=int, default=None, help="RANSAC seed of --plane (default 0)")
     p.add_argument("--json", action="store_true", help="print the study as JSON")
-    p.add_argument("--csv", default=None,
-                   help="also write the table to this .csv file (an existing file is replaced "
-                        "only if it is a voxel-study table, else with --force)")  # fmt: skip
+    p.add_argument(
+        "--csv",
+        default=None,
+        help="also write the table to this .csv file (an existing file is replaced "
+        "only if it is a voxel-study table, else with --force)",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--voxel", default=None, help=argparse.SUPPRESS)
     capture_flags(p)
@@ -753,7 +931,9 @@ def _add_perception_parsers(sub) -> None:
     p = sub.add_parser("synth-capture", help="render a scene as a noisy Kinect v2 depth capture")
     p.add_argument("scene", metavar="SCENE", help="library scene name or scene .yaml")
     p.add_argument(
-        "-o", "--output", required=True,
+        "-o",
+        "--output",
+        required=True,
         help=".png (+ .json sidecar), .pcd, .ply or .npy in an existing folder; an existing "
         "file is replaced only with --force",
     )
@@ -777,20 +957,26 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
 
     ratios = _numbers(args.ratios, "--ratios", tuple(range(2, 33)), SimError) or DEFAULT_RATIOS
     if any(r < 1.0 for r in ratios):
-        raise SimError(f"--ratios {_clip(repr(args.ratios), 80)}: give two or more right/left "
-                       f"ratios >= 1")  # fmt: skip
+        raise SimError(
+            f"--ratios {_clip(repr(args.ratios), 80)}: give two or more right/left ratios >= 1"
+        )
     if len(set(ratios)) < 5:  # the turning curve has four parameters
-        raise SimError(f"--ratios {_clip(repr(args.ratios), 80)}: the turning curve needs 5 or "
-                       f"more distinct right/left ratios >= 1")  # fmt: skip
+        raise SimError(
+            f"--ratios {_clip(repr(args.ratios), 80)}: the turning curve needs 5 or "
+            f"more distinct right/left ratios >= 1"
+        )
+
     # Its own earlier calibration may be replaced; a folder of anything else is refused.
     def earlier_calibration(folder) -> bool:
         return {n for n in os.listdir(folder) if not is_partial(n)} <= {*CALIBRATION_FILES}
 
     out = prepare_output_folder(
-        args.out, flag="--out", owned=earlier_calibration,
+        args.out,
+        flag="--out",
+        owned=earlier_calibration,
         accepts=f"--out takes a new or empty folder, or one holding only an earlier "
         f"calibration ({', '.join(CALIBRATION_FILES)})",
-    )  # fmt: skip
+    )
     samples, model, fit, spins = calibrate_turning(out, ratios=ratios, duration=args.duration)
     print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
     for s in samples:
@@ -803,11 +989,15 @@ def _cmd_calibrate_turning(args: argparse.Namespace) -> int:
         f"report's line: curvature = {model.slope:.3f} ln(ratio) {model.intercept:+.3f}  "
         f"(R^2 {model.r_squared:.3f})"
     )
-    print(f"turning on the spot:\n{'omega rad/s':>11} {'rate rad/s':>10} {'drift mm/rad':>12} "
-          f"{'wander mm':>9} {'J/rad':>7}")  # fmt: skip
+    print(
+        f"turning on the spot:\n{'omega rad/s':>11} {'rate rad/s':>10} {'drift mm/rad':>12} "
+        f"{'wander mm':>9} {'J/rad':>7}"
+    )
     for t in spins:
-        print(f"{t.omega:11g} {t.yaw_rate:10.3f} {1000 * t.drift:12.2f} {1000 * t.wander:9.1f} "
-              f"{t.energy_per_radian:7.4f}")  # fmt: skip
+        print(
+            f"{t.omega:11g} {t.yaw_rate:10.3f} {1000 * t.drift:12.2f} {1000 * t.wander:9.1f} "
+            f"{t.energy_per_radian:7.4f}"
+        )
     print(f"wrote {args.out}/{', '.join(CALIBRATION_FILES)}")
     return 0
 
@@ -821,24 +1011,42 @@ def _add_experiment_parser(sub) -> None:
     p.add_argument(
         "spec", metavar="SPEC", help=f"{', '.join(list_experiments())} or an experiment .yaml"
     )
-    p.add_argument("--trials", type=int, default=None,
-                   help="total trials, split evenly over the spec's routes (default: the spec's)")  # fmt: skip
-    p.add_argument("--reference", action="store_true",
-                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
-                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help="total trials, split evenly over the spec's routes (default: the spec's)",
+    )
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+        "arcs no tighter than the robot turns, and the tracking driver)",
+    )
     p.add_argument(
         "--workers", type=int, default=None, help="parallel workers (default: all cores)"
     )
-    p.add_argument("--out", default=None,
-                   help="results folder, created if new (default: results/SPEC); an existing one "
-                        "must be empty or hold a roachplan experiment (to --resume)")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="continue the experiment in --out (its --trials and --repeats by default)")  # fmt: skip
+    p.add_argument(
+        "--out",
+        default=None,
+        help="results folder, created if new (default: results/SPEC); an existing one "
+        "must be empty or hold a roachplan experiment (to --resume)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the experiment in --out (its --trials and --repeats by default)",
+    )
     p.add_argument("--repeats", type=int, default=None, help="re-drives of the best path")
-    p.add_argument("--backend", choices=("local", "ray"), default="local",
-                   help="local worker processes, or a Ray cluster")  # fmt: skip
-    p.add_argument("--address", default=None,
-                   help="Ray cluster address (default: start a local Ray instance)")  # fmt: skip
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="local worker processes, or a Ray cluster",
+    )
+    p.add_argument(
+        "--address", default=None, help="Ray cluster address (default: start a local Ray instance)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_experiment)
 
@@ -846,14 +1054,21 @@ def _add_experiment_parser(sub) -> None:
 def _cmd_replay(args: argparse.Namespace) -> int:
     from ._replay import SUFFIXES, load_replay, replay_inputs, replay_written, write_replay
 
-    out = check_output_file(args.output, suffixes=SUFFIXES, inputs=replay_inputs(args.folder),
-                            replaceable=replay_written, kind="a replay roachplan wrote",
-                            force=args.force)  # fmt: skip
+    out = check_output_file(
+        args.output,
+        suffixes=SUFFIXES,
+        inputs=replay_inputs(args.folder),
+        replaceable=replay_written,
+        kind="a replay roachplan wrote",
+        force=args.force,
+    )
     replay = load_replay(args.folder, trial=args.trial)
     size = write_replay(replay, out)
     shown = replay.trials[replay.shown]
-    print(f"wrote {out} ({size / 1e6:.1f} MB): {replay.title}; {shown['label']} plays "
-          f"({len(replay.frames)} frames, {shown['outcome']})")  # fmt: skip
+    print(
+        f"wrote {out} ({size / 1e6:.1f} MB): {replay.title}; {shown['label']} plays "
+        f"({len(replay.frames)} frames, {shown['outcome']})"
+    )
     if replay.note:
         print(f"roachplan: {replay.note}", file=sys.stderr)
     return 0
@@ -863,16 +1078,27 @@ def _add_replay_parser(sub) -> None:
     p = sub.add_parser(
         "replay", help="a trial, experiment or choice as one HTML file that plays offline"
     )
-    p.add_argument("folder", metavar="DIR",
-                   help="an experiment's results folder (`experiment --out`) or a choice's "
-                        "(`choose --out`)")  # fmt: skip
-    p.add_argument("--trial", type=int, default=None, metavar="K",
-                   help="only trial K of the experiment (default: every trial drawn, the best "
-                        "path's trial walking)")  # fmt: skip
-    p.add_argument("-o", "--output", required=True,
-                   help=".html (standalone: viser's client and the recording in one file, opens "
-                        "offline) or .viser (viser's recording), in an existing folder; an "
-                        "existing file is replaced only if roachplan wrote it (else --force)")  # fmt: skip
+    p.add_argument(
+        "folder",
+        metavar="DIR",
+        help="an experiment's results folder (`experiment --out`) or a choice's (`choose --out`)",
+    )
+    p.add_argument(
+        "--trial",
+        type=int,
+        default=None,
+        metavar="K",
+        help="only trial K of the experiment (default: every trial drawn, the best "
+        "path's trial walking)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help=".html (standalone: viser's client and the recording in one file, opens "
+        "offline) or .viser (viser's recording), in an existing folder; an "
+        "existing file is replaced only if roachplan wrote it (else --force)",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=_cmd_replay)
 
@@ -885,31 +1111,52 @@ def build_parser() -> argparse.ArgumentParser:
         "file only if roachplan wrote it (or with --force). Exit status: 0 done, 1 a run that "
         "failed, 2 bad input.",
     )
-    parser.add_argument("--debug", action="store_true",
-                        help="show the Python traceback of an error (for a bug report)")  # fmt: skip
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the Python traceback of an error (for a bug report)",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("serve", help="start the browser app")
-    p.add_argument("--scene", default="double_bridge",
-                   help="library scene name, scene .yaml, or a terrain file (capture, mesh, .scad)")
+    p.add_argument(
+        "--scene",
+        default="double_bridge",
+        help="library scene name, scene .yaml, or a terrain file (capture, mesh, .scad)",
+    )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default: loopback only)")
     p.add_argument("--port", type=int, default=8080)
     p.set_defaults(func=_cmd_serve)
 
-    terrain_help = ("library scene name, scene .yaml, or a terrain file (capture, mesh, .scad) "
-                    "as a scene with start and goal picked")  # fmt: skip
+    terrain_help = (
+        "library scene name, scene .yaml, or a terrain file (capture, mesh, .scad) "
+        "as a scene with start and goal picked"
+    )
     p = sub.add_parser("trial", help="one headless plan-and-drive trial")
     p.add_argument("--scene", default=None, help=f"{terrain_help} (default: double_bridge)")
-    p.add_argument("--scale", type=float, default=None, metavar="S",
-                   help="scale every terrain model by S (0.001: millimetres)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        metavar="S",
+        help="scale every terrain model by S (0.001: millimetres)",
+    )
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the scene's)")
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None)
-    p.add_argument("--from", dest="from_dir", default=None, metavar="DIR",
-                   help="re-run a trial of the experiment in DIR exactly (with --trial K)")  # fmt: skip
+    p.add_argument(
+        "--from",
+        dest="from_dir",
+        default=None,
+        metavar="DIR",
+        help="re-run a trial of the experiment in DIR exactly (with --trial K)",
+    )
     p.add_argument("--trial", type=int, default=None, metavar="K", help="trial number in DIR")
-    p.add_argument("--reference", action="store_true",
-                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
-                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+        "arcs no tighter than the robot turns, and the tracking driver)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_trial)
 
@@ -920,8 +1167,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
     p.add_argument("--scene", default="double_bridge", help=terrain_help)
-    p.add_argument("--scale", type=float, default=None, metavar="S",
-                   help="scale every terrain model by S (0.001: millimetres)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        metavar="S",
+        help="scale every terrain model by S (0.001: millimetres)",
+    )
     p.add_argument("--planner", choices=PLANNER_NAMES, default=None, help="default: the scene's")
     p.add_argument("--seed", type=int, default=None, help="first seed (default: the scene's)")
     p.add_argument("--count", type=int, default=1, help="number of distinct paths, by route")
@@ -934,29 +1186,47 @@ def build_parser() -> argparse.ArgumentParser:
         ("optimize", "let optimizing planners refine to their budget"),
     ):
         p.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None, help=what)
-    p.add_argument("--reference", action="store_true",
-                   help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
-                        "arcs no tighter than the robot turns, and the tracking driver)")  # fmt: skip
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="the report's raw paths and algorithms 1-2 (default: drivable plans, "
+        "arcs no tighter than the robot turns, and the tracking driver)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_plan)
 
-    p = sub.add_parser("benchmark",
-                       help="compare planners on a scene: an OMPL benchmark log (Planner Arena)")  # fmt: skip
+    p = sub.add_parser(
+        "benchmark", help="compare planners on a scene: an OMPL benchmark log (Planner Arena)"
+    )
     p.add_argument("--scene", default="double_bridge", help=terrain_help)
-    p.add_argument("--planners", required=True, metavar="P,Q,...",
-                   help=f"comma-separated, from {', '.join(PLANNER_NAMES)}")  # fmt: skip
+    p.add_argument(
+        "--planners",
+        required=True,
+        metavar="P,Q,...",
+        help=f"comma-separated, from {', '.join(PLANNER_NAMES)}",
+    )
     p.add_argument("--runs", type=int, required=True, help="plans per planner (run k: seed + k)")
     p.add_argument(
         "--time-limit", type=float, default=None, help="per plan [s] (default: the scene's)"
     )
     p.add_argument("--seed", type=int, default=None, help="first seed (default: the scene's)")
-    p.add_argument("--simulate", action="store_true",
-                   help="drive every plan in PyBullet: success, energy, drive time, failure mode")  # fmt: skip
-    p.add_argument("-o", "--output", required=True,
-                   help="the OMPL benchmark log (.log), in an existing folder; an existing file is "
-                        "replaced only if roachplan wrote it (else --force), never an input")  # fmt: skip
-    p.add_argument("--db", default=None,
-                   help="also the SQLite database Planner Arena opens (.db, .sqlite, .sqlite3)")
+    p.add_argument(
+        "--simulate",
+        action="store_true",
+        help="drive every plan in PyBullet: success, energy, drive time, failure mode",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="the OMPL benchmark log (.log), in an existing folder; an existing file is "
+        "replaced only if roachplan wrote it (else --force), never an input",
+    )
+    p.add_argument(
+        "--db",
+        default=None,
+        help="also the SQLite database Planner Arena opens (.db, .sqlite, .sqlite3)",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_benchmark)
@@ -964,26 +1234,45 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "calibrate-turning", help="sweep motor-speed ratios on flat ground (appendix A, fig. 3.4)"
     )
-    p.add_argument("--out", required=True,
-                   help="folder for turning.csv/.png/_model.json and spin.csv/.png, created if "
-                        "new; an existing one must be empty or hold only an earlier "
-                        "calibration")  # fmt: skip
-    p.add_argument("--ratios", default=None,
-                   help="right/left speed ratios (default: every 0.1 from 1 to 3 and 1.25, 1.75)")
-    p.add_argument("--duration", type=float, default=10.0,
-                   help="simulated seconds per ratio and per steady spin")  # fmt: skip
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder for turning.csv/.png/_model.json and spin.csv/.png, created if "
+        "new; an existing one must be empty or hold only an earlier "
+        "calibration",
+    )
+    p.add_argument(
+        "--ratios",
+        default=None,
+        help="right/left speed ratios (default: every 0.1 from 1 to 3 and 1.25, 1.75)",
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=10.0,
+        help="simulated seconds per ratio and per steady spin",
+    )
     p.set_defaults(func=_cmd_calibrate_turning)
 
     def _scad_flags(q) -> None:
         """The OpenSCAD render's time limit and backend, as every command that renders takes."""
-        q.add_argument("--scad-timeout", type=float, default=None, metavar="SECONDS",
-                       help="time limit of each OpenSCAD render (default: the scene's, else 600)")
-        q.add_argument("--scad-backend", choices=("auto", "cgal", "manifold"), default=None,
-                       help="who renders each OpenSCAD model: auto (manifold unless the model "
-                            "uses something it renders differently, such as surface(), then "
-                            "the binary; a note says which and why), cgal (the openscad "
-                            "binary) or manifold (openscad-evaluator, faster on CSG-heavy "
-                            "models; refuses surface()) (default: the scene's, else auto)")  # fmt: skip
+        q.add_argument(
+            "--scad-timeout",
+            type=float,
+            default=None,
+            metavar="SECONDS",
+            help="time limit of each OpenSCAD render (default: the scene's, else 600)",
+        )
+        q.add_argument(
+            "--scad-backend",
+            choices=("auto", "cgal", "manifold"),
+            default=None,
+            help="who renders each OpenSCAD model: auto (manifold unless the model "
+            "uses something it renders differently, such as surface(), then "
+            "the binary; a note says which and why), cgal (the openscad "
+            "binary) or manifold (openscad-evaluator, faster on CSG-heavy "
+            "models; refuses surface()) (default: the scene's, else auto)",
+        )
 
     p = sub.add_parser("scene", help="the scene library")
     scene_sub = p.add_subparsers(dest="scene_command", required=True)
@@ -997,20 +1286,30 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=_cmd_scene_check)
     q = scene_sub.add_parser("build", help="export a scene's assembled terrain mesh")
     q.add_argument("scene", metavar="NAME", help="library scene name or scene .yaml")
-    q.add_argument("-o", "--output", required=True,
-                   help="mesh file: .stl, .obj, .ply or .glb, in an existing folder; an existing "
-                        "file is replaced only if roachplan wrote it (else --force), never an "
-                        "input")  # fmt: skip
-    q.add_argument("--scale", type=float, default=None, metavar="S",
-                   help="scale every terrain model by S before placing it (0.001: millimetres)")
+    q.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="mesh file: .stl, .obj, .ply or .glb, in an existing folder; an existing "
+        "file is replaced only if roachplan wrote it (else --force), never an "
+        "input",
+    )
+    q.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        metavar="S",
+        help="scale every terrain model by S before placing it (0.001: millimetres)",
+    )
     _scad_flags(q)
     q.add_argument("--force", action="store_true", help=FORCE_HELP)
     q.set_defaults(func=_cmd_scene_build)
     # --debug after the command too (`roachplan plan --debug`); SUPPRESS keeps the top level's
     # value when it is not repeated there.
     for command in _all_parsers(parser)[1:]:
-        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                             help=argparse.SUPPRESS)  # fmt: skip
+        command.add_argument(
+            "--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+        )
     return parser
 
 
@@ -1042,7 +1341,9 @@ class _Parser(argparse.ArgumentParser):
 def _clip(text: str, limit: int = 2000) -> str:
     """text, cut to at most about `limit` characters, saying how much was cut."""
     text = str(text)
-    return text if len(text) <= limit else f"{text[:limit]}... ({len(text) - limit} more characters)"
+    return (
+        text if len(text) <= limit else f"{text[:limit]}... ({len(text) - limit} more characters)"
+    )
 
 
 MAX_PLAN_COUNT = 100
@@ -1085,8 +1386,19 @@ def check_flags(args: argparse.Namespace) -> None:
             raise UsageError(f"{flag} {v:g}: expected a number {accepted} {unit}".rstrip())
 
 
-PATH_ERRNOS = {errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.EPERM, errno.EROFS,
-               errno.EEXIST, errno.ENAMETOOLONG, errno.ELOOP, errno.EINVAL, errno.EXDEV}  # fmt: skip
+PATH_ERRNOS = {
+    errno.ENOENT,
+    errno.ENOTDIR,
+    errno.EISDIR,
+    errno.EACCES,
+    errno.EPERM,
+    errno.EROFS,
+    errno.EEXIST,
+    errno.ENAMETOOLONG,
+    errno.ELOOP,
+    errno.EINVAL,
+    errno.EXDEV,
+}
 """OSErrors about a path the user gave (exit 2); others (a full disk, an I/O error) are a run
 that failed (exit 1)."""
 
@@ -1115,8 +1427,11 @@ def report_error(exc: BaseException, debug: bool) -> int:
     # A bug of ours, not the user's input: say so in one line rather than hide it.
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
     hint = "" if debug else "; re-run with --debug for the traceback"
-    print(f"roachplan: internal error: {type(exc).__name__}: {_clip(first, 300)}{hint} (please "
-          f"report it)", file=sys.stderr)  # fmt: skip
+    print(
+        f"roachplan: internal error: {type(exc).__name__}: {_clip(first, 300)}{hint} (please "
+        f"report it)",
+        file=sys.stderr,
+    )
     return 1
 
 

@@ -54,6 +54,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._benchmark import write_benchmark_db as write_benchmark_db
     from ._errors import ExperimentError as ExperimentError
     from ._errors import OutputError as OutputError
+    from ._library import list_experiments as list_experiments
     from ._manifest import read_manifest as read_manifest
     from ._outputs import WRITTEN_BY as WRITTEN_BY
     from ._outputs import atomic_path as atomic_path
@@ -68,7 +69,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._runner import rerun_trial as rerun_trial
     from ._runner import run_experiment as run_experiment
     from ._spec import ExperimentSpec as ExperimentSpec
-    from ._library import list_experiments as list_experiments
     from ._spec import load_experiment as load_experiment
     from ._store import ResultStore as ResultStore
     from ._summary import RouteSummary as RouteSummary

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import get_args
 
 import numpy as np
+
 from roachplan.planning import PlannerConfig, PlanResult
 from roachplan.scenes import World
 
@@ -39,9 +40,17 @@ from ._outputs import WRITTEN_BY, atomic_path
 from ._trial import TrialOutcome, finish_trial, plan
 
 STATUS = (
-    "Unknown status", "Invalid start", "Invalid goal", "Unrecognized goal type", "Timeout",
-    "Approximate solution", "Exact solution", "Crash", "Unknown status", "Unknown status",
-)  # fmt: skip
+    "Unknown status",
+    "Invalid start",
+    "Invalid goal",
+    "Unrecognized goal type",
+    "Timeout",
+    "Approximate solution",
+    "Exact solution",
+    "Crash",
+    "Unknown status",
+    "Unknown status",
+)
 """OMPL's `status` enum as OMPL 1.7.0's Benchmark writes it: PlannerStatus(i).asString() for i
 below TYPE_COUNT (1.7.0 names ABORT and INFEASIBLE "Unknown status"; a test checks the list
 against the bindings)."""
@@ -161,7 +170,7 @@ def benchmark_run(planned: PlanResult, trial=None) -> BenchmarkRun:
             energy=trial.energy if driven else None,
             relative_energy=trial.relative_energy if driven else None,
             drive_time=trial.drive_time if driven else None,
-        )  # fmt: skip
+        )
     return BenchmarkRun(
         planner=planned.planner,
         seed=planned.seed,
@@ -170,7 +179,7 @@ def benchmark_run(planned: PlanResult, trial=None) -> BenchmarkRun:
         status=EXACT_SOLUTION if solved else TIMEOUT,
         solution_length=(
             float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if solved else None
-        ),  # fmt: skip
+        ),
         solution_smoothness=_xy_smoothness(xy) if solved else None,
         solution_segments=len(xy) - 1 if solved else None,
         collision_checks=planned.validity_checks,
@@ -208,8 +217,9 @@ def run_benchmark(
                 planned = plan(world, seed=seed + k, planner=cfg)
                 trial = None
                 if sim is not None:
-                    trial = finish_trial(world, planned, start=scene.start, goal=scene.goal,
-                                         sim=sim)  # fmt: skip
+                    trial = finish_trial(
+                        world, planned, start=scene.start, goal=scene.goal, sim=sim
+                    )
                 out.append(benchmark_run(planned, trial))
                 if on_run is not None:
                     on_run(out[-1])
@@ -217,16 +227,24 @@ def run_benchmark(
         if sim is not None:
             sim.close()
     (xa, ya), (xb, yb) = scene.bounds
-    setup = "\n".join([
-        WRITTEN_BY,
-        f"scene {scene.name}",
-        "start x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.start),
-        "goal x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.goal),
-        f"bounds x [{xa:g}, {xb:g}] y [{ya:g}, {yb:g}] m",
-        f"run k plans with seed {seed} + k" + (
-            f"; each plan driven by the {scene.driver.kind} driver in PyBullet" if simulate
-            else ""),
-    ]) + "\n"  # fmt: skip
+    setup = (
+        "\n".join(
+            [
+                WRITTEN_BY,
+                f"scene {scene.name}",
+                "start x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.start),
+                "goal x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.goal),
+                f"bounds x [{xa:g}, {xb:g}] y [{ya:g}, {yb:g}] m",
+                f"run k plans with seed {seed} + k"
+                + (
+                    f"; each plan driven by the {scene.driver.kind} driver in PyBullet"
+                    if simulate
+                    else ""
+                ),
+            ]
+        )
+        + "\n"
+    )
     return BenchmarkResult(
         name=re.sub(r"\s+", "_", scene.name) or "NO_NAME",
         hostname=(socket.gethostname().split() or ["UNKNOWN"])[0],
@@ -252,8 +270,9 @@ def _settings(cfg: PlannerConfig) -> list[tuple[str, str]]:
         if f.name == "keep_roadmap":  # how we ask for the graph, not how we plan
             continue
         if dataclasses.is_dataclass(value):
-            flat.update({f"{f.name}.{g.name}": getattr(value, g.name)
-                         for g in dataclasses.fields(value)})  # fmt: skip
+            flat.update(
+                {f"{f.name}.{g.name}": getattr(value, g.name) for g in dataclasses.fields(value)}
+            )
         else:
             flat[f.name] = value
     return sorted((k, _text(v)) for k, v in flat.items())
@@ -390,28 +409,43 @@ def _fill_db(conn: sqlite3.Connection, result: BenchmarkResult, props) -> None:
     for name, kind in ((_column(n), k) for n, k, _ in props):
         c.execute(f"ALTER TABLE runs ADD {name} {kind}")
     for name, values in _enums(result.simulated):
-        c.executemany("INSERT INTO enums VALUES (?, ?, ?)",
-                      [(name, j, v) for j, v in enumerate(values)])  # fmt: skip
+        c.executemany(
+            "INSERT INTO enums VALUES (?, ?, ?)", [(name, j, v) for j, v in enumerate(values)]
+        )
     c.execute(
         "INSERT INTO experiments (name, totaltime, timelimit, memorylimit, runcount, version, "
         "hostname, cpuinfo, date, seed, setup, simulated) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
-        (result.name, result.total_time, result.time_limit, result.memory_limit,
-         result.runs_per_planner, f"OMPL {result.ompl_version}", result.hostname, None,
-         result.started, str(result.seed), result.setup, int(result.simulated)),
-    )  # fmt: skip
+        (
+            result.name,
+            result.total_time,
+            result.time_limit,
+            result.memory_limit,
+            result.runs_per_planner,
+            f"OMPL {result.ompl_version}",
+            result.hostname,
+            None,
+            result.started,
+            str(result.seed),
+            result.setup,
+            int(result.simulated),
+        ),
+    )
     experiment = c.lastrowid
     columns = ", ".join(["experimentid", "plannerid"] + [_column(n) for n, _, _ in props])
     marks = ", ".join("?" * (len(props) + 2))
     for cfg in result.planners:
         # The script's settings: each common-property line with its newline, then ";".
         settings = "".join(f"{k} = {v}\n;" for k, v in _settings(cfg))
-        c.execute("INSERT INTO plannerConfigs (name, settings) VALUES (?, ?)",
-                  (_planner_name(cfg), settings))  # fmt: skip
+        c.execute(
+            "INSERT INTO plannerConfigs (name, settings) VALUES (?, ?)",
+            (_planner_name(cfg), settings),
+        )
         planner = c.lastrowid
         for r in result.runs_of(cfg.name):
             values = [_db_value(value(r)) for _, _, value in props]
-            c.execute(f"INSERT INTO runs ({columns}) VALUES ({marks})",
-                      [experiment, planner, *values])  # fmt: skip
+            c.execute(
+                f"INSERT INTO runs ({columns}) VALUES ({marks})", [experiment, planner, *values]
+            )
 
 
 def _db_value(v):

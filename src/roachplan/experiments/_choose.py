@@ -126,8 +126,11 @@ def energy_excess_bound(best: Candidate, other: Candidate, conf: float, de: floa
     double_bridge_rough they explain a third to a half of its spread); +inf with fewer than 2
     such worlds. <= 0: at confidence conf, best needs at most (1 + de) times other's energy."""
     mine = {r["seed"]: r["relative_energy"] for r in best.successes}
-    diffs = [mine[r["seed"]] - (1 + de) * r["relative_energy"]
-             for r in other.successes if r["seed"] in mine]  # fmt: skip
+    diffs = [
+        mine[r["seed"]] - (1 + de) * r["relative_energy"]
+        for r in other.successes
+        if r["seed"] in mine
+    ]
     return mean_interval(diffs, conf)[2] if len(diffs) >= 2 else math.inf
 
 
@@ -173,17 +176,26 @@ class Candidate:
         fails = [r for r in self.rollouts if r["outcome"] != "success"]
         mean_j = float(np.mean(joules)) if joules else math.nan
         return {
-            "candidate": self.index, "route": self.route, "plan_seed": self.seed,
-            "length_m": round(self.length, 3), "rollouts": self.n, "successes": len(ok),
-            "p_success": p, "p_low": p_lo, "p_high": p_hi,
-            "relative_energy": e, "relative_energy_low": e_lo, "relative_energy_high": e_hi,
-            "energy_j": mean_j, "energy_j_per_m": mean_j / self.length,
+            "candidate": self.index,
+            "route": self.route,
+            "plan_seed": self.seed,
+            "length_m": round(self.length, 3),
+            "rollouts": self.n,
+            "successes": len(ok),
+            "p_success": p,
+            "p_low": p_lo,
+            "p_high": p_hi,
+            "relative_energy": e,
+            "relative_energy_low": e_lo,
+            "relative_energy_high": e_hi,
+            "energy_j": mean_j,
+            "energy_j_per_m": mean_j / self.length,
             "cost_of_transport": mean_j / (mass * GRAVITY * self.length),
             "drive_time_s": float(np.mean([r["drive_time"] for r in ok])) if ok else math.nan,
             "failures": dict(Counter(r["outcome"] for r in fails)),
             "failed_at": [[round(v, 3) for v in r["end"]] for r in fails[:10]],
             "out": self.out,
-        }  # fmt: skip
+        }
 
 
 @dataclass(frozen=True)
@@ -221,8 +233,11 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
             shapes.append(shape)
             picked.append((route, planned))
 
-    vias = {name: v for name, region in world.scene.routes
-            if (v := _via_pose(world, region)) is not None}  # fmt: skip
+    vias = {
+        name: v
+        for name, region in world.scene.routes
+        if (v := _via_pose(world, region)) is not None
+    }
     tries, misses = 0, Counter()
     while vias and len(picked) < cfg.candidates and tries < 3 * cfg.candidates:
         for name, via in list(vias.items()):
@@ -245,8 +260,16 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
     for i, (route, planned) in enumerate(picked):
         xyz = planned.path_xyz
         length = float(np.sum(np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)))
-        out.append(Candidate(index=i, route=route, seed=planned.seed, path_xyz=xyz,
-                             length=max(length, 1e-6), spins=planned.spins))  # fmt: skip
+        out.append(
+            Candidate(
+                index=i,
+                route=route,
+                seed=planned.seed,
+                path_xyz=xyz,
+                length=max(length, 1e-6),
+                spins=planned.spins,
+            )
+        )
     return out
 
 
@@ -259,7 +282,9 @@ def _via_pose(world, region) -> tuple[float, float, float] | None:
     heading = math.atan2(sc.goal[1] - sc.start[1], sc.goal[0] - sc.start[0])
     (x0, y0), (x1, y1) = region
     cells = world.regions.cell_centres(world.regions.standable)
-    inside = cells[(cells[:, 0] >= x0) & (cells[:, 0] <= x1) & (cells[:, 1] >= y0) & (cells[:, 1] <= y1)]
+    inside = cells[
+        (cells[:, 0] >= x0) & (cells[:, 0] <= x1) & (cells[:, 1] >= y0) & (cells[:, 1] <= y1)
+    ]
     centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
     for xy in inside[np.argsort(np.linalg.norm(inside - centre, axis=1))][:20]:
         for yaw in (heading, heading + math.pi):
@@ -289,8 +314,9 @@ def _plan_via(world, via, *, seed: int) -> PlanResult | None:
     )
 
 
-def _eliminate(alive: list[Candidate], conf: float, min_success: float | None,
-               dp: float = 0.0) -> None:  # fmt: skip
+def _eliminate(
+    alive: list[Candidate], conf: float, min_success: float | None, dp: float = 0.0
+) -> None:
     """Mark the candidates that are clearly beaten (see the module docstring). On energy, only
     by a candidate that is at least as safe at confidence conf: its P lower bound clears
     min_success, or this one's P upper bound less dp (the indifference in P). A point estimate
@@ -312,8 +338,11 @@ def _eliminate(alive: list[Candidate], conf: float, min_success: float | None,
         for d in still:
             if d is c or d.out:
                 continue
-            safe_enough = (p[d.index][1] >= min_success if min_success is not None
-                           else p[d.index][1] >= p[c.index][2] - dp)  # fmt: skip
+            safe_enough = (
+                p[d.index][1] >= min_success
+                if min_success is not None
+                else p[d.index][1] >= p[c.index][2] - dp
+            )
             if safe_enough and e[d.index][2] < e[c.index][1]:
                 c.out = f"costs more energy than candidate {d.index} (intervals apart)"
                 break
@@ -409,8 +438,10 @@ def _decided(alive: list[Candidate], conf: float, cfg: ChooseConfig) -> str:
             return f"only one candidate clears P(success) >= {cfg.min_success:g}"
     if within_zone(alive, conf, cfg.min_success, cfg.indifference):
         dp, de = cfg.indifference
-        return (f"within the indifference zone (P {dp:g}, energy {de:.0%}) at "
-                f"{cfg.confidence:.0%} confidence")  # fmt: skip
+        return (
+            f"within the indifference zone (P {dp:g}, energy {de:.0%}) at "
+            f"{cfg.confidence:.0%} confidence"
+        )
     return ""
 
 
@@ -501,8 +532,11 @@ def race(
             stopped, cut_short = f"rollout cap of {cfg.rollouts} reached", True
             break
         per = cfg.batch if room is None else min(cfg.batch, room // len(targets))
-        calls = [(c.index, c.path_xyz.tolist(), world_seed(cfg.seed, c.n + j))
-                 for c in targets for j in range(per)]  # fmt: skip
+        calls = [
+            (c.index, c.path_xyz.tolist(), world_seed(cfg.seed, c.n + j))
+            for c in targets
+            for j in range(per)
+        ]
         # Stop before a round that would overrun the budget (a rollout takes about as long as
         # one of the last round did).
         if cfg.budget_s is not None and (
@@ -519,20 +553,30 @@ def race(
         used += len(calls)
         _eliminate(alive, conf, cfg.min_success, cfg.indifference[0])
         if progress is not None:
-            frac = used / cfg.rollouts if cfg.rollouts else (time.monotonic() - t0) / (cfg.budget_s or 1)
+            frac = (
+                used / cfg.rollouts
+                if cfg.rollouts
+                else (time.monotonic() - t0) / (cfg.budget_s or 1)
+            )
             left = sum(not c.out for c in candidates)
-            progress(f"{used} rollouts, {left} of {len(candidates)} candidates in the race", min(frac, 1.0))
+            progress(
+                f"{used} rollouts, {left} of {len(candidates)} candidates in the race",
+                min(frac, 1.0),
+            )
     ordered = rank(candidates, conf, cfg.min_success)
     chosen = next((c.index for c in ordered if c.successes), None)
     reached = None
     if cut_short and len(candidates) > 1:
         reached = _confidence_reached([c for c in candidates if not c.out], k, cfg)
         if reached is not None:
-            stopped += (f"; the first-ranked is within the indifference zone at {reached:.0%} "
-                        f"confidence (not {cfg.confidence:.0%})")  # fmt: skip
+            stopped += (
+                f"; the first-ranked is within the indifference zone at {reached:.0%} "
+                f"confidence (not {cfg.confidence:.0%})"
+            )
         elif cfg.indifference != (0.0, 0.0):
-            stopped += ("; the first-ranked is not within the indifference zone even at 50% "
-                        "confidence")
+            stopped += (
+                "; the first-ranked is not within the indifference zone even at 50% confidence"
+            )
     return Choice(
         chosen=chosen,
         ranking=[c.summary(conf, mass) for c in ordered],
@@ -566,8 +610,11 @@ def validate(
 ) -> dict:
     """Drive every candidate `repeats` more times with fresh seeds (stream 1) and compare with
     the predicted P(success): Brier score and a reliability table."""
-    calls = [(c.index, c.path_xyz.tolist(), rollout_seed(seed, c.index, k, stream=1))
-             for c in choice.candidates for k in range(repeats)]  # fmt: skip
+    calls = [
+        (c.index, c.path_xyz.tolist(), rollout_seed(seed, c.index, k, stream=1))
+        for c in choice.candidates
+        for k in range(repeats)
+    ]
     observed: dict[int, list[int]] = {c.index: [] for c in choice.candidates}
     for rec in run_rollouts(calls):
         observed[rec["candidate"]].append(int(rec["outcome"] == "success"))
@@ -578,17 +625,30 @@ def validate(
     for i, obs in observed.items():
         row = predicted[i]
         rate = float(np.mean(obs)) if obs else math.nan
-        rows.append({"candidate": i, "predicted": row["p_success"], "low": row["p_low"],
-                     "high": row["p_high"], "observed": rate, "rollouts": len(obs),
-                     "inside": bool(row["p_low"] - 1e-12 <= rate <= row["p_high"] + 1e-12)})  # fmt: skip
+        rows.append(
+            {
+                "candidate": i,
+                "predicted": row["p_success"],
+                "low": row["p_low"],
+                "high": row["p_high"],
+                "observed": rate,
+                "rollouts": len(obs),
+                "inside": bool(row["p_low"] - 1e-12 <= rate <= row["p_high"] + 1e-12),
+            }
+        )
     bins = [(0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0001)]
     table = []
     for lo, hi in bins:
         sel = [(p, o) for p, o in pairs if lo <= p < hi]
         if sel:
-            table.append({"bin": f"[{lo:.2f}, {min(hi, 1):.2f}]", "rollouts": len(sel),
-                          "mean_predicted": float(np.mean([p for p, _ in sel])),
-                          "observed": float(np.mean([o for _, o in sel]))})  # fmt: skip
+            table.append(
+                {
+                    "bin": f"[{lo:.2f}, {min(hi, 1):.2f}]",
+                    "rollouts": len(sel),
+                    "mean_predicted": float(np.mean([p for p, _ in sel])),
+                    "observed": float(np.mean([o for _, o in sel])),
+                }
+            )
     return {"repeats": repeats, "brier": brier, "candidates": rows, "reliability": table}
 
 
@@ -620,23 +680,39 @@ def choose(
     candidates = plan_candidates(world, cfg, budget=cfg.budget_s)
     if not candidates:
         raise ChooseError(f"{scene.name}: the planner found no path to choose from")
-    spec = ExperimentSpec(name=f"choose-{scene.name}", path=scene.path, scene=scene.path,
-                          planner=scene.planner, sim=scene.sim, driver=scene.driver,
-                          uncertainty=cfg.uncertainty)  # fmt: skip
+    spec = ExperimentSpec(
+        name=f"choose-{scene.name}",
+        path=scene.path,
+        scene=scene.path,
+        planner=scene.planner,
+        sim=scene.sim,
+        driver=scene.driver,
+        uncertainty=cfg.uncertainty,
+    )
     pool = _make_pool(spec, workers, backend, address)
 
     spins = {c.index: c.spins for c in candidates}
 
     def run_rollouts(calls: list[tuple]) -> list[dict]:
-        return list(pool.run(("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]})
-                             for c in calls))  # fmt: skip
+        return list(
+            pool.run(("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]}) for c in calls)
+        )
 
     try:
         left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)
-        choice = race(candidates, dataclass_replace(cfg, budget_s=left), run_rollouts,
-                      mass=world.robot.mass, progress=progress, cancelled=cancelled)  # fmt: skip
-        checked = validate(choice, validate_repeats, run_rollouts, seed=cfg.seed) if (
-            validate_repeats > 0 and choice.stopped != "cancelled") else None  # fmt: skip
+        choice = race(
+            candidates,
+            dataclass_replace(cfg, budget_s=left),
+            run_rollouts,
+            mass=world.robot.mass,
+            progress=progress,
+            cancelled=cancelled,
+        )
+        checked = (
+            validate(choice, validate_repeats, run_rollouts, seed=cfg.seed)
+            if (validate_repeats > 0 and choice.stopped != "cancelled")
+            else None
+        )
     finally:
         pool.close()
     return dataclass_replace(choice, wall_time=time.monotonic() - t0), checked

@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")  # files only; never a window
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
 from roachplan.planning import HeightField  # noqa: E402
 
 from ._summary import route_key  # noqa: E402
@@ -18,9 +19,13 @@ from ._summary import route_key  # noqa: E402
 def _terrain(ax, hf: HeightField) -> None:
     x0, x1, y0, y1 = hf.extent
     ax.imshow(
-        np.ma.masked_invalid(hf.heights), origin="lower", extent=(x0, x1, y0, y1),
-        cmap="Greys", alpha=0.55, interpolation="nearest",
-    )  # fmt: skip
+        np.ma.masked_invalid(hf.heights),
+        origin="lower",
+        extent=(x0, x1, y0, y1),
+        cmap="Greys",
+        alpha=0.55,
+        interpolation="nearest",
+    )
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -46,8 +51,14 @@ def paths_figure(
         for t in group:  # trajectories first and wider, so the planned path shows on top
             if t["trajectory"]:
                 q = np.asarray(t["trajectory"])
-                ax.plot(q[:, 1], q[:, 2], color="tab:blue", lw=1.8, alpha=0.8,
-                        ls="-" if t["outcome"] == "success" else "--")  # fmt: skip
+                ax.plot(
+                    q[:, 1],
+                    q[:, 2],
+                    color="tab:blue",
+                    lw=1.8,
+                    alpha=0.8,
+                    ls="-" if t["outcome"] == "success" else "--",
+                )
                 if t["outcome"] != "success":
                     ax.plot(q[-1, 1], q[-1, 2], "x", color="red", ms=9, mew=2, zorder=5)
             if t["path"]:

@@ -24,8 +24,17 @@ from ._spec import ExperimentSpec, config_from_json, uncertainty_from_json
 
 MANIFEST = "manifest.json"
 FORMAT = 1
-PACKAGES = ("roachplan", "ompl", "pybullet", "numpy", "scipy", "trimesh", "pyyaml",
-            "matplotlib", "ray")  # fmt: skip
+PACKAGES = (
+    "roachplan",
+    "ompl",
+    "pybullet",
+    "numpy",
+    "scipy",
+    "trimesh",
+    "pyyaml",
+    "matplotlib",
+    "ray",
+)
 
 
 def package_versions() -> dict[str, str]:
@@ -108,16 +117,21 @@ def read_manifest(out: Path) -> dict:
     if not path.is_file():
         raise ExperimentError(f"{out}: no {MANIFEST}; not an experiment's results folder")
     if path.stat().st_size > MAX_MANIFEST_BYTES:  # not ours: refuse before reading it all
-        raise ExperimentError(f"{path}: {path.stat().st_size} bytes, more than any roachplan "
-                              f"manifest ({MAX_MANIFEST_BYTES}); not an experiment's manifest")  # fmt: skip
+        raise ExperimentError(
+            f"{path}: {path.stat().st_size} bytes, more than any roachplan "
+            f"manifest ({MAX_MANIFEST_BYTES}); not an experiment's manifest"
+        )
     try:
         manifest = json.loads(path.read_text())
     except ValueError as exc:
         raise ExperimentError(f"{path}: not valid JSON ({str(exc)[:200]})") from None
     except OSError as exc:
         raise ExperimentError(f"{path}: cannot be read ({exc.strerror})") from None
-    missing = [k for k in MANIFEST_KEYS if k not in manifest] if isinstance(manifest, dict) else (
-        list(MANIFEST_KEYS))  # fmt: skip
+    missing = (
+        [k for k in MANIFEST_KEYS if k not in manifest]
+        if isinstance(manifest, dict)
+        else (list(MANIFEST_KEYS))
+    )
     if missing:
         raise ExperimentError(
             f"{path}: not the manifest of a roachplan experiment (no {', '.join(missing)}); "

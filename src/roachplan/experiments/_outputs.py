@@ -101,11 +101,15 @@ def _check_folder(folder: Path, flag: str, what: str) -> None:
     try:
         st = os.stat(shown)
     except FileNotFoundError:
-        raise OutputError(f"{where}: the folder {name} does not exist; create it first, or name "
-                          f"a file in an existing folder") from None  # fmt: skip
+        raise OutputError(
+            f"{where}: the folder {name} does not exist; create it first, or name "
+            f"a file in an existing folder"
+        ) from None
     except NotADirectoryError:
-        raise OutputError(f"{where}: {name} is not a folder (a part of it is a file); name a "
-                          f"file in an existing folder") from None  # fmt: skip
+        raise OutputError(
+            f"{where}: {name} is not a folder (a part of it is a file); name a "
+            f"file in an existing folder"
+        ) from None
     except OSError as exc:
         raise OutputError(f"{where}: cannot use the folder {name} ({exc.strerror})") from None
     if not stat.S_ISDIR(st.st_mode):
@@ -118,8 +122,10 @@ def _check_folder(folder: Path, flag: str, what: str) -> None:
     try:
         os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
     except OSError as exc:
-        raise OutputError(f"{where}: cannot create files in the folder {name} ({exc.strerror}); "
-                          f"choose a place you can write") from None  # fmt: skip
+        raise OutputError(
+            f"{where}: cannot create files in the folder {name} ({exc.strerror}); "
+            f"choose a place you can write"
+        ) from None
     os.unlink(probe)
 
 
@@ -221,16 +227,21 @@ def prepare_output_folder(
     elif not create:
         parent = next((p for p in path.absolute().parents if os.path.lexists(p)), Path("/"))
         if not parent.is_dir():
-            raise OutputError(f"{flag} {_show(path)}: cannot create the folder ({_show(parent)} "
-                              f"is a file); {accepts}")  # fmt: skip
+            raise OutputError(
+                f"{flag} {_show(path)}: cannot create the folder ({_show(parent)} "
+                f"is a file); {accepts}"
+            )
         _check_folder(parent, flag, str(path))
         return path
     else:
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            why = "a part of the path is a file" if isinstance(exc, NotADirectoryError) else (
-                exc.strerror)  # fmt: skip
+            why = (
+                "a part of the path is a file"
+                if isinstance(exc, NotADirectoryError)
+                else (exc.strerror)
+            )
             raise OutputError(
                 f"{flag} {_show(path)}: cannot create the folder ({why}); {accepts}"
             ) from None

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+
 from roachplan.scenes import build_world, with_scad_backend
 
 from ._errors import ExperimentError, OutputError
@@ -127,9 +128,13 @@ def run_experiment(
         table += "\n\n" + compare_routes(summaries[0], summaries[1], trial_recs)
     _write_outputs(out, spec=spec, world=world, trials=trial_recs, summaries=summaries, best=best)
     return ExperimentReport(
-        out=out, summaries=summaries, table=table, best=best,
-        trials_stored=len(trial_recs), trials_run=ran,
-    )  # fmt: skip
+        out=out,
+        summaries=summaries,
+        table=table,
+        best=best,
+        trials_stored=len(trial_recs),
+        trials_run=ran,
+    )
 
 
 def check_results_folder(out: Path, *, create: bool = True) -> Path:
@@ -160,9 +165,15 @@ def _bar(enabled: bool, total: int, initial: int, what: str):
     from tqdm import tqdm
 
     return tqdm(
-        total=total, initial=initial, desc=what, unit=" " + what.rstrip("s"), disable=not enabled,
-        file=sys.stderr, mininterval=0.5, smoothing=0.1,
-    )  # fmt: skip
+        total=total,
+        initial=initial,
+        desc=what,
+        unit=" " + what.rstrip("s"),
+        disable=not enabled,
+        file=sys.stderr,
+        mininterval=0.5,
+        smoothing=0.1,
+    )
 
 
 def _run_trials(chosen: list[dict], plans: dict, store: ResultStore, workers_pool, progress) -> int:
@@ -224,8 +235,12 @@ def _census(spec: ExperimentSpec, trials: int, workers_pool, progress: bool):
             f"{spec.path}: no plan took any of the routes {list(spec.routes)} in "
             f"{seed - spec.seed} plans (the plans took: {dict(seen)}); check the routes' regions"
         )
-    census = {"plans": seed - spec.seed, "quotas": quotas, "routes_planned": dict(seen),
-              "short": short}  # fmt: skip
+    census = {
+        "plans": seed - spec.seed,
+        "quotas": quotas,
+        "routes_planned": dict(seen),
+        "short": short,
+    }
     return census, [{"index": k, "seed": s, "route": r} for k, (s, r) in enumerate(chosen)], plans
 
 
@@ -241,10 +256,12 @@ def _best_path(spec: ExperimentSpec, store: ResultStore, workers_pool, progress:
     calls = []
     for i in range(repeats):
         if i not in done:
-            start = jitter_pose(tuple(best["start"]), spec.best_path_jitter,
-                                np.random.default_rng((spec.seed, i)))  # fmt: skip
-            calls.append(("redrive", (i, best["index"], best["path"], list(start),
-                                      best.get("spins", []))))  # fmt: skip
+            start = jitter_pose(
+                tuple(best["start"]), spec.best_path_jitter, np.random.default_rng((spec.seed, i))
+            )
+            calls.append(
+                ("redrive", (i, best["index"], best["path"], list(start), best.get("spins", [])))
+            )
     if calls:
         bar = _bar(progress, repeats, repeats - len(calls), "re-drives")
         for rec in workers_pool().run(calls):
@@ -257,15 +274,21 @@ def _best_path(spec: ExperimentSpec, store: ResultStore, workers_pool, progress:
     )
     ok_re = [r["relative_energy"] for r in redrives if r["outcome"] == "success"]
     return {
-        "index": best["index"], "seed": best["seed"], "route": best.get("target_route") or best["route"],
-        "relative_energy": best["relative_energy"], "energy": best["energy"],
-        "drive_time": best["drive_time"], "path": best["path"], "spins": best.get("spins", []),
-        "repeats": len(redrives), "repeat_successes": len(ok_re),
+        "index": best["index"],
+        "seed": best["seed"],
+        "route": best.get("target_route") or best["route"],
+        "relative_energy": best["relative_energy"],
+        "energy": best["energy"],
+        "drive_time": best["drive_time"],
+        "path": best["path"],
+        "spins": best.get("spins", []),
+        "repeats": len(redrives),
+        "repeat_successes": len(ok_re),
         "repeat_success_rate": len(ok_re) / len(redrives) if redrives else float("nan"),
         "repeat_energy_mean": float(np.mean(ok_re)) if ok_re else float("nan"),
         "repeat_outcomes": dict(Counter(r["outcome"] for r in redrives)),
         "jitter_m_deg": list(spec.best_path_jitter),
-    }  # fmt: skip
+    }
 
 
 def describe_best(best: dict | None) -> str:
@@ -322,9 +345,10 @@ def rerun_trial(out: Path, index: int) -> tuple[dict, dict | None, list[str]]:
     entries = {t["index"]: t for t in manifest["trials"]}
     if index not in entries:
         raise ExperimentError(
-            f"--trial {index}: {out} has trials 0 to {len(entries) - 1}" if entries
+            f"--trial {index}: {out} has trials 0 to {len(entries) - 1}"
+            if entries
             else f"--trial {index}: {out} chose no trials"
-        )  # fmt: skip
+        )
     spec = spec_from_manifest(manifest, out / MANIFEST)
     world = build_world(spec.scene_with_settings())
     if mesh_hash(world) != manifest["scene"]["mesh_sha256"]:
@@ -336,8 +360,11 @@ def rerun_trial(out: Path, index: int) -> tuple[dict, dict | None, list[str]]:
     entry = entries[index]
     result = run_trial(world, seed=entry["seed"])
     # Through JSON, as stored: tuples become lists, floats keep every bit.
-    rec = json.loads(json.dumps({"kind": TRIAL, "index": index, "target_route": entry["route"],
-                                 **result.to_json()}))  # fmt: skip
+    rec = json.loads(
+        json.dumps(
+            {"kind": TRIAL, "index": index, "target_route": entry["route"], **result.to_json()}
+        )
+    )
     stored = next(
         (
             r
@@ -346,8 +373,13 @@ def rerun_trial(out: Path, index: int) -> tuple[dict, dict | None, list[str]]:
         ),
         None,
     )
-    differ = [] if stored is None else sorted(
-        k for k in set(rec) | set(stored)
-        if k not in WALL_CLOCK_FIELDS and rec.get(k) != stored.get(k)
-    )  # fmt: skip
+    differ = (
+        []
+        if stored is None
+        else sorted(
+            k
+            for k in set(rec) | set(stored)
+            if k not in WALL_CLOCK_FIELDS and rec.get(k) != stored.get(k)
+        )
+    )
     return rec, stored, differ

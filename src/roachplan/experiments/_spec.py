@@ -78,8 +78,13 @@ class ExperimentSpec:
     def scene_with_settings(self) -> Scene:
         """The scene, with this spec's planner, sim and driver settings."""
         scene = load_scene(self.scene)
-        return dataclasses.replace(scene, planner=self.planner, sim=self.sim, driver=self.driver,
-                                   uncertainty=self.uncertainty)  # fmt: skip
+        return dataclasses.replace(
+            scene,
+            planner=self.planner,
+            sim=self.sim,
+            driver=self.driver,
+            uncertainty=self.uncertainty,
+        )
 
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
@@ -92,8 +97,20 @@ def resolve_experiment(name_or_path: str | Path) -> Path:
     return resolve_in_library(name_or_path, LIBRARY, "experiment", ExperimentError)
 
 
-_KEYS = ("description", "scene", "reference", "planner", "sim", "driver", "routes",
-         "trials_per_route", "seed", "max_plans", "best_path", "uncertainty")  # fmt: skip
+_KEYS = (
+    "description",
+    "scene",
+    "reference",
+    "planner",
+    "sim",
+    "driver",
+    "routes",
+    "trials_per_route",
+    "seed",
+    "max_plans",
+    "best_path",
+    "uncertainty",
+)
 
 
 def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
@@ -104,8 +121,9 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     data = f.mapping(raw, "", _KEYS, required=("scene",))
     if not isinstance(data["scene"], str):
         raise f.fail(
-            "scene", f"expected a library scene name, a scene .yaml or a terrain file (a capture, "
-            f"mesh or .scad), got {short_repr(data['scene'])}"
+            "scene",
+            f"expected a library scene name, a scene .yaml or a terrain file (a capture, "
+            f"mesh or .scad), got {short_repr(data['scene'])}",
         )
     scene_ref = data["scene"]
     if "\0" in scene_ref:
@@ -123,9 +141,10 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     for r in routes:
         if r not in known:
             raise f.fail(
-                "routes", f"{short_repr(r)} is not a route of scene {scene.name} (it has: "
-                f"{', '.join(known) or 'none'})"
-            )  # fmt: skip
+                "routes",
+                f"{short_repr(r)} is not a route of scene {scene.name} (it has: "
+                f"{', '.join(known) or 'none'})",
+            )
     if len(set(routes)) != len(routes):
         raise f.fail("routes", f"a route is listed twice: {short_repr(routes)}")
     best = f.mapping(data.get("best_path") or {}, "best_path", ("repeats", "jitter"))
@@ -151,7 +170,8 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
         sim=_override(f, scene.sim, data.get("sim"), "sim"),
         driver=driver,
         uncertainty=f.uncertainty(
-            {} if data.get("uncertainty") is None else data["uncertainty"], "uncertainty",
+            {} if data.get("uncertainty") is None else data["uncertainty"],
+            "uncertainty",
             base=scene.uncertainty,
         ),
         routes=tuple(routes),
@@ -166,8 +186,10 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
 def reference_settings(planner: PlannerConfig, driver: DriverConfig):
     """(planner, driver) as the report ran them: the planner's raw path (no drivable smoothing)
     and algorithms 1-2 (`reference: true`, `--reference`), for tables 7.1-7.3."""
-    return (dataclasses.replace(planner, turning_radius=None),
-            dataclasses.replace(driver, kind="reference"))  # fmt: skip
+    return (
+        dataclasses.replace(planner, turning_radius=None),
+        dataclasses.replace(driver, kind="reference"),
+    )
 
 
 def _count(f: YamlFields, value: Any, key: str, minimum: int) -> int:

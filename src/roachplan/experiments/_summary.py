@@ -134,8 +134,13 @@ def format_csv(summaries: list[RouteSummary]) -> str:
     w.writerow(["route", *attrs, *(f"failed_{f}" for f in FAILURES)])
     for s in summaries:
         values = [getattr(s, a) for a in attrs]
-        w.writerow([s.route, *("" if _is_nan(v) else v for v in values),
-                    *(s.failures.get(f, 0) for f in FAILURES)])  # fmt: skip
+        w.writerow(
+            [
+                s.route,
+                *("" if _is_nan(v) else v for v in values),
+                *(s.failures.get(f, 0) for f in FAILURES),
+            ]
+        )
     return buf.getvalue()
 
 
@@ -147,9 +152,13 @@ def compare_routes(a: RouteSummary, b: RouteSummary, records: list[dict]) -> str
     table = [[a.successes, a.trials - a.successes], [b.successes, b.trials - b.successes]]
     p_success = fisher_exact(table).pvalue if a.trials and b.trials else math.nan
     ea, eb = (
-        [r["relative_energy"] for r in records if route_key(r) == s.route and r["outcome"] == "success"]
+        [
+            r["relative_energy"]
+            for r in records
+            if route_key(r) == s.route and r["outcome"] == "success"
+        ]
         for s in (a, b)
-    )  # fmt: skip
+    )
     p_energy = mannwhitneyu(ea, eb).pvalue if ea and eb else math.nan
     return (
         f"{a.route} vs {b.route}: successes {a.successes}/{a.trials} vs {b.successes}/{b.trials} "

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+
 from roachplan.planning import PlannerConfig, PlanResult, plan_path
 from roachplan.scenes import World
 from roachplan.sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
@@ -249,12 +250,21 @@ def finish_trial(
     )
     if not planned.found:
         return TrialResult(
-            **common, outcome="no_path", reason=planned.message, route="", drive_time=0.0,
-            energy=0.0, relative_energy=0.0, drive_wall_time=0.0, path=(), trajectory=(),
-        )  # fmt: skip
+            **common,
+            outcome="no_path",
+            reason=planned.message,
+            route="",
+            drive_time=0.0,
+            energy=0.0,
+            relative_energy=0.0,
+            drive_wall_time=0.0,
+            path=(),
+            trajectory=(),
+        )
     t0 = time.perf_counter()
-    driven = drive(world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim,
-                   spins=planned.spins)  # fmt: skip
+    driven = drive(
+        world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim, spins=planned.spins
+    )
     return TrialResult(
         **common,
         outcome=driven.outcome,

@@ -54,9 +54,13 @@ class WorldDraw:
     """(left, right) speed / command [-]."""
 
     def to_json(self) -> dict:
-        return {"seed": self.seed, "start_offset": list(self.start_offset),
-                "friction_scale": self.friction_scale, "mass_scale": self.mass_scale,
-                "motor_gain": list(self.motor_gain)}  # fmt: skip
+        return {
+            "seed": self.seed,
+            "start_offset": list(self.start_offset),
+            "friction_scale": self.friction_scale,
+            "mass_scale": self.mass_scale,
+            "motor_gain": list(self.motor_gain),
+        }
 
 
 def draw(cfg: UncertaintyConfig, seed: int) -> WorldDraw:

@@ -22,6 +22,7 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
 import numpy as np
+
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 from roachplan.scenes import build_world
@@ -51,9 +52,15 @@ class TrialWorker:
         return {"seed": seed, "route": route, "plan": planned}
 
     def trial(
-        self, index: int, seed: int, target_route: str, planned: PlanResult | None, *,
-        start: tuple | None = None, goal: tuple | None = None,
-    ) -> dict:  # fmt: skip
+        self,
+        index: int,
+        seed: int,
+        target_route: str,
+        planned: PlanResult | None,
+        *,
+        start: tuple | None = None,
+        goal: tuple | None = None,
+    ) -> dict:
         """Trial `index`: drive the plan of `seed` (planned now unless given: the census's
         plan of that seed is the same plan) from start to goal (default: the scene's); a store
         record."""
@@ -70,12 +77,17 @@ class TrialWorker:
         scene = self.world.scene
         driven = drive(self.world, np.asarray(path), start=tuple(start), spins=spins)  # fresh
         return {
-            "kind": REDRIVE, "index": index, "of_trial": of_trial, "start": list(start),
-            "outcome": driven.outcome, "reason": driven.reason,
-            "drive_time": driven.drive_time, "energy": driven.energy,
+            "kind": REDRIVE,
+            "index": index,
+            "of_trial": of_trial,
+            "start": list(start),
+            "outcome": driven.outcome,
+            "reason": driven.reason,
+            "drive_time": driven.drive_time,
+            "energy": driven.energy,
             "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
             "trajectory": [list(p) for p in driven.trajectory],
-        }  # fmt: skip
+        }
 
     def rollout(self, candidate: int, path: list, seed: int, uncertainty, spins=()) -> dict:
         """One of `choose`'s rollouts: drive candidate `candidate`'s path (and its turns on the
@@ -93,22 +105,33 @@ class TrialWorker:
             mesh = self.world.mesh
             vertices = np.array(mesh.vertices, dtype=np.float64)
             vertices[:, 2] += terrain_noise(uncertainty, seed, len(vertices))
-            world_sim = Simulation(vertices, mesh.faces, ground_height=scene.ground,
-                                   robot=self.world.robot, cfg=scene.sim)  # fmt: skip
+            world_sim = Simulation(
+                vertices,
+                mesh.faces,
+                ground_height=scene.ground,
+                robot=self.world.robot,
+                cfg=scene.sim,
+            )
         else:
             world_sim = self.world.simulation()
         with world_sim as sim:
-            sim.perturb(friction=scene.sim.friction * w.friction_scale,
-                        mass_scale=w.mass_scale, motor_gain=w.motor_gain)  # fmt: skip
+            sim.perturb(
+                friction=scene.sim.friction * w.friction_scale,
+                mass_scale=w.mass_scale,
+                motor_gain=w.motor_gain,
+            )
             driven = drive(self.world, np.asarray(path), start=start, sim=sim, spins=spins)
         return {
-            "candidate": candidate, "seed": seed,
+            "candidate": candidate,
+            "seed": seed,
             "world": {**w.to_json(), "terrain_height": sigma},
-            "outcome": driven.outcome, "reason": driven.reason,
-            "drive_time": driven.drive_time, "energy": driven.energy,
+            "outcome": driven.outcome,
+            "reason": driven.reason,
+            "drive_time": driven.drive_time,
+            "energy": driven.energy,
             "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
             "end": list(driven.trajectory[-1][1:3]),
-        }  # fmt: skip
+        }
 
     def close(self) -> None:
         """Nothing held between calls (each drive's PyBullet world is closed with it)."""

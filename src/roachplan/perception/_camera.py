@@ -41,13 +41,23 @@ class Intrinsics:
     def scaled(self, width: int, height: int) -> Intrinsics:
         sx, sy = width / self.width, height / self.height
         return Intrinsics(
-            width=width, height=height, fx=self.fx * sx, fy=self.fy * sy,
-            cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5,
-        )  # fmt: skip
+            width=width,
+            height=height,
+            fx=self.fx * sx,
+            fy=self.fy * sy,
+            cx=(self.cx + 0.5) * sx - 0.5,
+            cy=(self.cy + 0.5) * sy - 0.5,
+        )
 
     def to_json(self) -> dict:
-        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
-                "cx": self.cx, "cy": self.cy}  # fmt: skip
+        return {
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+        }
 
 
 # Kinect v2 nominal intrinsics (iai_kinect2 / libfreenect2 defaults): the IR/depth camera, and
@@ -63,14 +73,23 @@ _PRIMESENSE = Intrinsics(width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy
 # px at 1280x720 times exactly these factors) and rounded, principal point at the image centre.
 # Every unit's factory calibration differs by about 1 % and its principal point by a few pixels:
 # when the camera's own numbers are at hand (its CameraInfo, rs-enumerate-devices), pass those.
-_D435_SCALES = {(1280, 720): 1.0, (848, 480): 0.6625, (640, 480): 0.6, (640, 360): 0.5,
-                (480, 270): 0.375, (424, 240): 0.33125}  # fmt: skip
+_D435_SCALES = {
+    (1280, 720): 1.0,
+    (848, 480): 0.6625,
+    (640, 480): 0.6,
+    (640, 360): 0.5,
+    (480, 270): 0.375,
+    (424, 240): 0.33125,
+}
 # TUM RGB-D benchmark (vision.in.tum.de/data/datasets/rgbd-dataset/file_formats): OpenNI
 # registered its depth images to the colour camera (pixels correspond 1:1), so the colour ("RGB")
 # calibration of each Freiburg Kinect is the depth PNG's pinhole; the page's IR calibrations
 # describe the unregistered depth sensor, which no published depth PNG is in.
-_TUM = {"tum-fr1": (517.3, 516.5, 318.6, 255.3), "tum-fr2": (520.9, 521.0, 325.1, 249.7),
-        "tum-fr3": (535.4, 539.2, 320.1, 247.6)}  # fmt: skip
+_TUM = {
+    "tum-fr1": (517.3, 516.5, 318.6, 255.3),
+    "tum-fr2": (520.9, 521.0, 325.1, 249.7),
+    "tum-fr3": (535.4, 539.2, 320.1, 247.6),
+}
 PRESETS: dict[str, Intrinsics] = {
     "kinect2-sd": Intrinsics(width=512, height=424, fx=365.5, fy=365.5, cx=255.5, cy=211.5),
     "kinect2-qhd": _HD.scaled(960, 540),
@@ -228,14 +247,20 @@ def intrinsics_from_mapping(
             )
     try:
         out = Intrinsics(
-            width=int(data["width"]), height=int(data["height"]), fx=float(data["fx"]),
-            fy=float(data["fy"]), cx=float(data["cx"]), cy=float(data["cy"]),
-        )  # fmt: skip
+            width=int(data["width"]),
+            height=int(data["height"]),
+            fx=float(data["fx"]),
+            fy=float(data["fy"]),
+            cx=float(data["cx"]),
+            cy=float(data["cy"]),
+        )
     except (TypeError, ValueError, OverflowError) as exc:
         raise CaptureError(f"{where}: intrinsics must be numbers ({str(exc)[:120]})") from None
-    if (not 1 <= min(out.width, out.height) <= max(out.width, out.height) <= MAX_IMAGE_SIDE
-            or not min(out.fx, out.fy) > 0
-            or not np.isfinite([out.fx, out.fy, out.cx, out.cy]).all()):  # fmt: skip
+    if (
+        not 1 <= min(out.width, out.height) <= max(out.width, out.height) <= MAX_IMAGE_SIDE
+        or not min(out.fx, out.fy) > 0
+        or not np.isfinite([out.fx, out.fy, out.cx, out.cy]).all()
+    ):
         raise CaptureError(
             f"{where}: intrinsics need width and height of 1-{MAX_IMAGE_SIDE} px and finite "
             f"fx, fy > 0: {out}"
@@ -282,8 +307,9 @@ def _matrix(path, key: str, value, shapes: tuple[tuple[int, int], ...]) -> np.nd
         a = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError, OverflowError, RecursionError):
         a = np.zeros(0)
-    want = [s for s in shapes if s[0] * s[1] == a.size and rows in (None, s[0])
-            and cols in (None, s[1])]  # fmt: skip
+    want = [
+        s for s in shapes if s[0] * s[1] == a.size and rows in (None, s[0]) and cols in (None, s[1])
+    ]
     if not want or not np.isfinite(a).all():
         shown = " or ".join(f"{r}x{c}" for r, c in shapes)
         raise CaptureError(
@@ -298,8 +324,7 @@ def _scale_of(data: dict, path: Path, keys: tuple[str, ...]) -> float | None:
     for k in keys:
         if data.get(k) is not None:
             v = data[k]
-            if (isinstance(v, bool) or not isinstance(v, int | float)
-                    or not 0 < v < float("inf")):  # fmt: skip
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < float("inf"):
                 raise CaptureError(
                     f"{path}: {k}: expected units per metre > 0, got {short_repr(v)}"
                 )
@@ -317,7 +342,7 @@ def _from_yaml(path: Path, text: str, size: tuple[int, int] | None) -> Calibrati
         )
     prefix = next((p for p in _FLAT_PREFIXES if f"{p}fx" in data), None)
     if prefix:
-        flat = {k[len(prefix):]: v for k, v in data.items() if k.startswith(prefix)}
+        flat = {k[len(prefix) :]: v for k, v in data.items() if k.startswith(prefix)}
         data = {**data, **flat}
     key = next((k for k in _MATRIX_KEYS if k in data), None)
     if key is not None:
@@ -348,8 +373,11 @@ def _rigid(path: Path, key: str, value) -> np.ndarray:
     m = _matrix(path, key, value, ((3, 4), (4, 4)))
     rot = m[:3, :3]
     err = np.abs(rot.T @ rot - np.eye(3)).max()
-    if err > 1e-3 or np.linalg.det(rot) <= 0 or (m.shape[0] == 4 and
-                                                 not np.allclose(m[3], (0, 0, 0, 1))):  # fmt: skip
+    if (
+        err > 1e-3
+        or np.linalg.det(rot) <= 0
+        or (m.shape[0] == 4 and not np.allclose(m[3], (0, 0, 0, 1)))
+    ):
         raise CaptureError(
             f"{path}: {key}: the first 3 columns must be a rotation (orthonormal, determinant "
             f"+1; R^T R is off by {err:.2g}) and a 4x4's last row 0 0 0 1"
@@ -370,14 +398,20 @@ def _from_pcl_xml(path: Path, text: str) -> Intrinsics:
     if node is None:
         raise CaptureError(f"{path}: no <depth> element with focal_length_x etc.")
     get = {c.tag: c.text for c in node}
-    keys = {"fx": "focal_length_x", "fy": "focal_length_y", "cx": "principal_point_x",
-            "cy": "principal_point_y"}  # fmt: skip
+    keys = {
+        "fx": "focal_length_x",
+        "fy": "focal_length_y",
+        "cx": "principal_point_x",
+        "cy": "principal_point_y",
+    }
     try:
         vals = {k: float(get[tag]) for k, tag in keys.items()}
     except (KeyError, TypeError, ValueError):
         raise CaptureError(f"{path}: <depth> needs {', '.join(keys.values())}") from None
-    if not (np.isfinite(list(vals.values())).all()
-            and 0 < min(vals["cx"], vals["cy"]) < MAX_IMAGE_SIDE / 2):  # fmt: skip
+    if not (
+        np.isfinite(list(vals.values())).all()
+        and 0 < min(vals["cx"], vals["cy"]) < MAX_IMAGE_SIDE / 2
+    ):
         raise CaptureError(
             f"{path}: <depth>: expected finite numbers and a principal point inside the image, "
             f"got {', '.join(f'{k} {v:g}' for k, v in vals.items())}"

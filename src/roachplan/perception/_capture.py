@@ -156,13 +156,16 @@ def load_capture(
     except OSError as exc:  # unreadable (permissions, an I/O error): not a traceback
         raise CaptureError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except MemoryError:
-        raise CaptureError(f"{path}: too large to read into the memory this process may use "
-                           f"(the machine's, or the limit set by ROACHPLAN_CHILD_MEMORY)") from None
+        raise CaptureError(
+            f"{path}: too large to read into the memory this process may use "
+            f"(the machine's, or the limit set by ROACHPLAN_CHILD_MEMORY)"
+        ) from None
     if units == "mm":
         cap = dataclasses.replace(
-            cap, points=cap.points * 1e-3,
+            cap,
+            points=cap.points * 1e-3,
             sensor_origin=tuple(float(v) * 1e-3 for v in cap.sensor_origin),
-        )  # fmt: skip
+        )
     return check_capture(cap, units_given=units is not None)
 
 
@@ -274,16 +277,24 @@ def _load_pcd(path: Path) -> Capture:
     vp = h.viewpoint
     organized = h.height > 1
     return Capture(
-        points=pts, shape=(h.height, h.width) if organized else None, source=str(path),
+        points=pts,
+        shape=(h.height, h.width) if organized else None,
+        source=str(path),
         sensor_origin=(vp[0], vp[1], vp[2]),
         frame="camera" if organized else None,  # organized: a camera's pixels, optical frame
-    )  # fmt: skip
+    )
 
 
 def _pcd_dtype(h: PcdHeader) -> np.dtype:
     """One binary point's x, y, z within its point_step bytes."""
-    return np.dtype({"names": list("xyz"), "formats": [h.field(k).dtype for k in "xyz"],
-                     "offsets": [h.byte_offset(k) for k in "xyz"], "itemsize": h.point_step})  # fmt: skip
+    return np.dtype(
+        {
+            "names": list("xyz"),
+            "formats": [h.field(k).dtype for k in "xyz"],
+            "offsets": [h.byte_offset(k) for k in "xyz"],
+            "itemsize": h.point_step,
+        }
+    )
 
 
 def _pcd_compressed(path: Path, f, h: PcdHeader) -> np.ndarray:
@@ -302,9 +313,15 @@ def _pcd_compressed(path: Path, f, h: PcdHeader) -> np.ndarray:
             f"{path}: the PCD's compressed data is damaged: it does not decode (LZF) to the "
             f"{size} bytes its header describes"
         )
-    return np.stack([np.frombuffer(raw, dtype=h.field(k).dtype, count=h.points,
-                                   offset=h.points * h.byte_offset(k)).astype(np.float64)
-                     for k in "xyz"], axis=1)  # fmt: skip
+    return np.stack(
+        [
+            np.frombuffer(
+                raw, dtype=h.field(k).dtype, count=h.points, offset=h.points * h.byte_offset(k)
+            ).astype(np.float64)
+            for k in "xyz"
+        ],
+        axis=1,
+    )
 
 
 def _pcd_ascii(path: Path, f, h: PcdHeader) -> np.ndarray:
@@ -324,8 +341,14 @@ def _read_rows(path: Path, f, rows: int, what: str, usecols=None) -> np.ndarray:
     try:
         with warnings.catch_warnings():  # an empty input warns; the caller counts the rows
             warnings.simplefilter("ignore", UserWarning)
-            out = np.loadtxt(io.TextIOWrapper(f, encoding="ascii"), dtype=np.float64, ndmin=2,
-                             max_rows=rows, comments=None, usecols=usecols)  # fmt: skip
+            out = np.loadtxt(
+                io.TextIOWrapper(f, encoding="ascii"),
+                dtype=np.float64,
+                ndmin=2,
+                max_rows=rows,
+                comments=None,
+                usecols=usecols,
+            )
     except UnicodeDecodeError:
         raise CaptureError(f"{path}: the {what} holds non-text bytes") from None
     except ValueError as exc:
@@ -434,9 +457,14 @@ def _load_text(path: Path) -> Capture:
         try:
             with warnings.catch_warnings():  # an empty list warns; it is refused below
                 warnings.simplefilter("ignore", UserWarning)
-                pts = np.loadtxt(io.TextIOWrapper(f, encoding="utf-8"), dtype=np.float64,
-                                 ndmin=2, comments="#", usecols=(0, 1, 2),
-                                 max_rows=MAX_CLOUD_POINTS + 1)  # fmt: skip
+                pts = np.loadtxt(
+                    io.TextIOWrapper(f, encoding="utf-8"),
+                    dtype=np.float64,
+                    ndmin=2,
+                    comments="#",
+                    usecols=(0, 1, 2),
+                    max_rows=MAX_CLOUD_POINTS + 1,
+                )
         except UnicodeDecodeError:
             raise CaptureError(f"{path}: not a text point list (binary content)") from None
         except ValueError as exc:
@@ -445,8 +473,10 @@ def _load_text(path: Path) -> Capture:
                 f"({str(exc)[:200]})"
             ) from None
     if len(pts) > MAX_CLOUD_POINTS:
-        raise CaptureError(f"{path}: more than {MAX_CLOUD_POINTS} points; clouds of at most "
-                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
+        raise CaptureError(
+            f"{path}: more than {MAX_CLOUD_POINTS} points; clouds of at most "
+            f"{MAX_CLOUD_POINTS // 1_000_000} million points are read"
+        )
     return Capture(points=pts.reshape(-1, 3), shape=None, source=str(path))
 
 
@@ -471,8 +501,10 @@ def _load_npy(path: Path) -> Capture:
         raise CaptureError(f"{path}: expected an (N, 3) or (H, W, 3) array, got shape {shape}")
     points = int(np.prod(shape[:-1]))
     if points > MAX_CLOUD_POINTS:
-        raise CaptureError(f"{path}: shape {shape} is {points} points; clouds of at most "
-                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
+        raise CaptureError(
+            f"{path}: shape {shape} is {points} points; clouds of at most "
+            f"{MAX_CLOUD_POINTS // 1_000_000} million points are read"
+        )
     need = int(np.prod(shape)) * dtype.itemsize
     if path.stat().st_size - offset < need:
         raise CaptureError(
@@ -501,8 +533,9 @@ def find_sidecar(path: Path) -> Path | None:
     return None
 
 
-def _needs_intrinsics(path: Path, why: str = "a depth image needs intrinsics",
-                      size: tuple[int, int] | None = None) -> CaptureError:  # fmt: skip
+def _needs_intrinsics(
+    path: Path, why: str = "a depth image needs intrinsics", size: tuple[int, int] | None = None
+) -> CaptureError:
     """The refusal of a depth image without usable intrinsics; with the image's size (w, h),
     the presets of that size come first."""
     fits = [k for k, v in PRESETS.items() if size is not None and (v.width, v.height) == size]
@@ -551,19 +584,30 @@ def _load_depth_image(
     if (intr.width, intr.height) != (w, h):
         if abs(intr.width / w - intr.height / h) > 1e-6:
             raise _needs_intrinsics(
-                path, f"the image is {w}x{h}, the intrinsics are for {intr.width}x"
-                f"{intr.height} (another aspect ratio)", size=(w, h),
-            )  # fmt: skip
+                path,
+                f"the image is {w}x{h}, the intrinsics are for {intr.width}x"
+                f"{intr.height} (another aspect ratio)",
+                size=(w, h),
+            )
         intr = intr.scaled(w, h)
     if not np.any(raw > 0):
         raise CaptureError(f"{path}: every pixel is 0 (no depth measured)")
     if not np.any(depth_m > 0):
-        raise CaptureError(f"{path}: no pixel holds a Kinect disparity within its model (every "
-                           f"one is {KINECT_NO_READING}, 0 or beyond {KINECT_MAX_DEPTH_M:g} m)")  # fmt: skip
+        raise CaptureError(
+            f"{path}: no pixel holds a Kinect disparity within its model (every "
+            f"one is {KINECT_NO_READING}, 0 or beyond {KINECT_MAX_DEPTH_M:g} m)"
+        )
     pts = depth_to_points(depth_m, intr)
-    return Capture(points=pts, shape=(h, w), source=str(path), intrinsics=intr, frame="camera",
-                   base_from_camera=calib.base_from_camera, depth_scale=depth_scale,
-                   notes=tuple(notes))  # fmt: skip
+    return Capture(
+        points=pts,
+        shape=(h, w),
+        source=str(path),
+        intrinsics=intr,
+        frame="camera",
+        base_from_camera=calib.base_from_camera,
+        depth_scale=depth_scale,
+        notes=tuple(notes),
+    )
 
 
 def _sidecar_depth_scale(sidecar: Path, size: tuple[int, int]) -> float | None:
@@ -576,9 +620,11 @@ def _sidecar_depth_scale(sidecar: Path, size: tuple[int, int]) -> float | None:
 
 def _check_depth_units(path: Path, depth_scale: float | None, depth_units) -> None:
     if depth_units is not None and depth_units not in DEPTH_UNITS:
-        raise CaptureError(f"{path}: depth_units {short_repr(depth_units)}: accepted: "
-                           f"{', '.join(DEPTH_UNITS)} (or none: depth in units of the depth "
-                           f"scale)")  # fmt: skip
+        raise CaptureError(
+            f"{path}: depth_units {short_repr(depth_units)}: accepted: "
+            f"{', '.join(DEPTH_UNITS)} (or none: depth in units of the depth "
+            f"scale)"
+        )
     if depth_units is not None and depth_scale is not None:
         raise CaptureError(
             f"{path}: both a depth scale ({depth_scale:g}) and depth units ({depth_units}) "
@@ -650,10 +696,12 @@ def kinect_disparity_verdict(raw: np.ndarray) -> tuple[str, str]:
     rest = v[(v > 0) & (v < KINECT_NO_READING)]
     lo, hi = _disparity_of(KINECT_NEAR_M), _disparity_of(KINECT_MAX_DEPTH_M)
     share = float(np.mean((rest >= lo) & (rest <= hi))) if rest.size else 0.0
-    evidence = (f"11-bit samples, {100 * marker / v.size:.1f} % of the pixels at "
-                f"{KINECT_NO_READING} (the Kinect's no-reading value), {100 * share:.0f} % of "
-                f"the others disparities of {KINECT_NEAR_M:g}-{KINECT_MAX_DEPTH_M:g} m "
-                f"({lo:.0f}-{hi:.0f})")  # fmt: skip
+    evidence = (
+        f"11-bit samples, {100 * marker / v.size:.1f} % of the pixels at "
+        f"{KINECT_NO_READING} (the Kinect's no-reading value), {100 * share:.0f} % of "
+        f"the others disparities of {KINECT_NEAR_M:g}-{KINECT_MAX_DEPTH_M:g} m "
+        f"({lo:.0f}-{hi:.0f})"
+    )
     return ("yes" if share >= MODEL_SHARE else "maybe"), evidence
 
 
@@ -662,8 +710,7 @@ def _swapped(raw: np.ndarray) -> np.ndarray:
     return ((r & 0xFF) << 8) | (r >> 8)
 
 
-TELL_DISPARITY = ("pass --depth-units kinect-disparity (depth_units: kinect-disparity in a "
-                  "scene)")  # fmt: skip
+TELL_DISPARITY = "pass --depth-units kinect-disparity (depth_units: kinect-disparity in a scene)"
 TELL_DEPTH = "pass its depth scale (--depth-scale N; 1000 for millimetres)"
 
 
@@ -764,8 +811,10 @@ def _read_netpbm(path: Path) -> tuple[np.ndarray, str]:
     note = ""
     if data.max() > h.maxval and h.binary and _swapped(data).max() <= h.maxval:
         data = _swapped(data)
-        note = (f"its 16-bit samples are little-endian (netpbm's are big-endian): as written "
-                f"they exceed the header's maxval {h.maxval}, swapped they do not")  # fmt: skip
+        note = (
+            f"its 16-bit samples are little-endian (netpbm's are big-endian): as written "
+            f"they exceed the header's maxval {h.maxval}, swapped they do not"
+        )
     if data.max() > h.maxval:
         raise CaptureError(
             f"{path}: a sample is {data.max()}, above the header's maxval {h.maxval}"
@@ -805,12 +854,17 @@ def depth_scale_advice(cap: Capture, depth_range: tuple[float, float]) -> str | 
         where = f"beyond {hi:g} m" if far > 0 else f"nearer than {lo:g} m"
         where = f"{(near + far) * 100:.0f} % of the measured pixels are {where}"
     else:
-        where = (f"{(near + far) * 100:.0f} % of the measured pixels are outside {span} "
-                 f"({far * 100:.0f} % beyond, {near * 100:.0f} % nearer)")  # fmt: skip
+        where = (
+            f"{(near + far) * 100:.0f} % of the measured pixels are outside {span} "
+            f"({far * 100:.0f} % beyond, {near * 100:.0f} % nearer)"
+        )
     msg = f"{cap.source}: {where} at {cap.depth_scale:g} units per metre"
     raw = z * cap.depth_scale
-    inside = {s: float(np.mean((raw / s >= lo) & (raw / s <= hi)))
-              for s in STANDARD_DEPTH_SCALES if s != cap.depth_scale}  # fmt: skip
+    inside = {
+        s: float(np.mean((raw / s >= lo) & (raw / s <= hi)))
+        for s in STANDARD_DEPTH_SCALES
+        if s != cap.depth_scale
+    }
     top = max(inside.values(), default=0.0)
     if top <= 0.5:
         return msg + "; no standard depth scale puts most of them inside: check the depth scale"
@@ -818,8 +872,10 @@ def depth_scale_advice(cap: Capture, depth_range: tuple[float, float]) -> str | 
     # 0.3-8 m): of those within 5 points of the best, take the one whose median depth is
     # nearest a depth camera's typical working distance.
     median = float(np.median(raw))
-    best = min((s for s, f in inside.items() if f >= top - 0.05),
-               key=lambda s: abs(np.log(median / s / TYPICAL_DEPTH_M)))  # fmt: skip
+    best = min(
+        (s for s, f in inside.items() if f >= top - 0.05),
+        key=lambda s: abs(np.log(median / s / TYPICAL_DEPTH_M)),
+    )
     return (
         f"{msg}; with a depth scale of {best:g} ({STANDARD_DEPTH_SCALES[best]}) "
         f"{inside[best] * 100:.0f} % fall within {span}: pass --depth-scale {best:g} "
@@ -850,8 +906,10 @@ def pointcloud2_to_points(msg) -> tuple[np.ndarray, tuple[int, int] | None]:
                 f"PointCloud2 field {k}: offset {f.offset} runs past point_step {step}"
             )
     if h * w > MAX_CLOUD_POINTS:
-        raise CaptureError(f"PointCloud2 of {h}x{w} points; clouds of at most "
-                           f"{MAX_CLOUD_POINTS // 1_000_000} million points are read")  # fmt: skip
+        raise CaptureError(
+            f"PointCloud2 of {h}x{w} points; clouds of at most "
+            f"{MAX_CLOUD_POINTS // 1_000_000} million points are read"
+        )
     if h * w == 0:
         raise CaptureError(f"PointCloud2 of {h}x{w} points: no points")
     if row < w * step or len(msg.data) < h * row:
@@ -860,21 +918,25 @@ def pointcloud2_to_points(msg) -> tuple[np.ndarray, tuple[int, int] | None]:
             f"{len(msg.data)} bytes: its row_step or data is too short"
         )
     end = ">" if msg.is_bigendian else "<"
-    dtype = np.dtype({
-        "names": list("xyz"),
-        "formats": [end + _PC2_TYPES[fields[k].datatype] for k in "xyz"],
-        "offsets": [fields[k].offset for k in "xyz"],
-        "itemsize": msg.point_step,
-    })  # fmt: skip
+    dtype = np.dtype(
+        {
+            "names": list("xyz"),
+            "formats": [end + _PC2_TYPES[fields[k].datatype] for k in "xyz"],
+            "offsets": [fields[k].offset for k in "xyz"],
+            "itemsize": msg.point_step,
+        }
+    )
     raw = np.frombuffer(bytes(msg.data), dtype=np.uint8, count=h * row).reshape(h, row)
     rows = raw[:, : w * step].copy().view(dtype).reshape(-1)
     pts = np.stack([rows[k].astype(np.float64) for k in "xyz"], axis=1)
     return pts, ((h, w) if h > 1 else None)
 
 
-BAG_MAGIC = {".bag": ("a ROS 1 bag", b"#ROSBAG V2.0\n"),
-             ".db3": ("a ROS 2 SQLite bag", b"SQLite format 3\0"),
-             ".mcap": ("an MCAP bag", b"\x89MCAP0\r\n")}  # fmt: skip
+BAG_MAGIC = {
+    ".bag": ("a ROS 1 bag", b"#ROSBAG V2.0\n"),
+    ".db3": ("a ROS 2 SQLite bag", b"SQLite format 3\0"),
+    ".mcap": ("an MCAP bag", b"\x89MCAP0\r\n"),
+}
 """Suffix -> what it is and what it starts with (ROS 1: format 2.0, the only one rosbags
 reads)."""
 
@@ -1041,8 +1103,12 @@ def _read_bag(reader, path: Path, topic: str | None, depth_scale: float | None) 
             pts, shape = pointcloud2_to_points(msg)
         except CaptureError as exc:
             raise CaptureError(f"{path} ({clouds[0].topic}): {exc}") from None
-        cap = Capture(points=pts, shape=shape, source=f"{path} ({clouds[0].topic})",
-                      frame=_frame_of(msg.header.frame_id))  # fmt: skip
+        cap = Capture(
+            points=pts,
+            shape=shape,
+            source=f"{path} ({clouds[0].topic})",
+            frame=_frame_of(msg.header.frame_id),
+        )
         return _with_imu_gravity(reader, cap, msg.header.frame_id)
     if images:
         cap = _bag_depth_image(reader, path, images[0], depth_scale)
@@ -1086,8 +1152,13 @@ def _with_imu_gravity(reader, cap: Capture, cloud_frame: str | None) -> Capture:
     mean = np.mean(np.asarray(acc, dtype=np.float64), axis=0) if acc else np.zeros(3)
     g = float(np.linalg.norm(mean))
     if not np.isfinite(g) or not 5.0 <= g <= 15.0:  # not at rest, or not in m/s^2
-        return dataclasses.replace(cap, notes=(*cap.notes, f"the IMU ({imus[0].topic}) reads "
-                                   f"{g:.1f} m/s^2, not gravity: its up was not used"))  # fmt: skip
+        return dataclasses.replace(
+            cap,
+            notes=(
+                *cap.notes,
+                f"the IMU ({imus[0].topic}) reads {g:.1f} m/s^2, not gravity: its up was not used",
+            ),
+        )
     note = f"up from the IMU ({imus[0].topic}, frame {frame_id or '?'})"
     if cloud_frame is not None and frame_id and frame_id.strip("/") != cloud_frame.strip("/"):
         note += f", assumed aligned with the cloud's frame {cloud_frame}"
@@ -1123,12 +1194,24 @@ def _bag_depth_image(reader, path: Path, conn, depth_scale: float | None) -> Cap
     ci = reader.deserialize(_first_message(reader, path, info[0]), info[0].msgtype)
     k = np.asarray(getattr(ci, "k", None) if hasattr(ci, "k") else ci.K, dtype=float).reshape(3, 3)
     intr = intrinsics_from_mapping(
-        {"width": img.width, "height": img.height, "fx": k[0, 0], "fy": k[1, 1],
-         "cx": k[0, 2], "cy": k[1, 2]}, f"{path} ({info[0].topic})",
-    )  # fmt: skip
+        {
+            "width": img.width,
+            "height": img.height,
+            "fx": k[0, 0],
+            "fy": k[1, 1],
+            "cx": k[0, 2],
+            "cy": k[1, 2],
+        },
+        f"{path} ({info[0].topic})",
+    )
     depth = np.nan_to_num(depth / scale, nan=0.0)
     if not np.any(depth > 0):
         raise CaptureError(f"{path} ({conn.topic}): every pixel is 0 (no depth measured)")
-    return Capture(points=depth_to_points(depth, intr), shape=(img.height, img.width),
-                   source=f"{path} ({conn.topic})", intrinsics=intr, frame="camera",
-                   depth_scale=scale)  # fmt: skip
+    return Capture(
+        points=depth_to_points(depth, intr),
+        shape=(img.height, img.width),
+        source=f"{path} ({conn.topic})",
+        intrinsics=intr,
+        frame="camera",
+        depth_scale=scale,
+    )

@@ -122,10 +122,13 @@ def find_planes(
             n, d = -n, -d
         planes.append(
             Plane(
-                normal=n, offset=float(d), support=len(inliers), area=_area(rest[inliers], n),
+                normal=n,
+                offset=float(d),
+                support=len(inliers),
+                area=_area(rest[inliers], n),
                 angle_deg=float(np.degrees(np.arccos(np.clip(n @ up, -1.0, 1.0)))),
             )
-        )  # fmt: skip
+        )
         keep = np.ones(len(rest), dtype=bool)
         keep[inliers] = False
         rest = rest[keep]
@@ -218,8 +221,7 @@ def choose_ground(
     facing = _facing_up(sub, up, cfg.prior_tolerance_deg, toward_sensor)
     planes = []
     if facing.sum() >= 50:
-        planes = find_planes(sub[facing], up, cfg, toward_sensor,
-                             cone_deg=cfg.prior_tolerance_deg)  # fmt: skip
+        planes = find_planes(sub[facing], up, cfg, toward_sensor, cone_deg=cfg.prior_tolerance_deg)
     pool = int(facing.sum())  # the points a ground may be a share of
     candidates = [p for p in planes if p.angle_deg <= cfg.prior_tolerance_deg]
     if not candidates:
@@ -244,8 +246,11 @@ def choose_ground(
     members = group(lead)
     refined = np.sum([q.support * q.normal for q in members], axis=0)
     refined /= np.linalg.norm(refined)
-    rivals = [candidates[int(k)] for k in order[1:]
-              if _angle(candidates[int(k)].normal, refined) > cfg.parallel_deg]  # fmt: skip
+    rivals = [
+        candidates[int(k)]
+        for k in order[1:]
+        if _angle(candidates[int(k)].normal, refined) > cfg.parallel_deg
+    ]
     if rivals and max(sum(q.support for q in group(r)) for r in rivals) >= 0.5 * scores[order[0]]:
         r = max(rivals, key=lambda r: sum(q.support for q in group(r)))
         warnings.append(
@@ -259,8 +264,9 @@ def choose_ground(
         if level and all(abs(p.offset - q.offset) >= cfg.level_gap for q in horizontal):
             horizontal.append(p)
     total = len(sub)
-    well = [p for p in horizontal
-            if p.area >= cfg.min_area and p.support >= cfg.min_fraction * pool]  # fmt: skip
+    well = [
+        p for p in horizontal if p.area >= cfg.min_area and p.support >= cfg.min_fraction * pool
+    ]
     if not well:
         well = [max(horizontal, key=lambda p: p.support)]
         warnings.append(
@@ -291,9 +297,14 @@ def choose_ground(
     n, d = _refit_level(points, level, cfg.threshold)
     support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
     return GroundChoice(
-        normal=n, offset=d, support=support, fraction=support / len(points), area=ground.area,
-        planes=tuple(planes), warnings=tuple(warnings),
-    )  # fmt: skip
+        normal=n,
+        offset=d,
+        support=support,
+        fraction=support / len(points),
+        area=ground.area,
+        planes=tuple(planes),
+        warnings=tuple(warnings),
+    )
 
 
 def _facing_up(
@@ -343,12 +354,16 @@ def _ground_through(
             f"no points within 25 cm of the picked point {near.round(3).tolist()}: pick a "
             f"point on the captured surface"
         )
-    n_loc, d_loc, inliers = _ransac_plane(local, cfg.threshold, min(cfg.iterations, 300),
-                                          np.random.default_rng(cfg.seed))  # fmt: skip
+    n_loc, d_loc, inliers = _ransac_plane(
+        local, cfg.threshold, min(cfg.iterations, 300), np.random.default_rng(cfg.seed)
+    )
     clear = len(inliers) >= 0.5 * len(local)
-    on_it = [p for p in planes
-             if np.mean(np.abs(local @ p.normal + p.offset) <= 3 * cfg.threshold) >= 0.3
-             and (not clear or _angle(p.normal, n_loc) <= 10.0 or _angle(p.normal, -n_loc) <= 10.0)]
+    on_it = [
+        p
+        for p in planes
+        if np.mean(np.abs(local @ p.normal + p.offset) <= 3 * cfg.threshold) >= 0.3
+        and (not clear or _angle(p.normal, n_loc) <= 10.0 or _angle(p.normal, -n_loc) <= 10.0)
+    ]
     if on_it:
         best = max(on_it, key=lambda p: p.support)
         n, d = _refit_level(points, [(best.normal, best.offset)], cfg.threshold)
@@ -362,9 +377,14 @@ def _ground_through(
     on = np.abs(points @ n + d) <= cfg.threshold
     support = int(np.sum(on))
     return GroundChoice(
-        normal=n, offset=float(d), support=support, fraction=support / total,
-        area=_area(points[on], n), planes=tuple(planes), warnings=(),
-    )  # fmt: skip
+        normal=n,
+        offset=float(d),
+        support=support,
+        fraction=support / total,
+        area=_area(points[on], n),
+        planes=tuple(planes),
+        warnings=(),
+    )
 
 
 def _refit(
@@ -404,8 +424,10 @@ def _refit_level(
         stacked = np.concatenate([g - g.mean(axis=0) for g in groups if len(g) >= 3])
         m = np.linalg.svd(stacked, full_matrices=False)[2][2]
         n = m if m @ n >= 0 else -m
-        offsets = [float(-n @ g.mean(axis=0)) if len(g) >= 3 else dk
-                   for g, dk in zip(groups, offsets, strict=True)]  # fmt: skip
+        offsets = [
+            float(-n @ g.mean(axis=0)) if len(g) >= 3 else dk
+            for g, dk in zip(groups, offsets, strict=True)
+        ]
         rms = float(np.sqrt(np.mean((groups[0] @ n + offsets[0]) ** 2)))
         wider = min(max(threshold, 2.5 * rms), MAX_BAND)
         if abs(wider - band) < 1e-3:

@@ -66,8 +66,18 @@ def _header_lines(head: bytes, end: bytes, source: str, kind: str) -> tuple[list
 # -- PCD ------------------------------------------------------------------------------------
 
 PcdEncoding = Literal["ascii", "binary", "binary_compressed"]
-PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
-            "POINTS", "DATA")  # fmt: skip
+PCD_KEYS = (
+    "VERSION",
+    "FIELDS",
+    "SIZE",
+    "TYPE",
+    "COUNT",
+    "WIDTH",
+    "HEIGHT",
+    "VIEWPOINT",
+    "POINTS",
+    "DATA",
+)
 PCD_TYPES = {"F": (4, 8), "I": (1, 2, 4, 8), "U": (1, 2, 4, 8)}
 """TYPE letter -> the SIZEs PCL writes for it [bytes]."""
 
@@ -158,8 +168,15 @@ def parse_pcd_header(head: bytes, file_size: int, source: str) -> PcdHeader:
             f"{source}: PCD DATA {_show(values['DATA'][0])}; accepted: ascii, binary, "
             f"binary_compressed"
         )
-    header = PcdHeader(fields=fields, width=width, height=height, points=width * height,
-                       viewpoint=viewpoint, data=data, data_offset=offset)  # type: ignore[arg-type]  # fmt: skip
+    header = PcdHeader(
+        fields=fields,
+        width=width,
+        height=height,
+        points=width * height,
+        viewpoint=viewpoint,
+        data=data,
+        data_offset=offset,
+    )  # type: ignore[arg-type]
     return _check_pcd_size(header, head, file_size, source)
 
 
@@ -199,8 +216,9 @@ def _pcd_fields(values: dict[str, list[str]], source: str) -> tuple[PcdField, ..
                 f"{n} ({' '.join(names)[:80]}): each field needs one SIZE, TYPE and COUNT"
             )
     fields = []
-    for name, size_s, type_s, count_s in zip(names, values["SIZE"], values["TYPE"], counts,
-                                             strict=True):  # fmt: skip
+    for name, size_s, type_s, count_s in zip(
+        names, values["SIZE"], values["TYPE"], counts, strict=True
+    ):
         size = _uint(source, f"SIZE of {name}", size_s)
         count = _uint(source, f"COUNT of {name}", count_s)
         kind = type_s.upper()
@@ -302,10 +320,24 @@ def _check_pcd_size(h: PcdHeader, head: bytes, file_size: int, source: str) -> P
 
 # -- PLY ------------------------------------------------------------------------------------
 
-PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
-             "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
-             "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
-             "float64": "f8"}  # fmt: skip
+PLY_TYPES = {
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
 """PLY property type -> numpy kind and size (without byte order)."""
 PlyFormat = Literal["ascii", "binary_little_endian", "binary_big_endian"]
 
@@ -363,11 +395,16 @@ def parse_ply_header(head: bytes, file_size: int, source: str) -> PlyHeader:
         raise CaptureError(f"{source}: not a PLY file (it starts with {head[:16]!r})")
     lines, offset = _header_lines(head[:HEAD_BYTES], b"end_header", source, "PLY")
     if lines[-1].strip() != "end_header":
-        raise CaptureError(f"{source}: PLY header line {len(lines)}: expected end_header, got "
-                           f"{_show(lines[-1], 40)}")  # fmt: skip
+        raise CaptureError(
+            f"{source}: PLY header line {len(lines)}: expected end_header, got "
+            f"{_show(lines[-1], 40)}"
+        )
     fmt, elements = _ply_lines(lines[1:-1], source)
-    header = PlyHeader(format=fmt, data_offset=offset,  # type: ignore[arg-type]
-                       elements=_ply_elements(elements, source))  # fmt: skip
+    header = PlyHeader(
+        format=fmt,
+        data_offset=offset,  # type: ignore[arg-type]
+        elements=_ply_elements(elements, source),
+    )
     available = max(file_size - offset, 0)
     if fmt == "ascii":  # a digit and a separator per value, a list at least its count
         need = sum(2 * e.count * len(e.properties) for e in header.elements) - 1
@@ -420,8 +457,11 @@ def _ply_lines(lines: list[str], source: str) -> tuple[str, list]:
 
 
 def _ply_format(words: list[str], where: str) -> str:
-    if len(words) != 3 or words[2] != "1.0" or words[1] not in ("ascii", "binary_little_endian",
-                                                                "binary_big_endian"):  # fmt: skip
+    if (
+        len(words) != 3
+        or words[2] != "1.0"
+        or words[1] not in ("ascii", "binary_little_endian", "binary_big_endian")
+    ):
         raise CaptureError(
             f"{where}: format {_show(' '.join(words[1:]), 40)}; accepted: ascii, "
             f"binary_little_endian or binary_big_endian, version 1.0"
@@ -447,12 +487,14 @@ def _ply_property(words: list[str], where: str) -> PlyProperty:
             )
     if count_t is not None and PLY_TYPES[count_t][0] == "f":
         raise CaptureError(f"{where}: a list's count type must be an integer type, not {count_t}")
-    return PlyProperty(name=name, type=PLY_TYPES[item_t],
-                       list_count=PLY_TYPES[count_t] if count_t else None)  # fmt: skip
+    return PlyProperty(
+        name=name, type=PLY_TYPES[item_t], list_count=PLY_TYPES[count_t] if count_t else None
+    )
 
 
-def _ply_elements(elements: list[tuple[str, int, list[PlyProperty]]], source: str
-                  ) -> tuple[PlyElement, ...]:  # fmt: skip
+def _ply_elements(
+    elements: list[tuple[str, int, list[PlyProperty]]], source: str
+) -> tuple[PlyElement, ...]:
     """The elements, checked: named once, each with a property, a vertex element of scalar x,
     y, z with 1 to MAX_CLOUD_POINTS entries."""
     if len({name for name, _, _ in elements}) != len(elements):
@@ -460,8 +502,10 @@ def _ply_elements(elements: list[tuple[str, int, list[PlyProperty]]], source: st
     empty = next((name for name, _, props in elements if not props), None)
     if empty is not None:  # its entries would take no bytes: any count would fit any file
         raise CaptureError(f"{source}: the PLY element {_show(empty)} has no properties")
-    els = tuple(PlyElement(name=name, count=count, properties=tuple(props))
-                for name, count, props in elements)  # fmt: skip
+    els = tuple(
+        PlyElement(name=name, count=count, properties=tuple(props))
+        for name, count, props in elements
+    )
     vertex = next((e for e in els if e.name == "vertex"), None)
     if vertex is None:
         raise CaptureError(
@@ -564,8 +608,9 @@ def parse_netpbm_header(head: bytes, file_size: int, source: str) -> NetpbmHeade
             f"image has maxval > 255 (16 bits per sample)"
         )
     check_pixels(source, width, height)
-    h = NetpbmHeader(channels=channels, binary=binary, width=width, height=height,
-                     maxval=maxval, data_offset=pos)  # fmt: skip
+    h = NetpbmHeader(
+        channels=channels, binary=binary, width=width, height=height, maxval=maxval, data_offset=pos
+    )
     available = file_size - pos
     # binary: 2 bytes per sample; ASCII: at least a digit and a separator per sample
     needed = 2 * h.samples if binary else 2 * h.samples - 1

@@ -142,9 +142,10 @@ class Reconstruction:
             g = self.ground
             out["ground"] = {
                 "normal_in_capture_frame": [round(float(v), 5) for v in g.normal],
-                "support_points": g.support, "support_fraction": round(g.fraction, 4),
+                "support_points": g.support,
+                "support_fraction": round(g.fraction, 4),
                 "area_m2": round(g.area, 3),
-            }  # fmt: skip
+            }
         out["triangles"] = int(len(self.mesh.faces))
         out["bounds"] = self.mesh.bounds.round(4).tolist() if len(self.mesh.faces) else None
         out["counts"] = dict(self.counts)
@@ -234,7 +235,7 @@ widest, a 120 deg wide-angle mode, reaches 1.73) [-]."""
 
 
 def capture_frame(capture: Capture, points: np.ndarray, cfg: MeshingConfig) -> str:
-    """"camera" or "world": the config's, else the file's word, else from the points ((N, 3)
+    """ "camera" or "world": the config's, else the file's word, else from the points ((N, 3)
     finite, relative to the sensor): a georeferenced cloud, one with points behind the
     sensor (a lidar all round it; a camera sees only z > 0), or one spread wider than any
     camera's field of view (a lidar's patch of ground, its z up and small) is a world frame."""
@@ -327,8 +328,10 @@ def reconstruct(
         if cfg.depth_range is None:  # the default range: most likely a wrong scale
             raise CaptureError(f"{capture.source}: {advice}")
         # A range the user chose keeps what it keeps; the scale may still be wrong.
-        warnings.append(f"{100 * (1 - inside.mean()):.0f} % of the points are outside the depth "
-                        f"range given; if that is not meant: {advice}")  # fmt: skip
+        warnings.append(
+            f"{100 * (1 - inside.mean()):.0f} % of the points are outside the depth "
+            f"range given; if that is not meant: {advice}"
+        )
     pts = pts[inside]
     stage("depth range", len(pts))
     pts = voxel_downsample(pts, cfg.voxel)
@@ -337,10 +340,13 @@ def reconstruct(
     stage("outliers", len(pts))
     ground = None
     up, up_source = gravity_prior(capture, frame, cfg)
-    gcfg = GroundConfig(threshold=cfg.ground_threshold, iterations=cfg.ground_iterations,
-                        seed=cfg.seed)  # fmt: skip
-    near_point = None if cfg.ground_point is None else np.asarray(cfg.ground_point) - (
-        origin if frame == "camera" else 0.0
+    gcfg = GroundConfig(
+        threshold=cfg.ground_threshold, iterations=cfg.ground_iterations, seed=cfg.seed
+    )
+    near_point = (
+        None
+        if cfg.ground_point is None
+        else np.asarray(cfg.ground_point) - (origin if frame == "camera" else 0.0)
     )
     if cfg.camera_pose is not None:
         wfc = pose_matrix(cfg.camera_pose)
@@ -351,7 +357,9 @@ def reconstruct(
         ground = choose_ground(pts, up, gcfg, near=near_point)
         counts["ground inliers"] = ground.support
         warnings.extend(ground.warnings)
-        wfc = world_from_ground(ground.normal, ground.offset, (cfg.depth_range or CAMERA_DEPTH_RANGE)[1])
+        wfc = world_from_ground(
+            ground.normal, ground.offset, (cfg.depth_range or CAMERA_DEPTH_RANGE)[1]
+        )
     else:
         wfc, ground = _world_frame_transform(pts, up, gcfg, cfg, near_point, notes)
         if ground is not None:
@@ -369,11 +377,16 @@ def reconstruct(
             keep = np.zeros(len(capture.points), dtype=bool)
             keep[np.flatnonzero(capture.valid)[inside]] = True
             grid = np.where(keep[:, None], capture.points - origin, np.nan)
-            keep[keep] = _crop_mask(grid[keep] @ centred_to_world[:3, :3].T
-                                    + centred_to_world[:3, 3], cfg.crop)  # fmt: skip
-            surface = organized_surface(grid.reshape(*capture.shape, 3),
-                                        keep.reshape(capture.shape), centred_to_world,
-                                        cfg.voxel[0], cfg.max_fill)  # fmt: skip
+            keep[keep] = _crop_mask(
+                grid[keep] @ centred_to_world[:3, :3].T + centred_to_world[:3, 3], cfg.crop
+            )
+            surface = organized_surface(
+                grid.reshape(*capture.shape, 3),
+                keep.reshape(capture.shape),
+                centred_to_world,
+                cfg.voxel[0],
+                cfg.max_fill,
+            )
         elif frame == "camera":
             surface = projected_surface(pts[in_crop], centred_to_world, cfg.max_fill)
         else:
@@ -392,8 +405,10 @@ def reconstruct(
         if cfg.cell is None:
             spacing = _point_spacing(world)
             if spacing > 2.0 * cell:
-                notes.append(f"points are {spacing:.3g} m apart: height field cells of "
-                             f"{spacing:.3g} m instead of {cell:g} m")  # fmt: skip
+                notes.append(
+                    f"points are {spacing:.3g} m apart: height field cells of "
+                    f"{spacing:.3g} m instead of {cell:g} m"
+                )
                 cell = spacing
         mesh = grid_mesh(world, cell, camera, cfg.fill_holes, source=capture.source)
     else:
@@ -409,9 +424,16 @@ def reconstruct(
             f"ground may be a raised surface (a table), or the up direction wrong"
         )
     return Reconstruction(
-        mesh=mesh, world_from_camera=wfc, counts=counts, times=times, frame=frame,
-        up_source=up_source, ground=ground, warnings=tuple(warnings), notes=tuple(notes),
-    )  # fmt: skip
+        mesh=mesh,
+        world_from_camera=wfc,
+        counts=counts,
+        times=times,
+        frame=frame,
+        up_source=up_source,
+        ground=ground,
+        warnings=tuple(warnings),
+        notes=tuple(notes),
+    )
 
 
 def _crop_mask(world: np.ndarray, crop) -> np.ndarray:
@@ -428,10 +450,12 @@ def surface_to_mesh(surface: Surface) -> trimesh.Trimesh:
     and merging, the planner's height field takes the noise (scenes/_world.py), and the page
     draws filled triangles apart from measured ones."""
     return trimesh.Trimesh(
-        surface.vertices, surface.faces, process=False,
+        surface.vertices,
+        surface.faces,
+        process=False,
         vertex_attributes={"height_noise": surface.height_noise},
         face_attributes={"filled": surface.filled_faces.astype(np.float64)},
-    )  # fmt: skip
+    )
 
 
 def _translation(t: np.ndarray) -> np.ndarray:
@@ -447,9 +471,13 @@ def _overhead(world: np.ndarray) -> np.ndarray:
 
 
 def _world_frame_transform(
-    pts: np.ndarray, up: np.ndarray, gcfg: GroundConfig, cfg: MeshingConfig,
-    near: np.ndarray | None, notes: list[str],
-) -> tuple[np.ndarray, GroundChoice | None]:  # fmt: skip
+    pts: np.ndarray,
+    up: np.ndarray,
+    gcfg: GroundConfig,
+    cfg: MeshingConfig,
+    near: np.ndarray | None,
+    notes: list[str],
+) -> tuple[np.ndarray, GroundChoice | None]:
     """A world-frame cloud ((N, 3)) keeps its axes (turned only when `up` is not +z); its
     ground goes to z = 0: the lowest well-supported level plane when there is one, else the
     cloud's 2nd percentile of height (hilly terrain); a georeferenced cloud's centre goes to
@@ -458,10 +486,13 @@ def _world_frame_transform(
     turned = pts @ rot.T
     ground = None
     try:
-        choice = choose_ground(turned, np.array([0.0, 0.0, 1.0]),
-                               GroundConfig(**{**gcfg.__dict__, "prior_tolerance_deg": 15.0}),
-                               near=None if near is None else rot @ near,
-                               toward_sensor=False)  # fmt: skip
+        choice = choose_ground(
+            turned,
+            np.array([0.0, 0.0, 1.0]),
+            GroundConfig(**{**gcfg.__dict__, "prior_tolerance_deg": 15.0}),
+            near=None if near is None else rot @ near,
+            toward_sensor=False,
+        )
     except CaptureError:
         choice = None
     centre = np.median(turned, axis=0)
@@ -520,15 +551,15 @@ def grid_mesh(
     z[~np.isfinite(z)] = np.nan
     z = _fill_small_holes(z, fill_holes)
     ys, xs = np.mgrid[0:ny, 0:nx]
-    verts = np.column_stack([
-        xy0[0] + (xs.ravel() + 0.5) * cell, xy0[1] + (ys.ravel() + 0.5) * cell, z.ravel()
-    ])  # fmt: skip
+    verts = np.column_stack(
+        [xy0[0] + (xs.ravel() + 0.5) * cell, xy0[1] + (ys.ravel() + 0.5) * cell, z.ravel()]
+    )
     idx = np.arange(ny * nx).reshape(ny, nx)
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]  # d is a's diagonal
     ok = np.isfinite(verts[:, 2])
     faces = np.concatenate(
         [np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)]
-    )  # fmt: skip  (counter-clockwise seen from +z: normals up)
+    )  # counter-clockwise seen from +z: normals up
     faces = faces[ok[faces].all(axis=1)]
     faces = faces[_faces_camera(verts, faces, camera)]
     mesh = trimesh.Trimesh(verts, faces, process=False)
@@ -543,8 +574,14 @@ def _fill_small_holes(z: np.ndarray, rounds: int) -> np.ndarray:
     for _ in range(rounds):
         pad = np.pad(z, 1, constant_values=np.nan)
         h, w = z.shape
-        stack = np.stack([pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
-                          for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])  # fmt: skip
+        stack = np.stack(
+            [
+                pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+                for dy in (-1, 0, 1)
+                for dx in (-1, 0, 1)
+                if dy or dx
+            ]
+        )
         n = np.isfinite(stack).sum(axis=0)
         fill = np.isnan(z) & (n >= 5)
         if not fill.any():
@@ -610,9 +647,26 @@ class CaptureSettings:
     """Bag topic."""
 
 
-SETTING_KEYS = ("voxel", "method", "intrinsics", "depth_scale", "depth_units", "units", "topic",
-                "camera_pose", "crop", "depth_range", "cell", "outlier_std", "ground_threshold",
-                "seed", "frame", "up", "ground_point", "recentre")  # fmt: skip
+SETTING_KEYS = (
+    "voxel",
+    "method",
+    "intrinsics",
+    "depth_scale",
+    "depth_units",
+    "units",
+    "topic",
+    "camera_pose",
+    "crop",
+    "depth_range",
+    "cell",
+    "outlier_std",
+    "ground_threshold",
+    "seed",
+    "frame",
+    "up",
+    "ground_point",
+    "recentre",
+)
 
 
 def _num(k: str, v, lo: float = 0.0) -> float:
@@ -676,14 +730,20 @@ def _pinhole_numbers(k: str, v: dict) -> PinholeNumbers:
     if unknown or missing:
         raise CaptureError(
             f"{k}: expected a mapping {{fx, fy, cx, cy[, width, height]}}; "
-            + (f"unknown {', '.join(map(str, unknown))}" if unknown else
-               f"missing {', '.join(missing)}")  # fmt: skip
+            + (
+                f"unknown {', '.join(map(str, unknown))}"
+                if unknown
+                else f"missing {', '.join(missing)}"
+            )
         )
     for n in ("width", "height"):
         if n in v and (isinstance(v[n], bool) or not isinstance(v[n], int) or v[n] < 1):
             raise CaptureError(f"{k}.{n}: expected a whole number of pixels >= 1, got {v[n]!r}")
-    return PinholeNumbers(**{n: _num(f"{k}.{n}", v[n]) for n in names[:4]},
-                          width=v.get("width"), height=v.get("height"))  # fmt: skip
+    return PinholeNumbers(
+        **{n: _num(f"{k}.{n}", v[n]) for n in names[:4]},
+        width=v.get("width"),
+        height=v.get("height"),
+    )
 
 
 def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
@@ -711,26 +771,35 @@ def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
         raise CaptureError(f"topic: expected a topic name, got {topic!r}")
     return CaptureSettings(
         meshing=MeshingConfig(**meshing),
-        intrinsics=intr if intr is None or isinstance(intr, PinholeNumbers) or intr in PRESETS
+        intrinsics=intr
+        if intr is None or isinstance(intr, PinholeNumbers) or intr in PRESETS
         else str(resolve(intr)),
         depth_scale=_num("depth_scale", data["depth_scale"]) if "depth_scale" in data else None,
         depth_units=_choice("depth_units", data["depth_units"], DEPTH_UNITS)  # type: ignore[arg-type]
-        if "depth_units" in data else None,
+        if "depth_units" in data
+        else None,
         units=_choice("units", data["units"], ("m", "mm")) if "units" in data else None,  # type: ignore[arg-type]
         topic=topic,
     )
 
 
 def mesh_capture(
-    path, settings: CaptureSettings = CaptureSettings(), on_stage: Callable[[str], None] | None = None
+    path,
+    settings: CaptureSettings = CaptureSettings(),
+    on_stage: Callable[[str], None] | None = None,
 ) -> Reconstruction:
     """Read a capture file and reconstruct its terrain; on_stage("read") once it is read, then
     as reconstruct calls it."""
     from ._capture import load_capture
 
-    cap = load_capture(path, intrinsics=settings.intrinsics, depth_scale=settings.depth_scale,
-                       topic=settings.topic, units=settings.units,
-                       depth_units=settings.depth_units)  # fmt: skip
+    cap = load_capture(
+        path,
+        intrinsics=settings.intrinsics,
+        depth_scale=settings.depth_scale,
+        topic=settings.topic,
+        units=settings.units,
+        depth_units=settings.depth_units,
+    )
     if on_stage is not None:
         on_stage("read")
     return reconstruct(cap, settings.meshing, on_stage)

@@ -82,9 +82,12 @@ class Surface:
 
 
 def organized_surface(
-    points: np.ndarray, valid: np.ndarray, world_from_camera: np.ndarray, voxel: float,
+    points: np.ndarray,
+    valid: np.ndarray,
+    world_from_camera: np.ndarray,
+    voxel: float,
     max_fill: float,
-) -> Surface:  # fmt: skip
+) -> Surface:
     """The surface of an organized capture: points ((H, W, 3) camera frame [m], the sensor at
     the origin), valid ((H, W) bool: measured and kept), world_from_camera ((4, 4)). Pixels are
     averaged in blocks about voxel [m] across at the median range; holes of at most max_fill
@@ -168,9 +171,12 @@ def _pixel_rays(
 
 
 def _fill_grid_holes(
-    grid: np.ndarray, ok: np.ndarray, rays: np.ndarray, world_from_camera: np.ndarray,
+    grid: np.ndarray,
+    ok: np.ndarray,
+    rays: np.ndarray,
+    world_from_camera: np.ndarray,
     max_fill: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Holes of the block grid ((h, w) ok False, not touching the border) whose rim (the valid
     blocks round them) is at most max_fill [m] across and flat (a plane within the noise),
     filled with that plane along each block's ray ((h, w, 3)). A shadow behind an object has
@@ -244,9 +250,11 @@ def _grid_faces(
         first = (n1 > n2) | ((n1 == n2) & ~(len_bc < len_ad))
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
     faces = [
-        np.stack([a, b, d], -1)[first & t_abd], np.stack([a, d, c], -1)[first & t_adc],
-        np.stack([a, b, c], -1)[~first & t_abc], np.stack([b, d, c], -1)[~first & t_bdc],
-    ]  # fmt: skip
+        np.stack([a, b, d], -1)[first & t_abd],
+        np.stack([a, d, c], -1)[first & t_adc],
+        np.stack([a, b, c], -1)[~first & t_abc],
+        np.stack([b, d, c], -1)[~first & t_bdc],
+    ]
     return np.concatenate(faces).astype(np.int64)
 
 
@@ -316,9 +324,13 @@ def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> S
 
 
 def _delaunay_surface(
-    flat: np.ndarray, points: np.ndarray, world: np.ndarray, kept, max_fill: float,
+    flat: np.ndarray,
+    points: np.ndarray,
+    world: np.ndarray,
+    kept,
+    max_fill: float,
     world_from_camera: np.ndarray | None,
-) -> Surface:  # fmt: skip
+) -> Surface:
     """The Surface of points ((N, 3): camera frame with world_from_camera, else world) from
     the Delaunay triangulation of flat ((N, 2): their image or their x, y): the triangles whose
     every edge kept(a, b) ((E,) vertex indices each -> (E,) bool) keeps, and the cut ones in
@@ -335,8 +347,13 @@ def _delaunay_surface(
         ok &= kept(faces[:, i], faces[:, j])
     back = _small_holes(tri, ~ok, world, max_fill)
     keep = ok | back
-    return _finish(points, faces[keep], np.zeros(len(points), dtype=bool), world_from_camera,
-                   filled_faces=back[keep])  # fmt: skip
+    return _finish(
+        points,
+        faces[keep],
+        np.zeros(len(points), dtype=bool),
+        world_from_camera,
+        filled_faces=back[keep],
+    )
 
 
 def _small_holes(tri, cut: np.ndarray, world: np.ndarray, max_fill: float) -> np.ndarray:
@@ -386,9 +403,12 @@ def _small_holes(tri, cut: np.ndarray, world: np.ndarray, max_fill: float) -> np
 
 
 def _finish(
-    points: np.ndarray, faces: np.ndarray, filled: np.ndarray,
-    world_from_camera: np.ndarray | None, filled_faces: np.ndarray | None = None,
-) -> Surface:  # fmt: skip
+    points: np.ndarray,
+    faces: np.ndarray,
+    filled: np.ndarray,
+    world_from_camera: np.ndarray | None,
+    filled_faces: np.ndarray | None = None,
+) -> Surface:
     """The Surface of vertices points ((V, 3), camera frame when world_from_camera ((4, 4)) is
     given, else world) and faces ((F, 3) into them): specks and unused vertices dropped, each
     facet turned to face the sensor (a world-frame cloud's: up), noise and areas computed.
@@ -431,11 +451,15 @@ def _finish(
         noise = np.full(len(world), model[0])
     noise = noise / np.sqrt(averaged)  # a smoothed vertex is the mean of that many samples
     return Surface(
-        vertices=world, faces=faces, height_noise=noise, filled=filled,
-        filled_faces=filled_faces, noise_model=model,
+        vertices=world,
+        faces=faces,
+        height_noise=noise,
+        filled=filled,
+        filled_faces=filled_faces,
+        noise_model=model,
         observed_area=float(area[~filled_faces].sum()),
         filled_area=float(area[filled_faces].sum()),
-    )  # fmt: skip
+    )
 
 
 def _not_specks(faces: np.ndarray, n_vertices: int) -> np.ndarray:

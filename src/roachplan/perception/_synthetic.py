@@ -95,8 +95,9 @@ def render_depth(
     seen = depth > 0
     if noise.axial:
         th = np.minimum(theta, np.radians(89.0))
-        sigma_mm = (1.5 - 0.5 * depth + 0.3 * depth**2
-                    + 0.1 * depth**1.5 * th**2 / (np.pi / 2 - th) ** 2)  # fmt: skip
+        sigma_mm = (
+            1.5 - 0.5 * depth + 0.3 * depth**2 + 0.1 * depth**1.5 * th**2 / (np.pi / 2 - th) ** 2
+        )
         depth = depth + rng.normal(size=depth.shape) * np.maximum(sigma_mm, 0.5) * 1e-3
     lo, hi = noise.range
     keep = seen & (depth >= lo) & (depth <= hi) & (np.degrees(theta) <= noise.max_incidence_deg)

@@ -178,14 +178,23 @@ def format_study(rows: list[VoxelStudyRow]) -> str:
 def study_json(rows: list[VoxelStudyRow], warning: str | None) -> dict:
     """The study as plain data: rows as in the CSV, and the planarity warning (or None)."""
     return {
-        "rows": [{"voxel_cm": r.voxel_cm, "points": r.points, "points_kept": r.kept,
-                  "error_mm": round(r.error_mm, 4)} for r in rows],
+        "rows": [
+            {
+                "voxel_cm": r.voxel_cm,
+                "points": r.points,
+                "points_kept": r.kept,
+                "error_mm": round(r.error_mm, 4),
+            }
+            for r in rows
+        ],
         "warning": warning,
-    }  # fmt: skip
+    }
 
 
 def study_csv(rows: list[VoxelStudyRow]) -> str:
     out = ["voxel_cm,points,points_kept,error_mm"]
-    out += [f"{'' if r.voxel_cm is None else r.voxel_cm},{r.points},{r.kept},{r.error_mm:.4f}"
-            for r in rows]  # fmt: skip
+    out += [
+        f"{'' if r.voxel_cm is None else r.voxel_cm},{r.points},{r.kept},{r.error_mm:.4f}"
+        for r in rows
+    ]
     return "\n".join(out) + "\n"

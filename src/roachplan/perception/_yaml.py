@@ -97,11 +97,12 @@ class _Loader(yaml.SafeLoader):
             self._values[id(node)] = count
         if count > MAX_YAML_VALUES:
             raise ComposerError(
-                None, None,
+                None,
+                None,
                 f"more than {MAX_YAML_VALUES} values, counting each alias (*name) as the values "
                 f"it repeats",
                 mark,
-            )  # fmt: skip
+            )
         return node
 
     def flatten_mapping(self, node: MappingNode) -> None:
@@ -116,11 +117,12 @@ class _Loader(yaml.SafeLoader):
                     key = self.construct_object(key_node)
                     if key in seen:
                         raise ConstructorError(
-                            None, None,
+                            None,
+                            None,
                             f"key {short_repr(key)} is given twice in one mapping (YAML would "
                             f"keep the last without a word)",
                             key_node.start_mark,
-                        )  # fmt: skip
+                        )
                     seen.add(key)
         super().flatten_mapping(node)
 
@@ -145,15 +147,18 @@ def _number_text(node: ScalarNode) -> str:
     """The scalar's text without `_` separators; ConstructorError if it is no number (an
     explicit `!!int` or `!!float` tag on text) or absurdly long."""
     text = str(node.value).replace("_", "")
-    ok = _INT_RE.match(text) if node.tag == _INT else (
-        _FLOAT_RE.match(text) or _DECIMAL_RE.match(text)
+    ok = (
+        _INT_RE.match(text)
+        if node.tag == _INT
+        else (_FLOAT_RE.match(text) or _DECIMAL_RE.match(text))
     )
     if len(text) > _LONGEST_NUMBER or not ok or text.lstrip("+-") in ("0x", "0o"):
         raise ConstructorError(
-            None, None,
+            None,
+            None,
             f"{short_repr(node.value)} is not a number of at most {_LONGEST_NUMBER} characters",
             node.start_mark,
-        )  # fmt: skip
+        )
     return text
 
 

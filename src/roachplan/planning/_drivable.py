@@ -125,8 +125,9 @@ def drivable_path(
             return None
         # The robot stands on the last state so far: key pose i, to the curve's rounding.
         here = out[-1][-1]
-        turned = _spin_and_line(np.array(keys), i, here, is_valid, step=step, margin=spin_margin,
-                                yaw_step=spin_step)  # fmt: skip
+        turned = _spin_and_line(
+            np.array(keys), i, here, is_valid, step=step, margin=spin_margin, yaw_step=spin_step
+        )
         if turned is None:
             return None
         j, line = turned
@@ -152,9 +153,9 @@ def spin_states(
     sweeps = [turn]
     if abs(turn) > math.pi - EITHER_WAY:
         sweeps.append(turn - math.copysign(2 * math.pi, turn))
-    yaws = np.concatenate([
-        yaw_from + np.linspace(0.0, t, max(1, math.ceil(abs(t) / yaw_step)) + 1) for t in sweeps
-    ])  # fmt: skip
+    yaws = np.concatenate(
+        [yaw_from + np.linspace(0.0, t, max(1, math.ceil(abs(t) / yaw_step)) + 1) for t in sweeps]
+    )
     centres = [np.asarray(xy, dtype=float)]
     for fraction, count in MARGIN_RINGS:
         a = 2 * math.pi * np.arange(count) / count
@@ -163,8 +164,16 @@ def spin_states(
     return np.column_stack([c, np.tile(yaws, len(centres))])
 
 
-def _spin_and_line(keys: np.ndarray, i: int, here: np.ndarray, is_valid, *, step: float,
-                   margin: float, yaw_step: float):  # fmt: skip
+def _spin_and_line(
+    keys: np.ndarray,
+    i: int,
+    here: np.ndarray,
+    is_valid,
+    *,
+    step: float,
+    margin: float,
+    yaw_step: float,
+):
     """(j, states) for the farthest key pose j > i that the robot, standing at `here` ((3,)
     pose on key pose i), reaches by turning on the spot to face it and walking the straight
     line there: states from the turned pose to key pose j's position, every <= step [m],

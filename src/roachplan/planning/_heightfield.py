@@ -48,8 +48,10 @@ class HeightField:
         if len(i) == 0:
             return ((np.nan, np.nan), (np.nan, np.nan))
         r = self.resolution
-        return ((self.x0 + i.min() * r, self.y0 + j.min() * r),
-                (self.x0 + i.max() * r, self.y0 + j.max() * r))  # fmt: skip
+        return (
+            (self.x0 + i.min() * r, self.y0 + j.min() * r),
+            (self.x0 + i.max() * r, self.y0 + j.max() * r),
+        )
 
     def sample(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear surface height at xy ((..., 2) [m]); NaN off the grid or next to a NaN cell."""
@@ -159,8 +161,11 @@ def heightfield_from_mesh(
             sn = None
             if noise is not None:
                 tn = tri_noise[sel]  # (n, 3): the noise at the corners, interpolated alike
-                sn = (tn[:, None, 0] + a * (tn[:, None, 1] - tn[:, None, 0])
-                      + c * (tn[:, None, 2] - tn[:, None, 0]))[inside]  # fmt: skip
+                sn = (
+                    tn[:, None, 0]
+                    + a * (tn[:, None, 1] - tn[:, None, 0])
+                    + c * (tn[:, None, 2] - tn[:, None, 0])
+                )[inside]
             hits.append((at, z[inside], sn))
     if hits:
         at = np.concatenate([h[0] for h in hits])
@@ -170,13 +175,15 @@ def heightfield_from_mesh(
             np.minimum.at(lowest, at, z)
             keep = z <= lowest[at] + overhead
             at, z = at[keep], z[keep]
-            hits = [(at, z, np.concatenate([h[2] for h in hits])[keep] if noise is not None
-                     else None)]  # fmt: skip
+            hits = [
+                (at, z, np.concatenate([h[2] for h in hits])[keep] if noise is not None else None)
+            ]
         np.maximum.at(flat, at, z)
         if noise is not None:
             np.maximum.at(noise.reshape(-1), at, np.concatenate([h[2] for h in hits]))
     if ground_height is not None:
         top = np.maximum(top, ground_height)
     top[~np.isfinite(top)] = np.nan
-    return HeightField(x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution,
-                       heights=top, noise=noise)  # fmt: skip
+    return HeightField(
+        x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, heights=top, noise=noise
+    )

@@ -157,9 +157,12 @@ def _outcome(fn: Callable, args: tuple, kwargs: dict, limit: int, task: str = "p
         limit_child_memory(limit)
         outcome = (True, fn(*args, **kwargs))
     except MemoryError:
-        outcome = (False, IsolationError(
-            f"the {task} process ran out of memory and was stopped; {_memory_advice(limit)}"
-        ))  # fmt: skip
+        outcome = (
+            False,
+            IsolationError(
+                f"the {task} process ran out of memory and was stopped; {_memory_advice(limit)}"
+            ),
+        )
     except BaseException as exc:  # noqa: BLE001
         outcome = (False, exc)
     try:
@@ -189,8 +192,9 @@ def _via_forkserver(
     if preload:
         ctx.set_forkserver_preload([preload])  # takes effect when the server first starts
     recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_forkserver_child, args=(send, fn, args, kwargs, limit, task),
-                        daemon=True)  # fmt: skip
+    child = ctx.Process(
+        target=_forkserver_child, args=(send, fn, args, kwargs, limit, task), daemon=True
+    )
     child.start()
     send.close()
     try:

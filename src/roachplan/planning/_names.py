@@ -6,9 +6,23 @@ from __future__ import annotations
 from typing import Literal, get_args
 
 PlannerName = Literal[
-    "prm", "stride", "rrt", "rrtconnect", "rrtstar", "prmstar", "lazyprm", "bitstar",
-    "est", "sbl", "kpiece1", "bkpiece1", "lbkpiece1", "fmt", "trrt", "informedrrtstar",
-]  # fmt: skip
+    "prm",
+    "stride",
+    "rrt",
+    "rrtconnect",
+    "rrtstar",
+    "prmstar",
+    "lazyprm",
+    "bitstar",
+    "est",
+    "sbl",
+    "kpiece1",
+    "bkpiece1",
+    "lbkpiece1",
+    "fmt",
+    "trrt",
+    "informedrrtstar",
+]
 PLANNER_NAMES: tuple[str, ...] = get_args(PlannerName)
 
 

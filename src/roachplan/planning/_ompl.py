@@ -168,9 +168,17 @@ class _TerrainSampler(ob.StateSampler):
     BLOCK = 256
 
     def __init__(
-        self, space, *, rng: np.random.Generator, cells: np.ndarray, cell: float, lo, hi, check,
+        self,
+        space,
+        *,
+        rng: np.random.Generator,
+        cells: np.ndarray,
+        cell: float,
+        lo,
+        hi,
+        check,
         known: dict[tuple[float, float, float], bool],
-    ) -> None:  # fmt: skip
+    ) -> None:
         """cells: (K, 2) centres of standable cells of size `cell` [m]; lo, hi: (2,) bounds of
         (x, y) [m]; check: vectorised validity of (N, 3) states; known: the verdict cache this
         sampler fills (shared by every sampler of one plan)."""
@@ -405,8 +413,17 @@ def _plan_here(
         return inside & check(st) if inside.all() else np.zeros(len(st), dtype=bool)
 
     if np.hypot(goal[0] - start[0], goal[1] - start[1]) < cfg.goal_radius:
-        return _coinciding(hf, fp, start=start, goal=goal, cfg=cfg, seed=seed, regions=regions,
-                           is_valid=inside_and_valid, t0=t0)  # fmt: skip
+        return _coinciding(
+            hf,
+            fp,
+            start=start,
+            goal=goal,
+            cfg=cfg,
+            seed=seed,
+            regions=regions,
+            is_valid=inside_and_valid,
+            t0=t0,
+        )
     # Sample where the robot can stand, one cell of margin round it (the map is coarse).
     cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
     if len(cells) == 0:
@@ -464,9 +481,14 @@ def _plan_here(
         if cfg.turning_radius is None:
             break
         drivable = drivable_path(
-            xyyaw[:, :2], start[2], cfg.turning_radius, inside_and_valid, cfg.check_resolution,
-            spin_margin=cfg.spin_margin, spin_step=_spin_step(fp, cfg),
-        )  # fmt: skip
+            xyyaw[:, :2],
+            start[2],
+            cfg.turning_radius,
+            inside_and_valid,
+            cfg.check_resolution,
+            spin_margin=cfg.spin_margin,
+            spin_step=_spin_step(fp, cfg),
+        )
         if drivable is not None:
             break
         # A route with a turn too tight for the space round it: search again from scratch
@@ -478,30 +500,39 @@ def _plan_here(
         planner.clear()
         pdef.clearSolutionPaths()
     stats = dict(
-        validity_checks=check.states, validity_time=check.seconds,
+        validity_checks=check.states,
+        validity_time=check.seconds,
         sampler_calls=sum(smp.calls for smp in samplers),
-    )  # fmt: skip
+    )
     if cfg.keep_roadmap:
         stats["roadmap"], stats["graph_states"] = _graph_segments(si, planner)
     if states is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
         message = f"{cfg.name} found no path within its {why}"
         if undrivable:
-            message = (f"{cfg.name} found {undrivable} route(s), but none the robot can follow "
-                       f"with turns of radius {cfg.turning_radius:g} m")  # fmt: skip
+            message = (
+                f"{cfg.name} found {undrivable} route(s), but none the robot can follow "
+                f"with turns of radius {cfg.turning_radius:g} m"
+            )
         return PlanResult(
-            found=False, planner=cfg.name, seed=seed, states=np.zeros((0, 3)),
-            path_xyz=np.zeros((0, 3)), plan_time=time.perf_counter() - t0,
-            message=message, **stats,
-        )  # fmt: skip
+            found=False,
+            planner=cfg.name,
+            seed=seed,
+            states=np.zeros((0, 3)),
+            path_xyz=np.zeros((0, 3)),
+            plan_time=time.perf_counter() - t0,
+            message=message,
+            **stats,
+        )
     path_xyz, spins = None, ()
     if cfg.turning_radius is not None:
         # The curve is sampled every check_resolution; the driver gets every waypoint_spacing,
         # and both states of every spin (where it begins and the heading it ends at).
         every = max(1, round(cfg.waypoint_spacing / cfg.check_resolution))
         at = np.asarray(drivable.spins, dtype=int)
-        keep = np.unique(np.r_[np.arange(0, len(drivable.states), every),
-                               len(drivable.states) - 1, at, at + 1])  # fmt: skip
+        keep = np.unique(
+            np.r_[np.arange(0, len(drivable.states), every), len(drivable.states) - 1, at, at + 1]
+        )
         xyyaw = drivable.states[keep]
         path_xyz = np.column_stack([xyyaw[:, :2], hf.sample(xyyaw[:, :2])])
         k = np.searchsorted(keep, at)
@@ -511,12 +542,19 @@ def _plan_here(
         planner=cfg.name,
         seed=seed,
         states=xyyaw,
-        path_xyz=(waypoints_on_surface(hf, xyyaw[:, :2], cfg.waypoint_spacing)
-                  if path_xyz is None else path_xyz),
+        path_xyz=(
+            waypoints_on_surface(hf, xyyaw[:, :2], cfg.waypoint_spacing)
+            if path_xyz is None
+            else path_xyz
+        ),
         plan_time=time.perf_counter() - t0,
-        message=f"{len(xyyaw)} states" + (
+        message=f"{len(xyyaw)} states"
+        + (
             f", drivable with turns of radius {cfg.turning_radius:g} m"
-            if cfg.turning_radius is not None else "") + _spins_note(spins),
+            if cfg.turning_radius is not None
+            else ""
+        )
+        + _spins_note(spins),
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
         turning_radius=cfg.turning_radius,
         spins=spins,
@@ -537,8 +575,9 @@ def _spin_step(fp: Footprint, cfg: PlannerConfig) -> float:
     return cfg.check_resolution / fp.radius
 
 
-def _coinciding(hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, is_valid,
-                t0: float) -> PlanResult:  # fmt: skip
+def _coinciding(
+    hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, is_valid, t0: float
+) -> PlanResult:
     """The trivial plan between a start and goal closer than goal_radius: the robot stands
     where the goal counts as reached. A drivable plan (turning_radius and spin_margin set)
     turns on the spot to the goal's heading first when it differs and every heading of the
@@ -550,28 +589,46 @@ def _coinciding(hf, fp, *, start, goal, cfg: PlannerConfig, seed: int, regions, 
     spins: tuple[tuple[int, float], ...] = ()
     what = "nothing to drive"
     if cfg.turning_radius is not None and abs(turn) > 1e-9:
-        turnable = cfg.spin_margin is not None and bool(np.all(is_valid(spin_states(
-            np.asarray(start[:2], dtype=float), start[2], goal[2], cfg.spin_margin,
-            _spin_step(fp, cfg)))))  # fmt: skip
+        turnable = cfg.spin_margin is not None and bool(
+            np.all(
+                is_valid(
+                    spin_states(
+                        np.asarray(start[:2], dtype=float),
+                        start[2],
+                        goal[2],
+                        cfg.spin_margin,
+                        _spin_step(fp, cfg),
+                    )
+                )
+            )
+        )
         if turnable:
             states.append(np.array([start[0], start[1], goal[2]]))
             spins = ((0, float(goal[2])),)
             what = f"a turn on the spot of {math.degrees(turn):.0f} deg to the goal's heading"
         else:
-            what += (f" (the goal's heading is {math.degrees(turn):.0f} deg away; turns on the "
-                     f"spot {'are off' if cfg.spin_margin is None else 'are not valid here'})")  # fmt: skip
+            what += (
+                f" (the goal's heading is {math.degrees(turn):.0f} deg away; turns on the "
+                f"spot {'are off' if cfg.spin_margin is None else 'are not valid here'})"
+            )
     if apart > 0 or cfg.turning_radius is None:  # the goal's own state ends the path
         states.append(np.asarray(goal, dtype=float))
     xyyaw = np.array(states)
     return PlanResult(
-        found=True, planner=cfg.name, seed=seed, states=xyyaw,
+        found=True,
+        planner=cfg.name,
+        seed=seed,
+        states=xyyaw,
         path_xyz=np.column_stack([xyyaw[:, :2], hf.sample(xyyaw[:, :2])]),
         plan_time=time.perf_counter() - t0,
-        message=(f"start and goal coincide ({apart:.3f} m apart, within the goal radius "
-                 f"{cfg.goal_radius:g} m): {what}"),
+        message=(
+            f"start and goal coincide ({apart:.3f} m apart, within the goal radius "
+            f"{cfg.goal_radius:g} m): {what}"
+        ),
         signature=homology_signature(regions.holes, xyyaw[:, :2]),
-        turning_radius=cfg.turning_radius, spins=spins,
-    )  # fmt: skip
+        turning_radius=cfg.turning_radius,
+        spins=spins,
+    )
 
 
 def _graph_segments(si, planner) -> tuple[np.ndarray, int]:
@@ -579,8 +636,12 @@ def _graph_segments(si, planner) -> tuple[np.ndarray, int]:
     number of vertices (an unconnected PRM milestone is in no segment)."""
     data = ob.PlannerData(si)
     planner.getPlannerData(data)
-    xy = np.array([[v.getState().getX(), v.getState().getY()]
-                   for v in (data.getVertex(i) for i in range(data.numVertices()))])  # fmt: skip
+    xy = np.array(
+        [
+            [v.getState().getX(), v.getState().getY()]
+            for v in (data.getVertex(i) for i in range(data.numVertices()))
+        ]
+    )
     segments = []
     targets = ou.vectorUint()
     for i in range(data.numVertices()):

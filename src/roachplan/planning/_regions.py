@@ -63,9 +63,9 @@ def standable_map(
     ys = np.arange(ya, yb + 1e-9, cell)
     gx, gy = np.meshgrid(xs, ys)  # (ny, nx)
     yaws = np.arange(n_yaw) * (2 * np.pi / n_yaw)
-    states = np.column_stack([
-        np.repeat(gx.ravel(), n_yaw), np.repeat(gy.ravel(), n_yaw), np.tile(yaws, gx.size)
-    ])  # fmt: skip
+    states = np.column_stack(
+        [np.repeat(gx.ravel(), n_yaw), np.repeat(gy.ravel(), n_yaw), np.tile(yaws, gx.size)]
+    )
     ok = check_states(hf, fp, cfg, states).valid.reshape(gx.size, n_yaw).any(axis=1)
     standable = ok.reshape(gx.shape)
     # The start's component (4-connected); if the start's own cell centre is not standable,
@@ -93,9 +93,13 @@ def standable_map(
         holes.append((xs[i[c]], ys[j[c]]))
     holes = np.array(sorted(holes), dtype=float).reshape(-1, 2)
     return StandableMap(
-        x0=float(xs[0]), y0=float(ys[0]), cell=cell, standable=standable, reachable=reachable,
+        x0=float(xs[0]),
+        y0=float(ys[0]),
+        cell=cell,
+        standable=standable,
+        reachable=reachable,
         holes=holes,
-    )  # fmt: skip
+    )
 
 
 def homology_signature(holes: np.ndarray, path_xy: np.ndarray) -> tuple[int, ...]:

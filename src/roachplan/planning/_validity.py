@@ -165,13 +165,20 @@ def check_states(
     checks = (
         (OFF_MAP, off_map),
         (FOOT, unsupported.any(axis=1)),
-        (COLLISION, (h_body - plane_body > fp.body_clearance + cfg.collision_margin
-                     + slack[:, n_feet : n_feet + n_body]).any(axis=1)),
+        (
+            COLLISION,
+            (
+                h_body - plane_body
+                > fp.body_clearance + cfg.collision_margin + slack[:, n_feet : n_feet + n_body]
+            ).any(axis=1),
+        ),
         (SLOPE, slope > cfg.max_slope_deg),
         # After the slope: on a steep curved ramp the legs' sweep uphill rises above the plane
         # through the feet, and "too steep" is the better explanation.
-        (COLLISION, (h_legs - plane_legs > cfg.leg_clearance
-                     + slack[:, n_feet + n_body :]).any(axis=1)),
+        (
+            COLLISION,
+            (h_legs - plane_legs > cfg.leg_clearance + slack[:, n_feet + n_body :]).any(axis=1),
+        ),
         (
             BODY_HEIGHT,
             plane_body[:, centre] - np.nan_to_num(h_body[:, centre], nan=-np.inf)

@@ -17,8 +17,7 @@ def scaled_scene(scene: Scene, factor: float | tuple[float, float, float]) -> Sc
     millimetres. Positions, bounds, start and goal stay in metres."""
     factors = tuple(factor) if isinstance(factor, tuple | list) else (factor,) * 3
     if len(factors) != 3 or not all(
-        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf
-        for f in factors
+        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf for f in factors
     ):
         raise SceneError(
             f"--scale: expected a positive number (0.001 for models in millimetres), got {factor!r}"

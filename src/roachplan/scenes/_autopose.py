@@ -17,8 +17,9 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from roachplan.planning import VALID, PlanningError, check_states, plan_path, standable_map
 from scipy import ndimage
+
+from roachplan.planning import VALID, PlanningError, check_states, plan_path, standable_map
 
 MAX_AUTO_DISTANCE = 4.0
 """Longest start-goal distance picked automatically [m]: on a room's floor the far wall is
@@ -60,8 +61,10 @@ def auto_bounds(mesh_bounds: np.ndarray, *, ground: bool):
     centre = (lo + hi) / 2
     if np.any(hi - lo > MAX_AUTO_EXTENT):
         half = np.minimum((hi - lo) / 2, MAX_AUTO_EXTENT / 2)
-        note = (f"the terrain is {(hi - lo)[0]:.0f} m x {(hi - lo)[1]:.0f} m: planning within "
-                f"{2 * half[0]:.0f} m x {2 * half[1]:.0f} m at its centre (set bounds, or crop)")  # fmt: skip
+        note = (
+            f"the terrain is {(hi - lo)[0]:.0f} m x {(hi - lo)[1]:.0f} m: planning within "
+            f"{2 * half[0]:.0f} m x {2 * half[1]:.0f} m at its centre (set bounds, or crop)"
+        )
         lo, hi = centre - half, centre + half
     return ((float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))), note
 
@@ -111,8 +114,9 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
     for attempt in range(tries):
         limit = cap * (0.7**attempt)
         ok = (reach >= 0) & (reach <= limit)
-        centres = np.column_stack([sm.x0 + np.nonzero(ok)[1] * sm.cell,
-                                   sm.y0 + np.nonzero(ok)[0] * sm.cell])  # fmt: skip
+        centres = np.column_stack(
+            [sm.x0 + np.nonzero(ok)[1] * sm.cell, sm.y0 + np.nonzero(ok)[0] * sm.cell]
+        )
         if len(centres) < 2:
             break
         pb = centres[np.argmax(np.linalg.norm(centres - pa, axis=1))]
@@ -130,8 +134,10 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
             continue
         if result.found:
             d = float(np.linalg.norm(pb - pa))
-            note = (f"start and goal picked automatically {d:.2f} m apart in the largest "
-                    f"region the robot can stand in ({area:.1f} m^2)")  # fmt: skip
+            note = (
+                f"start and goal picked automatically {d:.2f} m apart in the largest "
+                f"region the robot can stand in ({area:.1f} m^2)"
+            )
             if d < MIN_AUTO_DISTANCE:
                 note += f"; it allows no more than {d:.2f} m"
             return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
@@ -193,13 +199,22 @@ def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
             return None
         ends.append(pose)
     start, goal = ends
-    result = plan_path(world.heightfield, world.footprint, start, goal, bounds=sc.bounds,
-                       cfg=_quick(sc.planner), seed=seed)  # fmt: skip
+    result = plan_path(
+        world.heightfield,
+        world.footprint,
+        start,
+        goal,
+        bounds=sc.bounds,
+        cfg=_quick(sc.planner),
+        seed=seed,
+    )
     if not result.found:
         return None
     d = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
-    note = (f"start and goal picked automatically on the ground at either end of the model "
-            f"({extents[long]:.2f} m long), {d:.2f} m apart")  # fmt: skip
+    note = (
+        f"start and goal picked automatically on the ground at either end of the model "
+        f"({extents[long]:.2f} m long), {d:.2f} m apart"
+    )
     return AutoPoses(start=start, goal=goal, distance=d, region_area=float("nan"), note=note)
 
 

@@ -36,9 +36,13 @@ _PR_SET_NO_NEW_PRIVS = 38
 # os.statvfs flag -> mount flag. A bind mount in a user namespace must keep these flags of its
 # source (the kernel locks them), so a read-only remount restates them.
 _LOCKED_FLAGS = {
-    os.ST_NOSUID: _MS_NOSUID, os.ST_NODEV: _MS_NODEV, os.ST_NOEXEC: _MS_NOEXEC,
-    os.ST_NOATIME: _MS_NOATIME, os.ST_NODIRATIME: _MS_NODIRATIME, os.ST_RELATIME: _MS_RELATIME,
-}  # fmt: skip
+    os.ST_NOSUID: _MS_NOSUID,
+    os.ST_NODEV: _MS_NODEV,
+    os.ST_NOEXEC: _MS_NOEXEC,
+    os.ST_NOATIME: _MS_NOATIME,
+    os.ST_NODIRATIME: _MS_NODIRATIME,
+    os.ST_RELATIME: _MS_RELATIME,
+}
 _PIVOT_ROOT = {"x86_64": 155, "aarch64": 41, "riscv64": 41, "ppc64le": 203, "s390x": 217}
 """pivot_root's system call number per machine (no C library wrapper)."""
 

@@ -127,8 +127,13 @@ def _fontconfig_font(spec: str) -> tuple[str, int]:
     fc_match = shutil.which("fc-match")
     out = None
     if fc_match is not None:
-        out = subprocess.run([fc_match, "--format=%{file}:%{index}", f"{lookup}:outline=true:scalable=true"],
-                             capture_output=True, text=True, timeout=30, check=False)  # fmt: skip
+        out = subprocess.run(
+            [fc_match, "--format=%{file}:%{index}", f"{lookup}:outline=true:scalable=true"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=False,
+        )
     path, _, index = (out.stdout.strip() if out and out.returncode == 0 else "").rpartition(":")
     if not path or not os.path.isfile(path):
         # Not a guess at another font: glyphs would sit millimetres from OpenSCAD's.
@@ -313,8 +318,10 @@ def openscad_quad_diagonal(quad) -> tuple[int, int]:
             st[w][0] - st[u][0]
         )
 
-    if any(cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0
-           for a, b, c, d in ((0, 1, 2, 3), (1, 2, 3, 0))):  # fmt: skip
+    if any(
+        cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0
+        for a, b, c, d in ((0, 1, 2, 3), (1, 2, 3, 0))
+    ):
         # So twisted that it crosses itself seen along that axis: the binary then joins the
         # call's first and third corners (measured: a public terrain's cell, each of its
         # corners listed first, and random twisted quads).

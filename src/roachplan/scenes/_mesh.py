@@ -52,9 +52,13 @@ def looks_like_millimetres(mesh: trimesh.Trimesh) -> bool:
 def scaled_mesh(mesh: trimesh.Trimesh, scale: tuple[float, float, float]) -> trimesh.Trimesh:
     """A copy of mesh with its vertices scaled about its origin by (sx, sy, sz) (positive)."""
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
-    return trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False,
-                           vertex_attributes=dict(mesh.vertex_attributes),
-                           face_attributes=dict(mesh.face_attributes))  # fmt: skip
+    return trimesh.Trimesh(
+        vertices,
+        np.asarray(mesh.faces),
+        process=False,
+        vertex_attributes=dict(mesh.vertex_attributes),
+        face_attributes=dict(mesh.face_attributes),
+    )
 
 
 def clean_terrain_mesh(
@@ -75,10 +79,13 @@ def clean_terrain_mesh(
         raise SceneError(f"{label}: the mesh has no triangles with finite coordinates")
     # Per-vertex and per-face values (a capture's height noise, its filled triangles) stay
     # with their vertices and faces through cleaning.
-    out = trimesh.Trimesh(vertices, faces, process=False,
-                          vertex_attributes=dict(mesh.vertex_attributes),
-                          face_attributes={k: np.asarray(v)[keep]
-                                           for k, v in mesh.face_attributes.items()})  # fmt: skip
+    out = trimesh.Trimesh(
+        vertices,
+        faces,
+        process=False,
+        vertex_attributes=dict(mesh.vertex_attributes),
+        face_attributes={k: np.asarray(v)[keep] for k, v in mesh.face_attributes.items()},
+    )
     out.remove_unreferenced_vertices()  # drops the non-finite ones before they are compared
     out.merge_vertices()
     out.update_faces(out.nondegenerate_faces())

@@ -386,7 +386,7 @@ _COMPARISONS = frozenset(("&&", "||", "==", "!=", "<=", ">=", "<", ">", "!"))
 
 
 def scad_value_kind(expr: str, variables: Mapping[str, str] | None = None) -> str | None:
-    """"number", "string", "bool" or "vector" for a default value whose type can be read off
+    """ "number", "string", "bool" or "vector" for a default value whose type can be read off
     its text: a literal, a list `[...]`, a comparison, or arithmetic on numbers, built-in
     numeric functions and the model's variables (scad_variables) that are numbers themselves
     (`size = 2 * unit;`); None for any other expression (a condition `c ? a : b`, a call of a
@@ -444,9 +444,11 @@ def _kind_of(value: ScadValue) -> str:
 
 
 _KIND_NAMES = {
-    "number": "a number", "string": "a string", "bool": "a boolean (true or false)",
+    "number": "a number",
+    "string": "a string",
+    "bool": "a boolean (true or false)",
     "vector": "a vector (here: a number, as OpenSCAD's cube() and scale() take)",
-}  # fmt: skip
+}
 
 
 def param_problem(name: str, value: ScadValue, variables: Mapping[str, str], model: str) -> str:
@@ -517,9 +519,15 @@ JAIL_MODEL, JAIL_OUT = "/model", "/out"
 # locales and character sets, and its own resource folder (beside its program: ../share/openscad,
 # with its fonts/ and libraries/ where installed). The user's own fonts (~/.fonts) stay outside.
 _RUNTIME_DATA = (
-    "/etc/ld.so.cache", "/etc/fonts", "/usr/share/fontconfig", "/usr/share/fonts",
-    "/usr/local/share/fonts", "/var/cache/fontconfig", "/usr/lib/locale", "/dev/null",
-)  # fmt: skip
+    "/etc/ld.so.cache",
+    "/etc/fonts",
+    "/usr/share/fontconfig",
+    "/usr/share/fonts",
+    "/usr/local/share/fonts",
+    "/var/cache/fontconfig",
+    "/usr/lib/locale",
+    "/dev/null",
+)
 _LIBRARY_DIRS = ("/lib", "/lib64", "/usr/lib", "/usr/lib64")
 """Shown whole when `ldd` cannot list a program's libraries."""
 
@@ -581,8 +589,9 @@ def _show(path: str, ro: dict[str, str], links: dict[str, str], depth: int = 0) 
         if os.path.islink(step) and depth < 40:
             target = os.readlink(step)
             links[step] = target
-            _show(os.path.normpath(os.path.join(here, target, *parts[i + 1 :])), ro, links,
-                  depth + 1)  # fmt: skip
+            _show(
+                os.path.normpath(os.path.join(here, target, *parts[i + 1 :])), ro, links, depth + 1
+            )
             return
         here = step
     if os.path.exists(here):
@@ -592,8 +601,9 @@ def _show(path: str, ro: dict[str, str], links: dict[str, str], depth: int = 0) 
 @functools.cache
 def _jail_layout(program: str) -> tuple[dict[str, str], dict[str, str]]:
     """(read-only binds, symlinks) that let `program` run in the jail as it runs here."""
-    resources = os.path.join(os.path.dirname(os.path.realpath(program)), "..", "share",
-                             os.path.basename(program))  # fmt: skip
+    resources = os.path.join(
+        os.path.dirname(os.path.realpath(program)), "..", "share", os.path.basename(program)
+    )
     libraries = _program_libraries(program)
     wanted = [program, *(libraries or _LIBRARY_DIRS), *_RUNTIME_DATA, os.path.normpath(resources)]
     # Character-set modules of the C library, beside it (gconv/).
@@ -614,10 +624,15 @@ def _jail_layout(program: str) -> tuple[dict[str, str], dict[str, str]]:
 
 
 def confined(
-    argv: list[str], model_dir: Path, work_dir: Path, *, memory: int | None = None,
-    cpu: float = MAX_TIMEOUT, jail: bool = True,
+    argv: list[str],
+    model_dir: Path,
+    work_dir: Path,
+    *,
+    memory: int | None = None,
+    cpu: float = MAX_TIMEOUT,
+    jail: bool = True,
     layout: tuple[dict[str, str], dict[str, str]] | None = None,
-) -> list[str]:  # fmt: skip
+) -> list[str]:
     """The command that runs argv under the render limits (memory [bytes], default
     memory_limit(); cpu: processor time [s]) and, with jail, in a jail where model_dir is
     JAIL_MODEL (read-only; the working directory) and work_dir/out is JAIL_OUT (writable), and
@@ -640,10 +655,13 @@ def confined(
         root.mkdir(exist_ok=True)
         (work_dir / "out").mkdir(exist_ok=True)
         spec["jail"] = {
-            "root": str(root), "ro": {**ro, JAIL_MODEL: str(model_dir)},
-            "rw": {JAIL_OUT: str(work_dir / "out")}, "links": links, "tmpfs": ["/tmp"],
+            "root": str(root),
+            "ro": {**ro, JAIL_MODEL: str(model_dir)},
+            "rw": {JAIL_OUT: str(work_dir / "out")},
+            "links": links,
+            "tmpfs": ["/tmp"],
             "cwd": JAIL_MODEL,
-        }  # fmt: skip
+        }
         spec["env"] = {"PATH": "/usr/bin:/bin", "HOME": "/tmp", "LANG": "C.UTF-8"}
     return [sys.executable, "-I", "-S", _jail.__file__, json.dumps(spec)]
 
@@ -672,9 +690,13 @@ def _run(
     in a loop prints gigabytes, which must not fill this process's memory. RENDER_PROGRESS,
     when set, hears of it (as `name`) while it runs."""
     proc = subprocess.Popen(
-        cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE, start_new_session=True,
-    )  # fmt: skip
+        cmd,
+        cwd=cwd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
     kept: list[str] = []
     reader = threading.Thread(target=_read_ends, args=(proc.stderr, kept), daemon=True)
     reader.start()
@@ -749,9 +771,13 @@ def _limit_hit(returncode: int, err: str, *, memory: int, timeout: float) -> str
 
 
 def _failure(
-    scad_file: Path, proc: subprocess.CompletedProcess, *, memory: int, timeout: float,
+    scad_file: Path,
+    proc: subprocess.CompletedProcess,
+    *,
+    memory: int,
+    timeout: float,
     jail: bool,
-) -> str:  # fmt: skip
+) -> str:
     """Why a render that left no mesh failed, for a SceneError: the jail could not be made, a
     limit was hit, or OpenSCAD's own errors (its jail paths turned back into real ones)."""
     err = proc.stderr.replace(f"{JAIL_MODEL}/", f"{scad_file.parent}/") if jail else proc.stderr
@@ -828,8 +854,10 @@ def _manifold_differs(scad_file: Path) -> str:
     if found is None:
         return ""
     path, line, name = found
-    return f"{name}() ({path.name}, line {line}) is rendered differently by manifold " \
-           f"({MANIFOLD_DIFFERS[name]})"  # fmt: skip
+    return (
+        f"{name}() ({path.name}, line {line}) is rendered differently by manifold "
+        f"({MANIFOLD_DIFFERS[name]})"
+    )
 
 
 def manifold_problem(scad_file: Path) -> str:
@@ -955,8 +983,10 @@ def _manifold_distributions() -> list:
 @functools.cache
 def manifold_version() -> str:
     """The versions of the evaluator and of Manifold, for the cache key and messages."""
-    dists = {re.sub(r"[-_.]+", "-", d.metadata["Name"]).lower(): d.version
-             for d in _manifold_distributions()}  # fmt: skip
+    dists = {
+        re.sub(r"[-_.]+", "-", d.metadata["Name"]).lower(): d.version
+        for d in _manifold_distributions()
+    }
     return f"openscad-evaluator {dists['openscad-evaluator']}, manifold3d {dists['manifold3d']}"
 
 
@@ -980,14 +1010,23 @@ def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
                 shown.add(os.path.normpath(str(dist.locate_file(f.parts[0]))))
     paths = sorted({os.path.dirname(p) for p in shown})
     compiled = [
-        os.path.join(root, f) for top in shown if os.path.isdir(top)
-        for root, _, files in os.walk(top) for f in files if ".so" in f
-    ] + [p for p in shown if p.endswith(".so")]  # fmt: skip
+        os.path.join(root, f)
+        for top in shown
+        if os.path.isdir(top)
+        for root, _, files in os.walk(top)
+        for f in files
+        if ".so" in f
+    ] + [p for p in shown if p.endswith(".so")]
     libraries = set(_program_libraries(python))
     for start in range(0, len(compiled), 64):  # one ldd for many files
         try:
-            out = subprocess.run(["ldd", *compiled[start : start + 64]], capture_output=True,
-                                 text=True, timeout=60, check=False).stdout  # fmt: skip
+            out = subprocess.run(
+                ["ldd", *compiled[start : start + 64]],
+                capture_output=True,
+                text=True,
+                timeout=60,
+                check=False,
+            ).stdout
         except (OSError, subprocess.TimeoutExpired):
             out = ""
         # A module that ldd cannot read (not dynamic) only makes it exit 1; the rest is listed.
@@ -996,8 +1035,16 @@ def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
     fonts = [fc_match, *_program_libraries(fc_match), *_RUNTIME_DATA] if fc_match else []
     ro: dict[str, str] = {}
     links: dict[str, str] = {}
-    for path in [python, *sorted(libraries), stdlib, *sorted(shown), str(_MANIFOLD_MAIN),
-                 "/dev/null", "/etc/ld.so.cache", *fonts]:  # fmt: skip
+    for path in [
+        python,
+        *sorted(libraries),
+        stdlib,
+        *sorted(shown),
+        str(_MANIFOLD_MAIN),
+        "/dev/null",
+        "/etc/ld.so.cache",
+        *fonts,
+    ]:
         _show(path, ro, links)
     folders = [p for p in ro if os.path.isdir(p)]
 
@@ -1005,10 +1052,11 @@ def _manifold_layout() -> tuple[str, list[str], dict[str, str], dict[str, str]]:
         return any(path != f and path.startswith(f.rstrip("/") + "/") for f in folders)
 
     return (
-        python, paths,
+        python,
+        paths,
         {p: src for p, src in ro.items() if not covered(p)},
         {p: t for p, t in links.items() if not covered(p)},
-    )  # fmt: skip
+    )
 
 
 def _manifold_argv(model: str, target: str) -> tuple[list[str], tuple[dict, dict]]:
@@ -1017,8 +1065,19 @@ def _manifold_argv(model: str, target: str) -> tuple[list[str], tuple[dict, dict
     python, paths, ro, links = _manifold_layout()
     # -I -S: no site, no .pth files, no user packages; only `paths` come on sys.path, and the
     # jail shows only the evaluator's own packages there.
-    return [python, "-I", "-S", "-B", str(_MANIFOLD_MAIN), json.dumps(paths), model, "-o",
-            target, "--export-format", "binstl"], (ro, links)  # fmt: skip
+    return [
+        python,
+        "-I",
+        "-S",
+        "-B",
+        str(_MANIFOLD_MAIN),
+        json.dumps(paths),
+        model,
+        "-o",
+        target,
+        "--export-format",
+        "binstl",
+    ], (ro, links)
 
 
 def _main_digest() -> str:
@@ -1043,8 +1102,15 @@ def _render_argv(
     if backend == "manifold":
         return _manifold_argv(_manifold_input(scad_file, params, work, jail), target)
     defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={_scad_literal(v)}")]
-    return [openscad_binary(), "--export-format", "binstl", "-o", target, *defines,
-            scad_file.name], None  # fmt: skip
+    return [
+        openscad_binary(),
+        "--export-format",
+        "binstl",
+        "-o",
+        target,
+        *defines,
+        scad_file.name,
+    ], None
 
 
 def _named(why: str, backend: str) -> str:
@@ -1054,8 +1120,9 @@ def _named(why: str, backend: str) -> str:
     return why.replace("OpenSCAD failed", f"backend manifold ({manifold_version()}) failed", 1)
 
 
-def _manifold_input(scad_file: Path, params: Mapping[str, ScadValue], work: Path,
-                    jail: bool) -> str:  # fmt: skip
+def _manifold_input(
+    scad_file: Path, params: Mapping[str, ScadValue], work: Path, jail: bool
+) -> str:
     """The file the evaluator is given, as its process sees it: the model itself, or, with
     params, a wrapper in the output folder that includes the model and then assigns them. That
     is what `-D` does (the evaluator has no -D): an assignment after the model's own, the last
@@ -1115,7 +1182,8 @@ class ScadRender:
         if self.backend == "cgal":
             why = self.why or ("backend: cgal asked for" if self.asked == "cgal" else "")
             return f"{self.model.name}: rendered with the openscad binary{took}" + (
-                f": {why}" if why else "")  # fmt: skip
+                f": {why}" if why else ""
+            )
         text = f"{self.model.name}: rendered with manifold ({manifold_version()}){took}"
         if self.text_size > 0:
             dev = self.text_deviation
@@ -1145,14 +1213,16 @@ class _BackendFailed(SceneError):
     the binary next time (until the model, its files or the evaluator change). why: the short
     reason auto's note gives."""
 
-    def __init__(self, message: str, *, fallback: bool = False, remember: bool = False,
-                 why: str = "") -> None:  # fmt: skip
+    def __init__(
+        self, message: str, *, fallback: bool = False, remember: bool = False, why: str = ""
+    ) -> None:
         super().__init__(message)
         self.fallback, self.remember, self.why = fallback, remember, why
 
 
-def _cache_path(backend: str, scad_file: Path, params: Mapping[str, ScadValue],
-                deps: list[Path]) -> Path:  # fmt: skip
+def _cache_path(
+    backend: str, scad_file: Path, params: Mapping[str, ScadValue], deps: list[Path]
+) -> Path:
     """Where backend's mesh of the model is cached: a key made of the model's text, every file
     it reads, the overrides and who renders (program and versions)."""
     root = scad_file.parent
@@ -1173,17 +1243,30 @@ so that auto goes straight to the binary."""
 
 
 def _render_with(
-    backend: Literal["cgal", "manifold"], scad_file: Path, params: Mapping[str, ScadValue],
-    deps: list[Path], *, timeout: float, memory: int, limit: float,
-) -> ScadRender:  # fmt: skip
+    backend: Literal["cgal", "manifold"],
+    scad_file: Path,
+    params: Mapping[str, ScadValue],
+    deps: list[Path],
+    *,
+    timeout: float,
+    memory: int,
+    limit: float,
+) -> ScadRender:
     """backend's render of the model, from the cache or run now in the jail (raises
     _BackendFailed). timeout: seconds this run may take; limit: the object's time limit, for
     the message when it is hit."""
     out = _cache_path(backend, scad_file, params, deps)
     if out.is_file():
         facts = _read_facts(out.with_suffix(_FACTS))
-        return ScadRender(model=scad_file, path=out, backend=backend, asked=backend,
-                          seconds=facts.get("seconds"), cached=True, **_found(facts))  # fmt: skip
+        return ScadRender(
+            model=scad_file,
+            path=out,
+            backend=backend,
+            asked=backend,
+            seconds=facts.get("seconds"),
+            cached=True,
+            **_found(facts),
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     who = "OpenSCAD" if backend == "cgal" else "backend manifold"
     # Render into a fresh folder beside the cache and rename: a killed render leaves no
@@ -1193,8 +1276,9 @@ def _render_with(
         (work / "out").mkdir()
         jail = _jail_wanted()
         argv, layout = _render_argv(backend, scad_file, params, work, jail)
-        cmd = confined(argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail,
-                       layout=layout)  # fmt: skip
+        cmd = confined(
+            argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail, layout=layout
+        )
         t0 = time.monotonic()
         try:
             proc = _run(cmd, cwd=scad_file.parent, timeout=timeout, name=scad_file.name)
@@ -1209,14 +1293,23 @@ def _render_with(
         if proc.returncode != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
             why = _failure(scad_file, proc, memory=memory, timeout=limit, jail=jail)
             own = proc.returncode != _jail.SETUP_FAILED and not _limit_hit(
-                proc.returncode, proc.stderr, memory=memory, timeout=limit)  # fmt: skip
-            raise _BackendFailed(f"{scad_file}: {_named(why, backend)}", fallback=own,
-                                 remember=own, why=_short_failure(proc.stderr, why))  # fmt: skip
+                proc.returncode, proc.stderr, memory=memory, timeout=limit
+            )
+            raise _BackendFailed(
+                f"{scad_file}: {_named(why, backend)}",
+                fallback=own,
+                remember=own,
+                why=_short_failure(proc.stderr, why),
+            )
         if backend == "manifold":
             problem = _manifold_mesh_problem(scad_file, mesh)
             if problem:
-                raise _BackendFailed(problem, fallback=True, remember=True,
-                                     why=problem.split(": ", 1)[1].split(";")[0])  # fmt: skip
+                raise _BackendFailed(
+                    problem,
+                    fallback=True,
+                    remember=True,
+                    why=problem.split(": ", 1)[1].split(";")[0],
+                )
         facts = _read_facts(mesh.with_name(mesh.name + FACTS_SUFFIX))
         facts["seconds"] = round(seconds, 3)
         # The facts first: a mesh under its final name always has them beside it.
@@ -1224,8 +1317,9 @@ def _render_with(
         mesh.replace(out)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    return ScadRender(model=scad_file, path=out, backend=backend, asked=backend,
-                      seconds=seconds, **_found(facts))  # fmt: skip
+    return ScadRender(
+        model=scad_file, path=out, backend=backend, asked=backend, seconds=seconds, **_found(facts)
+    )
 
 
 def _read_facts(path: Path) -> dict:
@@ -1296,8 +1390,13 @@ def render_scad_result(
     deps = scad_dependencies(scad_file)
     if backend == "manifold" and manifold_problem(scad_file):
         raise SceneError(manifold_problem(scad_file))
-    job = {"scad_file": scad_file, "params": params, "deps": deps, "memory": memory,
-           "limit": timeout}  # fmt: skip
+    job = {
+        "scad_file": scad_file,
+        "params": params,
+        "deps": deps,
+        "memory": memory,
+        "limit": timeout,
+    }
     if backend != "auto":
         return _render_with(backend, timeout=timeout, **job)
     return _render_auto(job, timeout)
@@ -1319,8 +1418,9 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
     if not why:
         t0 = time.monotonic()
         try:
-            return dataclasses.replace(_render_with("manifold", timeout=timeout, **job),
-                                       asked="auto")  # fmt: skip
+            return dataclasses.replace(
+                _render_with("manifold", timeout=timeout, **job), asked="auto"
+            )
         except _BackendFailed as exc:
             if not exc.fallback:
                 raise
@@ -1328,8 +1428,7 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
             if exc.remember:
                 _write_atomic(refused, why)
         timeout = max(timeout - (time.monotonic() - t0), 1.0)
-    return dataclasses.replace(_render_with("cgal", timeout=timeout, **job), asked="auto",
-                               why=why)  # fmt: skip
+    return dataclasses.replace(_render_with("cgal", timeout=timeout, **job), asked="auto", why=why)
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -1347,5 +1446,6 @@ def render_scad(
     backend: Backend = DEFAULT_BACKEND,
 ) -> Path:
     """The cached STL of render_scad_result (same arguments): the mesh alone."""
-    return render_scad_result(scad_file, params, timeout=timeout, memory=memory,
-                              backend=backend).path  # fmt: skip
+    return render_scad_result(
+        scad_file, params, timeout=timeout, memory=memory, backend=backend
+    ).path

@@ -145,9 +145,12 @@ def terrain_file_scene(path: Path) -> Scene:
     else:
         obj = TerrainObject(source=path, key="terrain[0]", capture=CaptureSettings())
     return Scene(
-        name=path.stem, path=path, description=f"{path.name}, start and goal picked automatically",
-        terrain=(obj,), ground=None if obj.kind == "capture" else 0.0,
-    )  # fmt: skip
+        name=path.stem,
+        path=path,
+        description=f"{path.name}, start and goal picked automatically",
+        terrain=(obj,),
+        ground=None if obj.kind == "capture" else 0.0,
+    )
 
 
 # -- YAML files in a library (scenes, experiment specs) ---------------------------------------
@@ -361,8 +364,7 @@ def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
     """`scale: s` or `scale: [sx, sy, sz]`, each positive and finite."""
     factors = [value] * 3 if not isinstance(value, list | tuple) else value
     if len(factors) != 3 or not all(
-        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf
-        for f in factors
+        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf for f in factors
     ):
         raise ctx.fail(
             key,
@@ -374,10 +376,21 @@ def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
 
 def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     data = ctx.mapping(
-        value, key,
-        ("scad", "mesh", "capture", "params", "timeout", "backend", "perception", "scale",
-         "position", "orientation"),
-    )  # fmt: skip
+        value,
+        key,
+        (
+            "scad",
+            "mesh",
+            "capture",
+            "params",
+            "timeout",
+            "backend",
+            "perception",
+            "scale",
+            "position",
+            "orientation",
+        ),
+    )
     kinds = [k for k in ("scad", "mesh", "capture") if k in data]
     if len(kinds) != 1:
         raise ctx.fail(
@@ -451,8 +464,20 @@ def load_scene(name_or_path: str | Path) -> Scene:
         return terrain_file_scene(path)
     ctx = YamlFields(path)
     raw = read_yaml(path, "scene", SceneError)
-    keys = ("description", "terrain", "ground", "robot", "goal", "bounds", "routes",
-            "planner", "sim", "driver", "uncertainty", "seed")  # fmt: skip
+    keys = (
+        "description",
+        "terrain",
+        "ground",
+        "robot",
+        "goal",
+        "bounds",
+        "routes",
+        "planner",
+        "sim",
+        "driver",
+        "uncertainty",
+        "seed",
+    )
     data = ctx.mapping(raw, "", keys, required=("terrain",))
     terrain = data["terrain"]
     ground = data.get("ground", 0.0)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+
 from roachplan.perception import CaptureError, mesh_capture
 from roachplan.planning import (
     VALID,
@@ -83,9 +84,13 @@ class World:
         # an obstacle to go round.
         fp = self.footprint
         return standable_map(
-            self.heightfield, fp, sc.planner.validity, sc.bounds, sc.start[:2],
+            self.heightfield,
+            fp,
+            sc.planner.validity,
+            sc.bounds,
+            sc.start[:2],
             min_hole_area=self.robot.body_length * self.robot.body_width * 4,
-        )  # fmt: skip
+        )
 
     def route(self, path_xy: np.ndarray) -> str:
         """The route a path ((K, 2) [m]) takes: the first of the scene's named route regions it
@@ -99,9 +104,12 @@ class World:
     def simulation(self) -> Simulation:
         """A fresh PyBullet world of this terrain, ground and robot (the caller closes it)."""
         return Simulation(
-            self.mesh.vertices, self.mesh.faces, ground_height=self.scene.ground,
-            robot=self.robot, cfg=self.scene.sim,
-        )  # fmt: skip
+            self.mesh.vertices,
+            self.mesh.faces,
+            ground_height=self.scene.ground,
+            robot=self.robot,
+            cfg=self.scene.sim,
+        )
 
 
 def footprint_of(robot: RobotConfig) -> Footprint:
@@ -123,8 +131,9 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> tuple[trimesh.Trimesh
     source, note = obj.source, ""
     if obj.kind == "scad":
         try:
-            rendered = render_scad_result(source, dict(obj.params), timeout=obj.timeout,
-                                          backend=obj.backend)  # fmt: skip
+            rendered = render_scad_result(
+                source, dict(obj.params), timeout=obj.timeout, backend=obj.backend
+            )
         except SceneError as exc:
             raise SceneError(f"{label}: {exc}") from None
         source, note = rendered.path, rendered.note(scale=max(obj.scale))
@@ -239,7 +248,9 @@ def build_world(
     notes += [note] if (note := below_ground_note(mesh, scene.ground)) else []
     if scene.bounds is None:
         if len(mesh.faces) == 0:
-            raise SceneError(f"{scene.path}: give bounds: the scene has no terrain to take them from")
+            raise SceneError(
+                f"{scene.path}: give bounds: the scene has no terrain to take them from"
+            )
         bounds, note = auto_bounds(mesh.bounds, ground=scene.ground is not None)
         if bounds[0][0] >= bounds[1][0] or bounds[0][1] >= bounds[1][1]:
             raise SceneError(
@@ -255,7 +266,7 @@ def build_world(
         raise SceneError(
             f"{scene.path}: bounds: {hi[0] - lo[0]:.1f} m x {hi[1] - lo[1]:.1f} m is more than "
             f"{MAX_PLANNING_AREA:.0f} m^2 to plan over at {HEIGHTFIELD_RESOLUTION * 100:.0f} cm; "
-            f"give bounds at most {MAX_PLANNING_AREA ** 0.5:.0f} m x {MAX_PLANNING_AREA ** 0.5:.0f} m "
+            f"give bounds at most {MAX_PLANNING_AREA**0.5:.0f} m x {MAX_PLANNING_AREA**0.5:.0f} m "
             f"around the part the robot is to cross"
         )
     hf = heightfield_from_mesh(

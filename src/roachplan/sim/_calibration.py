@@ -82,9 +82,11 @@ def walk(
             turned += (new_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
             x, y, yaw = nx, ny, new_yaw
         return TurningSample(
-            ratio=right / left, distance=distance, revolutions=turned / (2 * math.pi),
+            ratio=right / left,
+            distance=distance,
+            revolutions=turned / (2 * math.pi),
             duration=sim.time,
-        )  # fmt: skip
+        )
 
 
 def _yaw(quat_xyzw) -> float:
@@ -143,8 +145,10 @@ def fit_turning_curve(samples: list[TurningSample]) -> TurningFit:
     r = np.array([s.ratio for s in samples], dtype=float)
     k = np.array([s.curvature for s in samples], dtype=float)
     if len(np.unique(r)) < CURVE_MIN_RATIOS or r.min() < 1.0:
-        raise SimError(f"a turning curve needs {CURVE_MIN_RATIOS} or more distinct ratios >= 1, "
-                       f"got {sorted(set(r.tolist()))}")  # fmt: skip
+        raise SimError(
+            f"a turning curve needs {CURVE_MIN_RATIOS} or more distinct ratios >= 1, "
+            f"got {sorted(set(r.tolist()))}"
+        )
     x, top = np.log(r), float(np.log(r.max()))
 
     def basis(rate: float, lock_ratio: float) -> np.ndarray:
@@ -165,8 +169,12 @@ def fit_turning_curve(samples: list[TurningSample]) -> TurningFit:
     p0 = np.array([kappa_sat, lock, rate, np.log(lock_ratio) - top])
     lo, hi = np.array([0.0, 0.0, 0.05, 1e-4]), np.array([np.inf, np.inf, 50.0, 2.0])
     p = least_squares(residual, np.clip(p0, lo, hi), bounds=(lo, hi)).x
-    curve = TurningCurve(kappa_sat=float(p[0]), lock=float(p[1]), rate=float(p[2]),
-                         lock_ratio=float(np.exp(top + p[3])))  # fmt: skip
+    curve = TurningCurve(
+        kappa_sat=float(p[0]),
+        lock=float(p[1]),
+        rate=float(p[2]),
+        lock_ratio=float(np.exp(top + p[3])),
+    )
     res = k - np.array([curve.curvature(v) for v in r])
     total = float(np.sum((k - k.mean()) ** 2))
     return TurningFit(
@@ -213,9 +221,15 @@ class SpinSample:
 
 
 def spin(
-    robot: RobotConfig, cfg: SimConfig, omega: float, duration: float, *,
-    lead_in: float = 0.0, walk_speed: float = 0.0, until: float = math.inf,
-) -> SpinSample:  # fmt: skip
+    robot: RobotConfig,
+    cfg: SimConfig,
+    omega: float,
+    duration: float,
+    *,
+    lead_in: float = 0.0,
+    walk_speed: float = 0.0,
+    until: float = math.inf,
+) -> SpinSample:
     """Spin on an open floor with the left motor at -omega and the right at +omega [rad/s] for
     `duration` [s], or until `until` [rad] is turned; first walk straight for `lead_in` [s]
     at `walk_speed` [rad/s] (0: the spin starts from rest, legs in tripod stance)."""
@@ -238,9 +252,13 @@ def spin(
             yaw = new_yaw
             wander = max(wander, math.hypot(x - x0, y - y0))
         return SpinSample(
-            omega=omega, turned=turned, displacement=math.hypot(x - x0, y - y0), wander=wander,
-            energy=sim.energy - e0, duration=sim.time - t0,
-        )  # fmt: skip
+            omega=omega,
+            turned=turned,
+            displacement=math.hypot(x - x0, y - y0),
+            wander=wander,
+            energy=sim.energy - e0,
+            duration=sim.time - t0,
+        )
 
 
 SPIN_SPEEDS = (5.0, 10.0, 20.0, 30.0)
@@ -253,9 +271,12 @@ and with the walk's momentum, as the driver begins them."""
 
 
 def spin_calibration(
-    robot: RobotConfig, cfg: SimConfig, walk_speed: float, speeds=SPIN_SPEEDS,
+    robot: RobotConfig,
+    cfg: SimConfig,
+    walk_speed: float,
+    speeds=SPIN_SPEEDS,
     duration: float = 10.0,
-) -> list[tuple[SpinTurn, SpinSample, list[SpinSample]]]:  # fmt: skip
+) -> list[tuple[SpinTurn, SpinSample, list[SpinSample]]]:
     """Turning on the spot at each motor speed of `speeds` [rad/s]: a steady spin from rest for
     `duration` [s] (yaw rate, drift, energy per radian) and half turns (pi rad) entered from a
     straight walk at walk_speed [rad/s] after each of SPIN_LEAD_INS (wander: the largest
@@ -264,15 +285,22 @@ def spin_calibration(
     out = []
     for omega in speeds:
         steady = spin(robot, cfg, omega, duration)
-        halves = [spin(robot, cfg, omega, duration, lead_in=t, walk_speed=walk_speed,
-                       until=math.pi) for t in SPIN_LEAD_INS]  # fmt: skip
+        halves = [
+            spin(robot, cfg, omega, duration, lead_in=t, walk_speed=walk_speed, until=math.pi)
+            for t in SPIN_LEAD_INS
+        ]
         if abs(steady.turned) < 1e-6:
-            raise SimError(f"the robot did not turn on the spot at motor speeds -{omega:g} and "
-                           f"+{omega:g} rad/s (turned {steady.turned:.2g} rad in {duration:g} s)")  # fmt: skip
+            raise SimError(
+                f"the robot did not turn on the spot at motor speeds -{omega:g} and "
+                f"+{omega:g} rad/s (turned {steady.turned:.2g} rad in {duration:g} s)"
+            )
         turn = SpinTurn(
-            omega=omega, yaw_rate=steady.yaw_rate, drift=steady.drift,
-            wander=max(h.wander for h in halves), energy_per_radian=steady.energy_per_radian,
-        )  # fmt: skip
+            omega=omega,
+            yaw_rate=steady.yaw_rate,
+            drift=steady.drift,
+            wander=max(h.wander for h in halves),
+            energy_per_radian=steady.energy_per_radian,
+        )
         out.append((turn, steady, halves))
     return out
 

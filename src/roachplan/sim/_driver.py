@@ -143,8 +143,10 @@ def check_spins(spins, n_waypoints: int) -> tuple[Spin, ...]:
         except (TypeError, ValueError):
             ok = False
         if not ok:
-            raise ValueError(f"spin {k} {item!r}: expected (waypoint index from 0 to "
-                             f"{n_waypoints - 1}, finite heading [rad])")  # fmt: skip
+            raise ValueError(
+                f"spin {k} {item!r}: expected (waypoint index from 0 to "
+                f"{n_waypoints - 1}, finite heading [rad])"
+            )
         out.append((int(index), float(yaw)))
     return tuple(sorted(out))
 
@@ -174,8 +176,7 @@ def drive_path(
         path = np.vstack([path, path])
     steps_per_control = max(1, round(cfg.control_period / sim.cfg.timestep))
     omega_max = min(sim.robot.max_motor_speed, cfg.max_ratio * cfg.omega0)
-    follower = (_Reference(path, cfg) if cfg.kind == "reference"
-                else _Tracking(path, cfg, spins))  # fmt: skip
+    follower = _Reference(path, cfg) if cfg.kind == "reference" else _Tracking(path, cfg, spins)
     standing = sim.robot.standing_height
     trajectory: list[tuple[float, float, float, float]] = []
     next_frame = 0.0
@@ -191,9 +192,13 @@ def drive_path(
             trajectory.append((t, *pos))
             if on_frame is not None:
                 on_frame(
-                    Frame(t=t, p_world_body=pos, quat_world_body=quat,
-                          leg_angles=tuple(sim.joint_angles().tolist()))
-                )  # fmt: skip
+                    Frame(
+                        t=t,
+                        p_world_body=pos,
+                        quat_world_body=quat,
+                        leg_angles=tuple(sim.joint_angles().tolist()),
+                    )
+                )
             next_frame += cfg.frame_period
         failure = _failure(pos, quat, path, standing, cfg.fall_drop)
         if failure is not None:
@@ -241,7 +246,9 @@ class _Reference:
     def update(self, pos, quat=None) -> tuple[Outcome, str] | None:
         # (quat, the body's orientation, is the tracking driver's: algorithm 1 needs only pos)
         i_before = self.i
-        self.i, arrived = next_waypoint(self.path_xy, self.i, pos[:2], self.cfg.r_path, self.cfg.r_end)
+        self.i, arrived = next_waypoint(
+            self.path_xy, self.i, pos[:2], self.cfg.r_path, self.cfg.r_end
+        )
         if arrived:
             return "success", "reached the goal"
         self.advanced = self.i != i_before
@@ -361,8 +368,11 @@ class _Tracking:
         return None
 
     def where(self) -> str:
-        spin = (f", turning on the spot {abs(self.spin_error):.2f} rad from the heading of its "
-                f"spin" if self.spinning else "")  # fmt: skip
+        spin = (
+            f", turning on the spot {abs(self.spin_error):.2f} rad from the heading of its spin"
+            if self.spinning
+            else ""
+        )
         return f"{self.s:.2f} m along the {self.total:.2f} m path{spin}"
 
     def speeds(self, pos, quat, omega_max: float) -> tuple[float, float]:

@@ -161,9 +161,12 @@ class Simulation:
             # Continuous joints: no limits; the leg carries its motor's reflected inertia; the
             # default velocity motor is off, since our servo applies the torque itself.
             bc.changeDynamics(
-                robot_id, j, jointLowerLimit=1.0, jointUpperLimit=-1.0,
+                robot_id,
+                j,
+                jointLowerLimit=1.0,
+                jointUpperLimit=-1.0,
                 localInertiaDiagonal=inertia,
-            )  # fmt: skip
+            )
             bc.setJointMotorControl2(robot_id, j, p.VELOCITY_CONTROL, force=0.0)
         return robot_id
 
@@ -267,8 +270,11 @@ class Simulation:
         # PyBullet recomputes a link's inertia from its shape when its mass is set, so the
         # nominal inertia, scaled, is set back after.
         bc.changeDynamics(self.robot_id, -1, mass=r.body_mass * mass_scale)
-        bc.changeDynamics(self.robot_id, -1, localInertiaDiagonal=tuple(
-            v * mass_scale for v in self._base_inertia))  # fmt: skip
+        bc.changeDynamics(
+            self.robot_id,
+            -1,
+            localInertiaDiagonal=tuple(v * mass_scale for v in self._base_inertia),
+        )
         self._motor_gain = (float(motor_gain[0]), float(motor_gain[1]))
 
     def step(self) -> None:
