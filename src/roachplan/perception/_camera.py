@@ -405,7 +405,7 @@ def _from_pcl_xml(path: Path, text: str) -> Intrinsics:
         "cy": "principal_point_y",
     }
     try:
-        vals = {k: float(get[tag]) for k, tag in keys.items()}
+        vals = {k: float(get[tag] or "") for k, tag in keys.items()}  # (no text: refused)
     except (KeyError, TypeError, ValueError):
         raise CaptureError(f"{path}: <depth> needs {', '.join(keys.values())}") from None
     if not (
@@ -426,8 +426,8 @@ def xml_depth_scale(text: str) -> float | None:
     unit), if it has a usable one."""
     try:
         root = ET.fromstring(f"<root>{text.split('?>', 1)[-1]}</root>")
-        z = float(root.find("depth").find("z_multiplication_factor").text)
-    except (ET.ParseError, AttributeError, TypeError, ValueError):
+        z = float(root.findtext("depth/z_multiplication_factor") or "")
+    except (ET.ParseError, ValueError):
         return None
     scale = 1.0 / z if z > 0 else None
     return scale if scale is not None and np.isfinite(scale) else None

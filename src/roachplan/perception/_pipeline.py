@@ -519,12 +519,12 @@ def _world_frame_transform(
 def _point_spacing(world: np.ndarray) -> float:
     """Median distance [m] from a point to its nearest neighbour in x, y (of up to 20,000
     evenly strided points of world, (N, 3))."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     xy = world[:: max(1, len(world) // 20000), :2]
     if len(xy) < 2:
         return 0.0
-    dist, _ = cKDTree(xy).query(xy, k=2)
+    dist, _ = KDTree(xy).query(xy, k=2)
     return float(np.median(dist[:, 1]))
 
 

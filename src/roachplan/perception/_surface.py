@@ -292,11 +292,11 @@ def projected_surface(
     at the origin, z > 0): the Delaunay triangulation of (x/z, y/z), its edges cut at depth
     discontinuities as an organized capture's are; small holes (cut triangles in groups at
     most max_fill [m] across, on a flat rim) are put back."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     pts = points[points[:, 2] > 1e-6]
     uv = pts[:, :2] / pts[:, 2:3]
-    pitch = cKDTree(uv).query(uv, k=2)[0][:, 1] if len(pts) >= 3 else np.zeros(len(pts))
+    pitch = KDTree(uv).query(uv, k=2)[0][:, 1] if len(pts) >= 3 else np.zeros(len(pts))
 
     def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return _kept_edges(pts[a], pts[b], world_from_camera, np.maximum(pitch[a], pitch[b]))
@@ -311,10 +311,10 @@ def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> S
     spacing at their ends (the distance to a point's third nearest neighbour in x, y), as
     greedy projection triangulation does; small holes (dropped triangles in groups at most
     max_fill [m] across, not on the outer edge) are put back."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     xy = points[:, :2]
-    spacing = cKDTree(xy).query(xy, k=4)[0][:, 3] if len(points) >= 4 else np.zeros(len(xy))
+    spacing = KDTree(xy).query(xy, k=4)[0][:, 3] if len(points) >= 4 else np.zeros(len(xy))
 
     def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         length = np.linalg.norm(points[a] - points[b], axis=1)
@@ -494,14 +494,14 @@ def denoise(
     becomes flat, while at a step, an edge or an object the spread is larger and the samples
     stay where they were measured. One pass, like a moving-least-squares smoothing of order 1
     with an edge guard."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     n = len(points)
     averaged = np.ones(n)
     k = min(SMOOTH_NEIGHBOURS, n)
     if k < 4:
         return points, averaged
-    _, idx = cKDTree(points).query(points, k=k)
+    _, idx = KDTree(points).query(points, k=k)
     nbr = points[idx]  # (N, k, 3), the point itself first
     centre = nbr.mean(axis=1)
     cov = np.einsum("nki,nkj->nij", nbr - centre[:, None], nbr - centre[:, None])
@@ -541,12 +541,12 @@ def range_noise_model(points: np.ndarray, camera: bool, k: int = 8) -> tuple[flo
     textures a scene also has) gives sigma there, and a, b >= 0 are fitted to those by least
     squares. NOISE_FALLBACK with too few points."""
     from scipy.optimize import nnls
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     pts = points[:: max(1, len(points) // 20000)]
     if len(pts) < 200:
         return NOISE_FALLBACK if camera else (NOISE_FALLBACK[0] * 10, 0.0)
-    _, idx = cKDTree(pts).query(pts, k=k + 1)
+    _, idx = KDTree(pts).query(pts, k=k + 1)
     nbr = pts[idx[:, 1:]]  # (N, k, 3)
     centre = nbr.mean(axis=1)
     cov = np.einsum("nki,nkj->nij", nbr - centre[:, None], nbr - centre[:, None])
