@@ -191,10 +191,10 @@ def choose_ground(
 ) -> GroundChoice:
     """The ground plane of points ((N, 3), capture frame [m]) under the gravity prior up ((3,)).
 
-    1. Planes are found one after another (find_planes).
-    2. Candidates face up within prior_tolerance_deg of the prior; the best-supported group of
-       mutually parallel candidates gives the refined up (the floor and a desk agree on it; a
-       sloping surface does not).
+    1. Planes are found one after another (find_planes) among the points facing up within
+       prior_tolerance_deg of the prior, as hypotheses inside that cone (gravity first).
+    2. The best-supported group of mutually parallel candidates gives the refined up (the
+       floor and a desk agree on it; a sloping surface does not).
     3. The horizontal planes (within parallel_deg of the refined up) that are well supported
        (min_area, min_fraction) are ground candidates; the lowest one (farthest below the
        sensor) is the ground.
@@ -212,7 +212,12 @@ def choose_ground(
         if not planes:
             raise CaptureError("no plane found in the capture: nothing to take as the ground")
         return _ground_through(
-            points, planes, np.asarray(near, dtype=np.float64), cfg, up, toward_sensor
+            points,
+            planes,
+            np.asarray(near, dtype=np.float64),
+            cfg,
+            up=up,
+            toward_sensor=toward_sensor,
         )
     # Gravity first: only points whose surface faces up under the prior are searched, and
     # only planes within the prior's cone are hypotheses. Searching the whole cloud found the
@@ -237,13 +242,46 @@ def choose_ground(
         )
         candidates = [best]
 
+    refined = _refined_up(candidates, up, cfg, warnings)
+    ground, well = _lowest_level(
+        planes,
+        refined,
+        cfg,
+        pool=pool,
+        total=len(sub),
+        toward_sensor=toward_sensor,
+        warnings=warnings,
+    )
+    # The level surfaces share one normal (a floor and the desks on it): fitted jointly, their
+    # up is better known than from the ground alone, which may be a strip a few tens of
+    # centimetres deep at the bottom of the view (2 deg there is 5 cm at the camera).
+    level = [(p.normal, p.offset) for p in [ground, *[q for q in well if q is not ground]]]
+    n, d = _refit_level(points, level, cfg.threshold)
+    support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
+    return GroundChoice(
+        normal=n,
+        offset=d,
+        support=support,
+        fraction=support / len(points),
+        area=ground.area,
+        planes=tuple(planes),
+        warnings=tuple(warnings),
+    )
+
+
+def _refined_up(
+    candidates: list[Plane], up: np.ndarray, cfg: GroundConfig, warnings: list[str]
+) -> np.ndarray:
+    """(3,) unit up refined by the best-supported group of mutually parallel candidate planes
+    (the floor and a desk agree on it; a sloping surface does not); a warning when another
+    orientation is nearly as well supported."""
+
     def group(p: Plane) -> list[Plane]:
         return [q for q in candidates if _angle(p.normal, q.normal) <= cfg.parallel_deg]
 
     scores = [sum(q.support for q in group(p)) for p in candidates]
     order = np.argsort(scores)[::-1]
-    lead = candidates[int(order[0])]
-    members = group(lead)
+    members = group(candidates[int(order[0])])
     refined = np.sum([q.support * q.normal for q in members], axis=0)
     refined /= np.linalg.norm(refined)
     rivals = [
@@ -258,12 +296,28 @@ def choose_ground(
             f"{_angle(refined, up):.0f} deg from the assumed gravity, another "
             f"{r.angle_deg:.0f} deg; check the result, or give --up or the camera pose"
         )
+    return refined
+
+
+def _lowest_level(
+    planes: list[Plane],
+    refined: np.ndarray,
+    cfg: GroundConfig,
+    *,
+    pool: int,
+    total: int,
+    toward_sensor: bool,
+    warnings: list[str],
+) -> tuple[Plane, list[Plane]]:
+    """(the ground, every well-supported level plane): among the planes level to refined
+    ((3,) unit; not a thin fragment of a larger one), those min_area large and min_fraction of
+    pool points are well supported, and the lowest of them is the ground. total: the points
+    searched, for the warnings' shares."""
     horizontal: list[Plane] = []
     for p in sorted(planes, key=lambda p: -p.support):
         level = _angle(p.normal, refined) <= cfg.parallel_deg
         if level and all(abs(p.offset - q.offset) >= cfg.level_gap for q in horizontal):
             horizontal.append(p)
-    total = len(sub)
     well = [
         p for p in horizontal if p.area >= cfg.min_area and p.support >= cfg.min_fraction * pool
     ]
@@ -290,21 +344,7 @@ def choose_ground(
             f"the ground is tilted {ground.angle_deg:.0f} deg from the assumed gravity: a steep "
             f"camera, or the wrong surface"
         )
-    # The level surfaces share one normal (a floor and the desks on it): fitted jointly, their
-    # up is better known than from the ground alone, which may be a strip a few tens of
-    # centimetres deep at the bottom of the view (2 deg there is 5 cm at the camera).
-    level = [(p.normal, p.offset) for p in [ground, *[q for q in well if q is not ground]]]
-    n, d = _refit_level(points, level, cfg.threshold)
-    support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
-    return GroundChoice(
-        normal=n,
-        offset=d,
-        support=support,
-        fraction=support / len(points),
-        area=ground.area,
-        planes=tuple(planes),
-        warnings=tuple(warnings),
-    )
+    return ground, well
 
 
 def _facing_up(
@@ -331,6 +371,7 @@ def _ground_through(
     planes: list[Plane],
     near: np.ndarray,
     cfg: GroundConfig,
+    *,
     up: np.ndarray,
     toward_sensor: bool = True,
 ) -> GroundChoice:

@@ -285,6 +285,41 @@ STAGES: tuple[str, ...] = ("depth range", "voxel", "outliers", "ground", "mesh")
 """The pipeline's stages after reading, in order (Reconstruction.times has one entry each)."""
 
 
+class _Stages:
+    """The pipeline's bookkeeping: each stage's wall time and points left, and progress."""
+
+    def __init__(self, source: str, on_stage: Callable[[str], None] | None) -> None:
+        self.source, self.on_stage = source, on_stage
+        self.times: dict[str, float] = {}
+        self.counts: dict[str, int] = {}
+        self._t = time.perf_counter()
+
+    def done(self, name: str, n: int | None = None) -> None:
+        """Stage `name` ended with n points left (CaptureError when none is)."""
+        now = time.perf_counter()
+        self.times[name], self._t = now - self._t, now
+        if self.on_stage is not None:
+            self.on_stage(name)
+        if n is not None:
+            self.counts[name] = int(n)
+            if n == 0:
+                raise CaptureError(f"{self.source}: no points left after the {name} stage")
+
+
+@dataclass(frozen=True, eq=False)
+class _Placement:
+    """Where a capture sits in the world."""
+
+    world_from_file: np.ndarray
+    """(4, 4) the file's own coordinates -> world."""
+    world_from_centred: np.ndarray
+    """(4, 4) points relative to the sensor (a camera frame) or as read (a world frame) ->
+    world."""
+    frame: Literal["camera", "world"]
+    up_source: str
+    ground: GroundChoice | None
+
+
 def reconstruct(
     capture: Capture,
     cfg: MeshingConfig = MeshingConfig(),
@@ -292,37 +327,87 @@ def reconstruct(
 ) -> Reconstruction:
     """The terrain mesh of a capture, world frame; CaptureError when a stage has nothing left.
     on_stage(name) is called as each of STAGES ends (progress)."""
-    times: dict[str, float] = {}
-    counts: dict[str, int] = {"points": int(capture.valid.sum())}
+    log = _Stages(capture.source, on_stage)
+    log.counts["points"] = int(capture.valid.sum())
     warnings: list[str] = []
     notes: list[str] = list(capture.notes)
-    t = time.perf_counter()
-
-    def stage(name: str, n: int | None = None) -> None:
-        nonlocal t
-        now = time.perf_counter()
-        times[name] = now - t
-        t = now
-        if on_stage is not None:
-            on_stage(name)
-        if n is not None:
-            counts[name] = int(n)
-            if n == 0:
-                raise CaptureError(f"{capture.source}: no points left after the {name} stage")
-
     raw = capture.finite_points()
     frame = capture_frame(capture, raw - np.asarray(capture.sensor_origin), cfg)
     origin = np.asarray(capture.sensor_origin, dtype=np.float64)
     pts = raw - origin if frame == "camera" else raw
+    inside = _in_depth_range(capture, raw - origin, frame, cfg, warnings)
+    pts = pts[inside]
+    log.done("depth range", len(pts))
+    pts = voxel_downsample(pts, cfg.voxel)
+    log.done("voxel", len(pts))
+    pts = remove_outliers(pts, cfg.outlier_neighbours, cfg.outlier_std)
+    log.done("outliers", len(pts))
+    placed = _place(capture, pts, frame, cfg, warnings=warnings, notes=notes)
+    if placed.ground is not None:
+        log.counts["ground inliers"] = placed.ground.support
+    wfc = placed.world_from_file
+    world = (pts + (origin if placed.frame == "camera" else 0.0)) @ wfc[:3, :3].T + wfc[:3, 3]
+    in_crop = _crop_mask(world, cfg.crop)
+    world = world[in_crop]
+    log.done("ground", len(world))
+    if cfg.method == "sensor":
+        kept = np.zeros(len(capture.points), dtype=bool)  # the file's points the stages kept
+        kept[np.flatnonzero(capture.valid)[inside]] = True
+        surface = _sensor_surface(
+            capture, kept, pts=pts[in_crop], world=world, placed=placed, cfg=cfg
+        )
+        mesh = surface_to_mesh(surface)
+        total = surface.observed_area + surface.filled_area
+        notes.append(
+            f"surface: {surface.observed_area:.2f} m^2 between measured samples; "
+            f"{surface.filled_area:.2f} m^2 ({100 * surface.filled_area / max(total, 1e-12):.1f} %) "
+            f"filled in from the rims of small holes; what the sensor did not see is left "
+            f"open (not walkable)"
+        )
+        log.counts["filled vertices"] = int(surface.filled.sum())
+    else:
+        camera = wfc[:3, 3] if placed.frame == "camera" else _overhead(world)
+        mesh = _other_mesh(world, camera, cfg, capture.source, notes)
+    log.done("mesh")
+    if len(mesh.faces) == 0:
+        raise CaptureError(f"{capture.source}: meshing produced no triangles")
+    log.counts["triangles"] = len(mesh.faces)
+    below = float(np.percentile(world[:, 2], 1)) if placed.frame == "camera" else 0.0
+    if below < -0.25:
+        warnings.append(
+            f"1 % of the terrain lies more than {-below:.2f} m below the ground chosen: the "
+            f"ground may be a raised surface (a table), or the up direction wrong"
+        )
+    return Reconstruction(
+        mesh=mesh,
+        world_from_camera=wfc,
+        counts=log.counts,
+        times=log.times,
+        frame=placed.frame,
+        up_source=placed.up_source,
+        ground=placed.ground,
+        warnings=tuple(warnings),
+        notes=tuple(notes),
+    )
+
+
+def _in_depth_range(
+    capture: Capture, centred: np.ndarray, frame: str, cfg: MeshingConfig, warnings: list[str]
+) -> np.ndarray:
+    """(N,) bool: the finite points (centred: (N, 3) relative to the sensor [m]) inside the
+    depth range: along the optical axis in a camera frame, from the sensor in a world frame
+    (which keeps everything by default). CaptureError when most pixels of a depth image fall
+    outside the default range (a wrong depth scale, with the one that fits); a warning when a
+    range the user chose leaves out most."""
     if frame == "camera":
         near, far = cfg.depth_range or CAMERA_DEPTH_RANGE
-        inside = (pts[:, 2] >= near) & (pts[:, 2] <= far)
+        inside = (centred[:, 2] >= near) & (centred[:, 2] <= far)
     elif cfg.depth_range is not None:
         near, far = cfg.depth_range
-        dist = np.linalg.norm(raw - origin, axis=1)
+        dist = np.linalg.norm(centred, axis=1)
         inside = (dist >= near) & (dist <= far)
     else:
-        inside = np.ones(len(pts), dtype=bool)
+        inside = np.ones(len(centred), dtype=bool)
     advice = depth_scale_advice(capture, cfg.depth_range or CAMERA_DEPTH_RANGE)
     if advice is not None and inside.mean() < 0.5:
         if cfg.depth_range is None:  # the default range: most likely a wrong scale
@@ -332,108 +417,104 @@ def reconstruct(
             f"{100 * (1 - inside.mean()):.0f} % of the points are outside the depth "
             f"range given; if that is not meant: {advice}"
         )
-    pts = pts[inside]
-    stage("depth range", len(pts))
-    pts = voxel_downsample(pts, cfg.voxel)
-    stage("voxel", len(pts))
-    pts = remove_outliers(pts, cfg.outlier_neighbours, cfg.outlier_std)
-    stage("outliers", len(pts))
-    ground = None
+    return inside
+
+
+def _place(
+    capture: Capture,
+    pts: np.ndarray,
+    frame: str,
+    cfg: MeshingConfig,
+    *,
+    warnings: list[str],
+    notes: list[str],
+) -> _Placement:
+    """Where the capture's points (pts: (N, 3), relative to the sensor in a camera frame, as
+    read in a world frame [m]) sit in the world: the camera pose given, or the ground found
+    (a camera frame), or the world frame's ground at z = 0."""
+    origin = np.asarray(capture.sensor_origin, dtype=np.float64)
     up, up_source = gravity_prior(capture, frame, cfg)
     gcfg = GroundConfig(
         threshold=cfg.ground_threshold, iterations=cfg.ground_iterations, seed=cfg.seed
     )
-    near_point = (
-        None
-        if cfg.ground_point is None
-        else np.asarray(cfg.ground_point) - (origin if frame == "camera" else 0.0)
-    )
+    near_point = None
+    if cfg.ground_point is not None:
+        near_point = np.asarray(cfg.ground_point) - (origin if frame == "camera" else 0.0)
+    ground = None
     if cfg.camera_pose is not None:
-        wfc = pose_matrix(cfg.camera_pose)
+        centred = pose_matrix(cfg.camera_pose)
         if frame != "camera":
             notes.append("a camera pose was given: the cloud is taken as in the camera's frame")
         frame, up_source = "camera", "the camera pose given"
     elif frame == "camera":
         ground = choose_ground(pts, up, gcfg, near=near_point)
-        counts["ground inliers"] = ground.support
         warnings.extend(ground.warnings)
-        wfc = world_from_ground(
-            ground.normal, ground.offset, (cfg.depth_range or CAMERA_DEPTH_RANGE)[1]
-        )
+        reach = (cfg.depth_range or CAMERA_DEPTH_RANGE)[1]
+        centred = world_from_ground(ground.normal, ground.offset, reach)
     else:
-        wfc, ground = _world_frame_transform(pts, up, gcfg, cfg, near_point, notes)
-        if ground is not None:
-            counts["ground inliers"] = ground.support
-    centred_to_world = wfc  # takes points relative to the sensor (camera) or as read (world)
-    if frame == "camera":
-        wfc = wfc @ _translation(-origin)  # the transform takes the file's own coordinates
-    world = (pts + (origin if frame == "camera" else 0.0)) @ wfc[:3, :3].T + wfc[:3, 3]
-    in_crop = _crop_mask(world, cfg.crop)
-    world = world[in_crop]
-    stage("ground", len(world))
-    camera = wfc[:3, 3] if frame == "camera" else _overhead(world)
-    if cfg.method == "sensor":
-        if frame == "camera" and capture.shape is not None:
-            keep = np.zeros(len(capture.points), dtype=bool)
-            keep[np.flatnonzero(capture.valid)[inside]] = True
-            grid = np.where(keep[:, None], capture.points - origin, np.nan)
-            keep[keep] = _crop_mask(
-                grid[keep] @ centred_to_world[:3, :3].T + centred_to_world[:3, 3], cfg.crop
-            )
-            surface = organized_surface(
-                grid.reshape(*capture.shape, 3),
-                keep.reshape(capture.shape),
-                centred_to_world,
-                cfg.voxel[0],
-                cfg.max_fill,
-            )
-        elif frame == "camera":
-            surface = projected_surface(pts[in_crop], centred_to_world, cfg.max_fill)
-        else:
-            surface = scattered_surface(world, cfg.max_fill)
-        mesh = surface_to_mesh(surface)
-        total = surface.observed_area + surface.filled_area
-        notes.append(
-            f"surface: {surface.observed_area:.2f} m^2 between measured samples; "
-            f"{surface.filled_area:.2f} m^2 ({100 * surface.filled_area / max(total, 1e-12):.1f} %) "
-            f"filled in from the rims of small holes; what the sensor did not see is left "
-            f"open (not walkable)"
+        centred, ground = _world_frame_transform(
+            pts, up, gcfg=gcfg, cfg=cfg, near=near_point, notes=notes
         )
-        counts["filled vertices"] = int(surface.filled.sum())
-    elif cfg.method == "grid":
-        cell = cfg.cell or cfg.voxel[0]
-        if cfg.cell is None:
-            spacing = _point_spacing(world)
-            if spacing > 2.0 * cell:
-                notes.append(
-                    f"points are {spacing:.3g} m apart: height field cells of "
-                    f"{spacing:.3g} m instead of {cell:g} m"
-                )
-                cell = spacing
-        mesh = grid_mesh(world, cell, camera, cfg.fill_holes, source=capture.source)
-    else:
-        mesh = surface_mesh(world, camera, cfg)
-    stage("mesh")
-    if len(mesh.faces) == 0:
-        raise CaptureError(f"{capture.source}: meshing produced no triangles")
-    counts["triangles"] = len(mesh.faces)
-    below = float(np.percentile(world[:, 2], 1)) if frame == "camera" else 0.0
-    if below < -0.25:
-        warnings.append(
-            f"1 % of the terrain lies more than {-below:.2f} m below the ground chosen: the "
-            f"ground may be a raised surface (a table), or the up direction wrong"
-        )
-    return Reconstruction(
-        mesh=mesh,
-        world_from_camera=wfc,
-        counts=counts,
-        times=times,
-        frame=frame,
+    # A camera frame's transforms took points relative to the sensor; the file's own
+    # coordinates have the sensor at its origin.
+    from_file = centred @ _translation(-origin) if frame == "camera" else centred
+    return _Placement(
+        world_from_file=from_file,
+        world_from_centred=centred,
+        frame="camera" if frame == "camera" else "world",
         up_source=up_source,
         ground=ground,
-        warnings=tuple(warnings),
-        notes=tuple(notes),
     )
+
+
+def _sensor_surface(
+    capture: Capture,
+    kept: np.ndarray,
+    *,
+    pts: np.ndarray,
+    world: np.ndarray,
+    placed: _Placement,
+    cfg: MeshingConfig,
+) -> Surface:
+    """The sensor method's surface (perception/_surface.py): an organized capture pixel to
+    pixel (the file's points the stages kept: kept (N,) bool, within the crop box); an
+    unorganized camera cloud by its directions (pts: the kept, cropped points relative to the
+    sensor); a world-frame cloud by x, y (world: the same points in the world [m])."""
+    if placed.frame == "camera" and capture.shape is not None:
+        origin = np.asarray(capture.sensor_origin, dtype=np.float64)
+        grid = np.where(kept[:, None], capture.points - origin, np.nan)
+        to_world = placed.world_from_centred
+        kept = kept.copy()
+        kept[kept] = _crop_mask(grid[kept] @ to_world[:3, :3].T + to_world[:3, 3], cfg.crop)
+        return organized_surface(
+            grid.reshape(*capture.shape, 3),
+            kept.reshape(capture.shape),
+            to_world,
+            cfg.voxel[0],
+            cfg.max_fill,
+        )
+    if placed.frame == "camera":
+        return projected_surface(pts, placed.world_from_centred, cfg.max_fill)
+    return scattered_surface(world, cfg.max_fill)
+
+
+def _other_mesh(
+    world: np.ndarray, camera: np.ndarray, cfg: MeshingConfig, source: str, notes: list[str]
+) -> trimesh.Trimesh:
+    """The grid, Poisson or ball-pivoting mesh of the world points ((N, 3) [m]) seen from
+    camera ((3,) [m])."""
+    if cfg.method != "grid":
+        return surface_mesh(world, camera, cfg)
+    cell = cfg.cell or cfg.voxel[0]
+    if cfg.cell is None:
+        spacing = _point_spacing(world)
+        if spacing > 2.0 * cell:
+            notes.append(
+                f"points are {spacing:.3g} m apart: height field cells of "
+                f"{spacing:.3g} m instead of {cell:g} m"
+            )
+            cell = spacing
+    return grid_mesh(world, cell, camera, cfg.fill_holes, source=source)
 
 
 def _crop_mask(world: np.ndarray, crop) -> np.ndarray:
@@ -473,6 +554,7 @@ def _overhead(world: np.ndarray) -> np.ndarray:
 def _world_frame_transform(
     pts: np.ndarray,
     up: np.ndarray,
+    *,
     gcfg: GroundConfig,
     cfg: MeshingConfig,
     near: np.ndarray | None,
@@ -699,6 +781,12 @@ def _seed(k: str, v) -> int:
     return v
 
 
+def _bool(k: str, v) -> bool:
+    if not isinstance(v, bool):
+        raise CaptureError(f"{k}: expected true or false, got {v!r}")
+    return v
+
+
 _MESHING_PARSERS = {
     "voxel": lambda k, v: _vec(k, v, 3, 0.0) if isinstance(v, list | tuple) else (_num(k, v),) * 3,
     "method": lambda k, v: _choice(k, v, METHODS),
@@ -712,14 +800,8 @@ _MESHING_PARSERS = {
     "frame": lambda k, v: _choice(k, v, FRAMES),
     "up": lambda k, v: _vec(k, v, 3),
     "ground_point": lambda k, v: _vec(k, v, 3),
-    "recentre": lambda k, v: _bool(k, v),
+    "recentre": _bool,
 }
-
-
-def _bool(k: str, v) -> bool:
-    if not isinstance(v, bool):
-        raise CaptureError(f"{k}: expected true or false, got {v!r}")
-    return v
 
 
 def _pinhole_numbers(k: str, v: dict) -> PinholeNumbers:

@@ -302,7 +302,9 @@ def projected_surface(
         return _kept_edges(pts[a], pts[b], world_from_camera, np.maximum(pitch[a], pitch[b]))
 
     world = pts @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
-    return _delaunay_surface(uv, pts, world, kept, max_fill, world_from_camera)
+    return _delaunay_surface(
+        uv, pts, world=world, kept=kept, max_fill=max_fill, world_from_camera=world_from_camera
+    )
 
 
 def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> Surface:
@@ -320,12 +322,15 @@ def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> S
         length = np.linalg.norm(points[a] - points[b], axis=1)
         return length <= mu * np.minimum(spacing[a], spacing[b])
 
-    return _delaunay_surface(xy, points, points, kept, max_fill, None)
+    return _delaunay_surface(
+        xy, points, world=points, kept=kept, max_fill=max_fill, world_from_camera=None
+    )
 
 
 def _delaunay_surface(
     flat: np.ndarray,
     points: np.ndarray,
+    *,
     world: np.ndarray,
     kept,
     max_fill: float,

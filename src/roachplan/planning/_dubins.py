@@ -73,7 +73,7 @@ class DubinsPath:
         return tuple(self.at(np.array([self.length]))[0].tolist())
 
 
-def _word_params(word: str, a: float, b: float, d: float) -> tuple[float, float, float] | None:
+def _word_params(word: str, a: float, b: float, d: float) -> tuple[float, float, float] | None:  # noqa: PLR0911 - one return per Dubins word and its no-solution case
     """(t, p, q), the three segments of `word` in units of the radius, for the normalised
     problem (from the origin at heading a to (d, 0) at heading b); None where it has none."""
     sa, sb, ca, cb = math.sin(a), math.sin(b), math.cos(a), math.cos(b)

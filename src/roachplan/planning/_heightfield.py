@@ -111,11 +111,47 @@ def heightfield_from_mesh(
     faces = np.asarray(faces, dtype=np.int64)
     nx = int(np.floor((xy_max[0] - xy_min[0]) / resolution)) + 1
     ny = int(np.floor((xy_max[1] - xy_min[1]) / resolution)) + 1
-    top = np.full((ny, nx), -np.inf)
     noisy = vertex_noise is not None and bool(np.any(np.asarray(vertex_noise) > 0))
-    noise = np.zeros((ny, nx)) if noisy else None
     tri = vertices[faces]  # (F, 3, 3)
-    tri_noise = np.asarray(vertex_noise, dtype=np.float64)[faces] if noisy else None
+    corner_noise = np.asarray(vertex_noise, dtype=np.float64)[faces] if noisy else None
+    at, z, sigma = _grid_hits(
+        tri, corner_noise, xy0=np.asarray(xy_min, dtype=np.float64), resolution=resolution,
+        shape=(ny, nx),
+    )  # fmt: skip
+    if overhead is not None and len(at):  # keep each point's surfaces within overhead of its lowest
+        lowest = np.full(ny * nx, np.inf)
+        np.minimum.at(lowest, at, z)
+        keep = z <= lowest[at] + overhead
+        at, z, sigma = at[keep], z[keep], None if sigma is None else sigma[keep]
+    top = np.full(ny * nx, -np.inf)
+    np.maximum.at(top, at, z)
+    noise = None
+    if sigma is not None:
+        noise = np.zeros(ny * nx)
+        np.maximum.at(noise, at, sigma)
+        noise = noise.reshape(ny, nx)
+    top = top.reshape(ny, nx)
+    if ground_height is not None:
+        top = np.maximum(top, ground_height)
+    top[~np.isfinite(top)] = np.nan
+    return HeightField(
+        x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, heights=top, noise=noise
+    )
+
+
+def _grid_hits(
+    tri: np.ndarray,
+    corner_noise: np.ndarray | None,
+    *,
+    xy0: np.ndarray,
+    resolution: float,
+    shape: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(flat grid indices (H,), heights (H,) [m], noise (H,) [m] or None): every grid point
+    ((ny, nx) = shape, spacing resolution [m] from xy0 (2,)) an upward-facing triangle of tri
+    ((F, 3, 3) [m]) covers, with the triangle's height there and its corners' noise
+    (corner_noise (F, 3) [m]) interpolated alike."""
+    ny, nx = shape
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed xy area
@@ -125,9 +161,8 @@ def heightfield_from_mesh(
     # loader leaves every mesh) -- skipping them also skips a closed mesh's large bottom.
     keep = det > 1e-12
     tri, det = tri[keep], det[keep]
-    if tri_noise is not None:
-        tri_noise = tri_noise[keep]
-    xy0 = np.asarray(xy_min, dtype=np.float64)
+    if corner_noise is not None:
+        corner_noise = corner_noise[keep]
     lo = np.maximum(np.ceil((tri[:, :, :2].min(1) - xy0) / resolution - 1e-9), 0).astype(np.int64)
     hi = np.minimum(
         np.floor((tri[:, :, :2].max(1) - xy0) / resolution + 1e-9), (nx - 1, ny - 1)
@@ -137,8 +172,7 @@ def heightfield_from_mesh(
     # Vectorised over triangles of similar size: each bucket tests a side x side block of grid
     # points per triangle, side the next power of two of its triangles' bounding boxes.
     side = 1 << np.ceil(np.log2(np.maximum(span, 1))).astype(np.int64)
-    flat = top.reshape(-1)
-    hits: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []  # (cells, z, noise)
+    ats, zs, sigmas = [np.zeros(0, dtype=np.int64)], [np.zeros(0)], [np.zeros(0)]
     for b in np.unique(side[on_grid]):
         idx = np.flatnonzero(on_grid & (side == b))
         off = np.stack(np.meshgrid(np.arange(b), np.arange(b)), axis=-1).reshape(-1, 2)  # (b*b, 2)
@@ -156,34 +190,11 @@ def heightfield_from_mesh(
             eps = 1e-9
             inside = (a >= -eps) & (c >= -eps) & (a + c <= 1 + eps)
             inside &= np.all(cell <= hi[sel, None, :], axis=-1)
-            z = o[..., 2] + a * e1[..., 2] + c * e2[..., 2]
-            at = (cell[..., 1] * nx + cell[..., 0])[inside]
-            sn = None
-            if noise is not None:
-                tn = tri_noise[sel]  # (n, 3): the noise at the corners, interpolated alike
-                sn = (
-                    tn[:, None, 0]
-                    + a * (tn[:, None, 1] - tn[:, None, 0])
-                    + c * (tn[:, None, 2] - tn[:, None, 0])
-                )[inside]
-            hits.append((at, z[inside], sn))
-    if hits:
-        at = np.concatenate([h[0] for h in hits])
-        z = np.concatenate([h[1] for h in hits])
-        if overhead is not None:  # keep each point's surfaces within overhead of its lowest
-            lowest = np.full(ny * nx, np.inf)
-            np.minimum.at(lowest, at, z)
-            keep = z <= lowest[at] + overhead
-            at, z = at[keep], z[keep]
-            hits = [
-                (at, z, np.concatenate([h[2] for h in hits])[keep] if noise is not None else None)
-            ]
-        np.maximum.at(flat, at, z)
-        if noise is not None:
-            np.maximum.at(noise.reshape(-1), at, np.concatenate([h[2] for h in hits]))
-    if ground_height is not None:
-        top = np.maximum(top, ground_height)
-    top[~np.isfinite(top)] = np.nan
-    return HeightField(
-        x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, heights=top, noise=noise
-    )
+            ats.append((cell[..., 1] * nx + cell[..., 0])[inside])
+            zs.append((o[..., 2] + a * e1[..., 2] + c * e2[..., 2])[inside])
+            if corner_noise is not None:
+                n = corner_noise[sel][:, None, :]  # (n, 1, 3)
+                sigmas.append((n[..., 0] + a * (n[..., 1] - n[..., 0])
+                               + c * (n[..., 2] - n[..., 0]))[inside])  # fmt: skip
+    sigma = np.concatenate(sigmas) if corner_noise is not None else None
+    return np.concatenate(ats), np.concatenate(zs), sigma

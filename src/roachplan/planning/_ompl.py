@@ -401,7 +401,6 @@ def _plan_here(
 ) -> PlanResult:
     t0 = time.perf_counter()
     _seed_ompl(seed)
-    rng = np.random.default_rng(seed)
     lo, hi = np.asarray(bounds[0], dtype=float), np.asarray(bounds[1], dtype=float)
     check = _Checker(hf, fp, cfg.validity)
     if regions is None:
@@ -424,94 +423,26 @@ def _plan_here(
             is_valid=inside_and_valid,
             t0=t0,
         )
-    # Sample where the robot can stand, one cell of margin round it (the map is coarse).
-    cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
-    if len(cells) == 0:
-        cells = regions.cell_centres(np.ones_like(regions.reachable))
-
-    samplers: list[_TerrainSampler] = []
-    known: dict[tuple[float, float, float], bool] = {}  # one verdict cache for every sampler
-
-    def alloc(sp):
-        sampler = _TerrainSampler(
-            sp, rng=rng, cells=cells, cell=regions.cell, lo=lo, hi=hi, check=check, known=known
-        )
-        samplers.append(sampler)  # OMPL holds only a C++ reference: keep the Python object alive
-        return sampler
-
-    space = _TerrainSpace(alloc)
-    rv = ob.RealVectorBounds(2)
-    for k in range(2):
-        rv.setLow(k, float(lo[k]))
-        rv.setHigh(k, float(hi[k]))
-    space.setBounds(rv)
-    si = ob.SpaceInformation(space)
-
-    def is_valid(s) -> bool:
-        key = (s.getX(), s.getY(), s.getYaw())
-        verdict = known.get(key)
-        if verdict is None:
-            verdict = bool(check(np.array([key]))[0])
-        return verdict
-
-    si.setStateValidityChecker(ob.StateValidityCheckerFn(is_valid))
-    si.setMotionValidator(_BatchMotionValidator(si, fp, check, cfg.check_resolution))
-    si.setup()
-    pdef = ob.ProblemDefinition(si)
-    pdef.setStartAndGoalStates(_se2_state(space, start), _se2_state(space, goal))
-    objective = ob.PathLengthOptimizationObjective(si)
-    # An infinite threshold is met by any path: optimizing planners stop at their first one.
-    objective.setCostThreshold(ob.Cost(0.0 if cfg.optimize else float("inf")))
-    pdef.setOptimizationObjective(objective)
-    planner = getattr(og, _OMPL_CLASS[cfg.name])(si)
-    planner.setProblemDefinition(pdef)
-    planner.setup()
+    problem = _Problem.build(
+        fp, start=start, goal=goal, lo=lo, hi=hi, cfg=cfg, rng=np.random.default_rng(seed),
+        regions=regions, check=check,
+    )  # fmt: skip
     deadline = t0 + cfg.time_limit
-
-    undrivable = 0  # routes found that no drivable path follows
-    while True:
-        if cfg.name in ("prm", "prmstar") and not cfg.optimize:
-            states = _solve_prm(si, planner, cfg, deadline)
-        else:
-            planner.solve(_budget_ptc(cfg.max_iterations, deadline))
-            states = pdef.getSolutionPath().getStates() if pdef.hasExactSolution() else None
-        if states is None:
-            break
-        xyyaw = _simplified(si, states, cfg)
-        if cfg.turning_radius is None:
-            break
-        drivable = drivable_path(
-            xyyaw[:, :2],
-            start[2],
-            cfg.turning_radius,
-            inside_and_valid,
-            cfg.check_resolution,
-            spin_margin=cfg.spin_margin,
-            spin_step=_spin_step(fp, cfg),
-        )
-        if drivable is not None:
-            break
-        # A route with a turn too tight for the space round it: search again from scratch
-        # (the planner's random stream goes on, so the next route differs), within the budget.
-        undrivable += 1
-        states = None
-        if undrivable >= DRIVABLE_ATTEMPTS or time.perf_counter() > deadline:
-            break
-        planner.clear()
-        pdef.clearSolutionPaths()
+    route = problem.search(cfg, deadline, start_yaw=start[2], spin_step=_spin_step(fp, cfg),
+                           is_valid=inside_and_valid)  # fmt: skip
     stats = dict(
         validity_checks=check.states,
         validity_time=check.seconds,
-        sampler_calls=sum(smp.calls for smp in samplers),
+        sampler_calls=sum(smp.calls for smp in problem.samplers),
     )
     if cfg.keep_roadmap:
-        stats["roadmap"], stats["graph_states"] = _graph_segments(si, planner)
-    if states is None:
+        stats["roadmap"], stats["graph_states"] = _graph_segments(problem.si, problem.planner)
+    if route.xyyaw is None:
         why = "time limit" if time.perf_counter() > deadline else "iteration budget"
         message = f"{cfg.name} found no path within its {why}"
-        if undrivable:
+        if route.undrivable:
             message = (
-                f"{cfg.name} found {undrivable} route(s), but none the robot can follow "
+                f"{cfg.name} found {route.undrivable} route(s), but none the robot can follow "
                 f"with turns of radius {cfg.turning_radius:g} m"
             )
         return PlanResult(
@@ -524,10 +455,11 @@ def _plan_here(
             message=message,
             **stats,
         )
-    path_xyz, spins = None, ()
-    if cfg.turning_radius is not None:
+    xyyaw, path_xyz, spins = route.xyyaw, None, ()
+    if route.drivable is not None:
         # The curve is sampled every check_resolution; the driver gets every waypoint_spacing,
         # and both states of every spin (where it begins and the heading it ends at).
+        drivable = route.drivable
         every = max(1, round(cfg.waypoint_spacing / cfg.check_resolution))
         at = np.asarray(drivable.spins, dtype=int)
         keep = np.unique(
@@ -560,6 +492,115 @@ def _plan_here(
         spins=spins,
         **stats,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class _Route:
+    """What a search found: the planner's route (simplified, (K, 3) x, y, yaw) or None, its
+    drivable path (with turning_radius) and how many routes no drivable path followed."""
+
+    xyyaw: np.ndarray | None
+    drivable: object | None
+    undrivable: int
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """One OMPL problem over the terrain: the space, its information, the problem
+    definition, the planner, and the terrain samplers it made (kept alive: OMPL holds only a
+    C++ reference to them)."""
+
+    si: object
+    pdef: object
+    planner: object
+    samplers: list
+
+    @staticmethod
+    def build(
+        fp, *, start, goal, lo, hi, cfg: PlannerConfig, rng, regions, check: _Checker
+    ) -> _Problem:
+        """Set up the SE(2) problem from start to goal within lo, hi ((2,) [m]): the terrain
+        sampler over the standable map, the validity checker and the batch motion validator,
+        the planner cfg.name."""
+        # Sample where the robot can stand, one cell of margin round it (the map is coarse).
+        cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
+        if len(cells) == 0:
+            cells = regions.cell_centres(np.ones_like(regions.reachable))
+        samplers: list[_TerrainSampler] = []
+        known: dict[tuple[float, float, float], bool] = {}  # one verdict cache for every sampler
+
+        def alloc(sp):
+            sampler = _TerrainSampler(
+                sp, rng=rng, cells=cells, cell=regions.cell, lo=lo, hi=hi, check=check, known=known
+            )
+            samplers.append(sampler)
+            return sampler
+
+        space = _TerrainSpace(alloc)
+        rv = ob.RealVectorBounds(2)
+        for k in range(2):
+            rv.setLow(k, float(lo[k]))
+            rv.setHigh(k, float(hi[k]))
+        space.setBounds(rv)
+        si = ob.SpaceInformation(space)
+
+        def is_valid(s) -> bool:
+            key = (s.getX(), s.getY(), s.getYaw())
+            verdict = known.get(key)
+            if verdict is None:
+                verdict = bool(check(np.array([key]))[0])
+            return verdict
+
+        si.setStateValidityChecker(ob.StateValidityCheckerFn(is_valid))
+        si.setMotionValidator(_BatchMotionValidator(si, fp, check, cfg.check_resolution))
+        si.setup()
+        pdef = ob.ProblemDefinition(si)
+        pdef.setStartAndGoalStates(_se2_state(space, start), _se2_state(space, goal))
+        objective = ob.PathLengthOptimizationObjective(si)
+        # An infinite threshold is met by any path: optimizing planners stop at their first one.
+        objective.setCostThreshold(ob.Cost(0.0 if cfg.optimize else float("inf")))
+        pdef.setOptimizationObjective(objective)
+        planner = getattr(og, _OMPL_CLASS[cfg.name])(si)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        return _Problem(si=si, pdef=pdef, planner=planner, samplers=samplers)
+
+    def search(
+        self, cfg: PlannerConfig, deadline: float, *, start_yaw: float, spin_step: float, is_valid
+    ) -> _Route:
+        """Solve until deadline [s, perf_counter]; with turning_radius, turn each route into a
+        drivable path (is_valid: (N, 3) states -> (N,) bool), searching again from scratch for
+        a route with a turn too tight for the space round it, up to DRIVABLE_ATTEMPTS."""
+        si, pdef, planner = self.si, self.pdef, self.planner
+        undrivable = 0
+        while True:
+            if cfg.name in ("prm", "prmstar") and not cfg.optimize:
+                states = _solve_prm(si, planner, cfg, deadline)
+            else:
+                planner.solve(_budget_ptc(cfg.max_iterations, deadline))
+                states = pdef.getSolutionPath().getStates() if pdef.hasExactSolution() else None
+            if states is None:
+                return _Route(None, None, undrivable)
+            xyyaw = _simplified(si, states, cfg)
+            if cfg.turning_radius is None:
+                return _Route(xyyaw, None, undrivable)
+            drivable = drivable_path(
+                xyyaw[:, :2],
+                start_yaw,
+                cfg.turning_radius,
+                is_valid,
+                cfg.check_resolution,
+                spin_margin=cfg.spin_margin,
+                spin_step=spin_step,
+            )
+            if drivable is not None:
+                return _Route(xyyaw, drivable, undrivable)
+            # The planner's random stream goes on, so the next route differs.
+            undrivable += 1
+            if undrivable >= DRIVABLE_ATTEMPTS or time.perf_counter() > deadline:
+                return _Route(None, None, undrivable)
+            planner.clear()
+            pdef.clearSolutionPaths()
 
 
 def _spins_note(spins) -> str:

@@ -80,27 +80,9 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
     bounds = sc.bounds
     (xa, ya), (xb, yb) = bounds
     sm = standable_map(hf, fp, vcfg, bounds, ((xa + xb) / 2, (ya + yb) / 2))
-    labels, n = ndimage.label(sm.standable)
-    if n == 0:
-        raise PlanningError(
-            "the robot can stand nowhere on this terrain (no place is flat, wide and clear "
-            "enough for its six feet): check the ground found, or give start and goal"
-        )
-    sizes = ndimage.sum(np.ones_like(labels), labels, index=np.arange(1, n + 1))
-    region = labels == (1 + int(np.argmax(sizes)))
+    region = _largest_region(sm.standable)
     area = float(region.sum()) * sm.cell**2
-    # Away from the region's edge where it is wide enough (up to 3 cells, 12 cm): a pose on
-    # the rim of a noisy capture is valid by a hair, and one beside a chair leg is a collision
-    # waiting for the first step.
-    for rounds in (3, 2, 1):
-        inner = ndimage.binary_erosion(region, iterations=rounds)
-        inner_labels, m = ndimage.label(inner)
-        if m:
-            sizes_in = ndimage.sum(np.ones_like(inner_labels), inner_labels, np.arange(1, m + 1))
-            inner = inner_labels == (1 + int(np.argmax(sizes_in)))
-            if inner.sum() * sm.cell**2 >= 0.25 * area:
-                region = inner
-                break
+    region = _inside(region)
     cells = np.argwhere(region)  # (K, 2) rows j, i
     centroid = cells.mean(axis=0)
     first = tuple(cells[np.argmin(np.sum((cells - centroid) ** 2, axis=1))])
@@ -141,13 +123,42 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
             if d < MIN_AUTO_DISTANCE:
                 note += f"; it allows no more than {d:.2f} m"
             return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
-        failures.append(_why_not(result, np.linalg.norm(pb - pa)))
+        failures.append(_why_not(result, float(np.linalg.norm(pb - pa))))
     distinct = list(dict.fromkeys(failures))  # the same reason twice is said once
     raise PlanningError(
         f"could not pick a start and goal the planner joins in the largest standable region "
         f"({area:.2f} m^2): {'; '.join(distinct[-2:]) or 'the region is a single place'}; "
         f"give start and goal"
     )
+
+
+def _largest_region(standable: np.ndarray) -> np.ndarray:
+    """(ny, nx) bool: the largest 4-connected region of standable ((ny, nx) bool);
+    PlanningError when there is none."""
+    labels, n = ndimage.label(standable)
+    if n == 0:
+        raise PlanningError(
+            "the robot can stand nowhere on this terrain (no place is flat, wide and clear "
+            "enough for its six feet): check the ground found, or give start and goal"
+        )
+    sizes = ndimage.sum(np.ones_like(labels), labels, index=np.arange(1, n + 1))
+    return labels == (1 + int(np.argmax(sizes)))
+
+
+def _inside(region: np.ndarray) -> np.ndarray:
+    """The region ((ny, nx) bool) away from its edge where it is wide enough (up to 3 cells,
+    12 cm, keeping at least a quarter of it): a pose on the rim of a noisy capture is valid by
+    a hair, and one beside a chair leg is a collision waiting for the first step."""
+    area = region.sum()
+    for rounds in (3, 2, 1):
+        inner = ndimage.binary_erosion(region, iterations=rounds)
+        labels, m = ndimage.label(inner)
+        if m:
+            sizes = ndimage.sum(np.ones_like(labels), labels, np.arange(1, m + 1))
+            inner = labels == (1 + int(np.argmax(sizes)))
+            if inner.sum() >= 0.25 * area:
+                return inner
+    return region
 
 
 def _why_not(result, distance: float) -> str:
