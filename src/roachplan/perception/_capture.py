@@ -392,7 +392,7 @@ def _ply_by_open3d(path: Path, h: PlyHeader) -> np.ndarray:
     import open3d as o3d
 
     with _captured_output() as said:
-        cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False)
+        cloud = o3d.io.read_point_cloud(os.fspath(path), remove_nan_points=False)  # pyright: ignore[reportArgumentType] (its stubs ask for PathLike; it takes a str)
     pts = np.asarray(cloud.points, dtype=np.float64)
     told = " ".join(re.sub(r"\x1b\[[0-9;]*m|\[Open3D \w+\]", "", said.getvalue()).split())
     # When RPly fails part way Open3D still returns the vertex count, of uninitialised values.
@@ -540,7 +540,7 @@ def _needs_intrinsics(
     the presets of that size come first."""
     fits = [k for k, v in PRESETS.items() if size is not None and (v.width, v.height) == size]
     names = [*fits, *(k for k in PRESETS if k not in fits)]
-    lead = f"presets of {size[0]}x{size[1]}: {', '.join(fits)}; " if fits else ""
+    lead = f"presets of {size[0]}x{size[1]}: {', '.join(fits)}; " if fits and size else ""
     return CaptureError(
         f"{path}: {why}: {lead}pass --intrinsics with a preset "
         f"({', '.join(names)}) or a calibration file, or the numbers --fx --fy --cx --cy "

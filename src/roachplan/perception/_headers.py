@@ -9,7 +9,7 @@ import dataclasses
 import math
 import struct
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 from ._errors import CaptureError
 
@@ -420,10 +420,10 @@ def parse_ply_header(head: bytes, file_size: int, source: str) -> PlyHeader:
     return header
 
 
-def _ply_lines(lines: list[str], source: str) -> tuple[str, list]:
+def _ply_lines(lines: list[str], source: str) -> tuple[PlyFormat, list]:
     """The header's lines between `ply` and `end_header` -> (format, [(element name, count,
     [properties])])."""
-    fmt: str | None = None
+    fmt: PlyFormat | None = None
     elements: list[tuple[str, int, list[PlyProperty]]] = []
     for n, line in enumerate(lines, 2):
         words = line.split()
@@ -456,7 +456,7 @@ def _ply_lines(lines: list[str], source: str) -> tuple[str, list]:
     return fmt, elements
 
 
-def _ply_format(words: list[str], where: str) -> str:
+def _ply_format(words: list[str], where: str) -> PlyFormat:
     if (
         len(words) != 3
         or words[2] != "1.0"
@@ -466,7 +466,7 @@ def _ply_format(words: list[str], where: str) -> str:
             f"{where}: format {_show(' '.join(words[1:]), 40)}; accepted: ascii, "
             f"binary_little_endian or binary_big_endian, version 1.0"
         )
-    return words[1]
+    return cast(PlyFormat, words[1])  # (one of its values: checked above)
 
 
 def _ply_property(words: list[str], where: str) -> PlyProperty:

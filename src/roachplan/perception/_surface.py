@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -183,7 +184,7 @@ def _fill_grid_holes(
     the object's edge and the floor far behind on its rim: not flat, left open."""
     grid, ok = grid.copy(), ok.copy()
     filled = np.zeros_like(ok)
-    labels, n = ndimage.label(~ok)
+    labels, n = cast("tuple[np.ndarray, int]", ndimage.label(~ok))
     if n == 0:
         return grid, ok, filled
     h, w = ok.shape
@@ -422,7 +423,7 @@ def _finish(
     or only filled triangles use it."""
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if filled_faces is None:
-        filled_faces = filled[faces].any(axis=1)
+        filled_faces = np.asarray(filled[faces].any(axis=1))
     keep = _not_specks(faces, len(points))
     faces, filled_faces = faces[keep], np.asarray(filled_faces, dtype=bool)[keep]
     used = np.zeros(len(points), dtype=bool)
@@ -506,7 +507,7 @@ def denoise(
     k = min(SMOOTH_NEIGHBOURS, n)
     if k < 4:
         return points, averaged
-    _, idx = KDTree(points).query(points, k=k)
+    idx = np.asarray(KDTree(points).query(points, k=k)[1])
     nbr = points[idx]  # (N, k, 3), the point itself first
     centre = nbr.mean(axis=1)
     cov = np.einsum("nki,nkj->nij", nbr - centre[:, None], nbr - centre[:, None])
@@ -551,7 +552,7 @@ def range_noise_model(points: np.ndarray, camera: bool, k: int = 8) -> tuple[flo
     pts = points[:: max(1, len(points) // 20000)]
     if len(pts) < 200:
         return NOISE_FALLBACK if camera else (NOISE_FALLBACK[0] * 10, 0.0)
-    _, idx = KDTree(pts).query(pts, k=k + 1)
+    idx = np.asarray(KDTree(pts).query(pts, k=k + 1)[1])
     nbr = pts[idx[:, 1:]]  # (N, k, 3)
     centre = nbr.mean(axis=1)
     cov = np.einsum("nki,nkj->nij", nbr - centre[:, None], nbr - centre[:, None])

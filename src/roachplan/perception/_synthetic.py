@@ -75,13 +75,13 @@ def render_depth(
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
-        o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
-        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
+        o3d.core.Tensor.from_numpy(np.asarray(mesh.vertices, dtype=np.float32)),
+        o3d.core.Tensor.from_numpy(np.asarray(mesh.faces, dtype=np.uint32)),
     )
     rot, eye = world_from_camera[:3, :3], world_from_camera[:3, 3]
     dirs = intr.rays() @ rot.T  # z = 1 in the camera: the hit distance is the depth
     rays = np.concatenate([np.broadcast_to(eye, dirs.shape), dirs], axis=-1).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor(rays))
+    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
     depth = hit["t_hit"].numpy().astype(np.float64)
     normals = hit["primitive_normals"].numpy().astype(np.float64)
     depth[~np.isfinite(depth)] = 0.0
@@ -154,7 +154,7 @@ def save_depth(
     else:
         pts = depth_to_points(depth_m, intr).astype(np.float32)
         if suffix == ".pcd":
-            from pypcd4 import Encoding, PointCloud
+            from pypcd4.pypcd4 import Encoding, PointCloud
 
             pc = PointCloud.from_xyz_points(pts)
             pc.metadata.width, pc.metadata.height = intr.width, intr.height

@@ -139,6 +139,6 @@ def dubins_path(start, goal, radius: float) -> DubinsPath:
     return DubinsPath(
         start=(float(start[0]), float(start[1]), float(start[2])),
         word=word,
-        lengths=tuple(v * radius for v in tpq),
+        lengths=(tpq[0] * radius, tpq[1] * radius, tpq[2] * radius),
         radius=radius,
     )

@@ -25,13 +25,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ._drivable import drivable_path, spin_states
+from ._drivable import DrivablePath, drivable_path, spin_states
 from ._heightfield import HeightField
 from ._isolated import Method, run_isolated
 from ._names import PLANNER_NAMES, PlannerName, PlanningError
@@ -263,7 +264,7 @@ class _TerrainSpace(ob.SE2StateSpace):
         return self._alloc(self)
 
 
-def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
+def _se2_state(space, xyyaw):
     s = ob.State(space)
     s().setX(float(xyyaw[0]))
     s().setY(float(xyyaw[1]))
@@ -273,11 +274,11 @@ def _se2_state(space: ob.SE2StateSpace, xyyaw) -> ob.State:
     return s
 
 
-def _fn_ptc(fn) -> ob.PlannerTerminationCondition:
+def _fn_ptc(fn):
     return ob.PlannerTerminationCondition(ob.PlannerTerminationConditionFn(fn))
 
 
-def _budget_ptc(max_calls: int, deadline: float) -> ob.PlannerTerminationCondition:
+def _budget_ptc(max_calls: int, deadline: float):
     """Stops after max_calls evaluations (deterministic) or at the wall-clock deadline."""
     calls = [0]
 
@@ -288,7 +289,7 @@ def _budget_ptc(max_calls: int, deadline: float) -> ob.PlannerTerminationConditi
     return _fn_ptc(done)
 
 
-def _roadmap_path(si: ob.SpaceInformation, planner: og.PRM) -> list | None:
+def _roadmap_path(si, planner) -> list | None:
     """Shortest start-goal path through PRM's current roadmap, as vertex states, or None."""
     pd = ob.PlannerData(si)
     planner.getPlannerData(pd)
@@ -367,7 +368,9 @@ def plan_path(
                 f"{label} ({pose[0]:.3f}, {pose[1]:.3f}, yaw {np.degrees(pose[2]):.0f} deg) "
                 f"is invalid: {verdict}"
             )
-    request = dict(start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions)
+    request: dict[str, Any] = dict(
+        start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions
+    )
     return run_isolated(_plan_here, hf, fp, isolation=isolation, preload=__name__, **request)
 
 
@@ -430,7 +433,7 @@ def _plan_here(
     deadline = t0 + cfg.time_limit
     route = problem.search(cfg, deadline, start_yaw=start[2], spin_step=_spin_step(fp, cfg),
                            is_valid=inside_and_valid)  # fmt: skip
-    stats = dict(
+    stats: dict[str, Any] = dict(
         validity_checks=check.states,
         validity_time=check.seconds,
         sampler_calls=sum(smp.calls for smp in problem.samplers),
@@ -500,7 +503,7 @@ class _Route:
     drivable path (with turning_radius) and how many routes no drivable path followed."""
 
     xyyaw: np.ndarray | None
-    drivable: object | None
+    drivable: DrivablePath | None
     undrivable: int
 
 
@@ -510,9 +513,9 @@ class _Problem:
     definition, the planner, and the terrain samplers it made (kept alive: OMPL holds only a
     C++ reference to them)."""
 
-    si: object
-    pdef: object
-    planner: object
+    si: Any  # ompl.base.SpaceInformation (the bindings are untyped)
+    pdef: Any  # ompl.base.ProblemDefinition
+    planner: Any  # an ompl.geometric planner
     samplers: list
 
     @staticmethod
@@ -691,7 +694,7 @@ def _graph_segments(si, planner) -> tuple[np.ndarray, int]:
     return np.array(segments, dtype=np.float64).reshape(-1, 2, 2), len(xy)
 
 
-def _solve_prm(si, planner: og.PRM, cfg: PlannerConfig, deadline: float) -> list | None:
+def _solve_prm(si, planner, cfg: PlannerConfig, deadline: float) -> list | None:
     # The first solve call only inserts the start and goal milestones (its condition is
     # already true); then we grow and expand the roadmap 2:1 like PRM.solve, but in this thread
     # and in fixed batches, and query it after every batch.

@@ -10,6 +10,7 @@ many times the path crosses a ray from the hole towards +x, with sign (Bhattacha
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -67,10 +68,10 @@ def standable_map(
         [np.repeat(gx.ravel(), n_yaw), np.repeat(gy.ravel(), n_yaw), np.tile(yaws, gx.size)]
     )
     ok = check_states(hf, fp, cfg, states).valid.reshape(gx.size, n_yaw).any(axis=1)
-    standable = ok.reshape(gx.shape)
+    standable = np.asarray(ok).reshape(gx.shape)
     # The start's component (4-connected); if the start's own cell centre is not standable,
     # the nearest standable cell's.
-    components, _ = ndimage.label(standable)
+    components, _ = cast("tuple[np.ndarray, int]", ndimage.label(standable))
     j, i = np.nonzero(standable)
     reachable = np.zeros_like(standable)
     if len(i):
@@ -79,7 +80,7 @@ def standable_map(
     # Holes: 8-connected unreachable regions not touching the border (the dual connectivity
     # of the reachable cells', so a hole cannot leak through a diagonal). A floor below a
     # bridge is standable but unreachable: it belongs to the hole.
-    labels, n = ndimage.label(~reachable, structure=np.ones((3, 3)))
+    labels, n = cast("tuple[np.ndarray, int]", ndimage.label(~reachable, structure=np.ones((3, 3))))
     border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
     holes = []
     for k in range(1, n + 1):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -135,7 +136,7 @@ def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
 def _largest_region(standable: np.ndarray) -> np.ndarray:
     """(ny, nx) bool: the largest 4-connected region of standable ((ny, nx) bool);
     PlanningError when there is none."""
-    labels, n = ndimage.label(standable)
+    labels, n = cast("tuple[np.ndarray, int]", ndimage.label(standable))
     if n == 0:
         raise PlanningError(
             "the robot can stand nowhere on this terrain (no place is flat, wide and clear "
@@ -152,7 +153,7 @@ def _inside(region: np.ndarray) -> np.ndarray:
     area = region.sum()
     for rounds in (3, 2, 1):
         inner = ndimage.binary_erosion(region, iterations=rounds)
-        labels, m = ndimage.label(inner)
+        labels, m = cast("tuple[np.ndarray, int]", ndimage.label(inner))
         if m:
             sizes = ndimage.sum(np.ones_like(labels), labels, np.arange(1, m + 1))
             inner = labels == (1 + int(np.argmax(sizes)))

@@ -126,10 +126,15 @@ def surface_distances(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20_000) -
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
-        o3d.core.Tensor(b.vertices.astype(np.float32)), o3d.core.Tensor(b.faces.astype(np.uint32))
+        o3d.core.Tensor.from_numpy(b.vertices.astype(np.float32)),
+        o3d.core.Tensor.from_numpy(b.faces.astype(np.uint32)),
     )
-    points, _ = trimesh.sample.sample_surface(a, n, seed=0)
-    d = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
+    points = trimesh.sample.sample_surface(a, n, seed=0)[0]
+    d = (
+        scene.compute_distance(o3d.core.Tensor.from_numpy(points.astype(np.float32)))
+        .numpy()
+        .astype(float)
+    )
     for i in np.flatnonzero(d > 1e-5 * np.linalg.norm(a.extents)):
         nearest = trimesh.triangles.closest_point(
             b.triangles, np.tile(points[i], (len(b.faces), 1))

@@ -83,6 +83,7 @@ class World:
         # A hole smaller than the robot's own footprint is noise to go through or over, not
         # an obstacle to go round.
         fp = self.footprint
+        assert sc.bounds is not None and sc.start is not None  # build_world sets both
         return standable_map(
             self.heightfield,
             fp,
@@ -138,6 +139,7 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> tuple[trimesh.Trimesh
             raise SceneError(f"{label}: {exc}") from None
         source, note = rendered.path, rendered.note(scale=max(obj.scale))
     if obj.kind == "capture":
+        assert obj.capture is not None  # a capture object has its settings
         try:
             raw = mesh_capture(source, obj.capture).mesh
         except CaptureError as exc:
@@ -185,6 +187,7 @@ def build_terrain(scene: Scene) -> Terrain:
             if key not in m.face_attributes:
                 m.face_attributes[key] = np.zeros(len(m.faces))
     mesh = trimesh.util.concatenate([m for m, _ in built])
+    assert isinstance(mesh, trimesh.Trimesh)  # (of Trimesh pieces, one Trimesh)
     mesh.merge_vertices()
     return Terrain(mesh, tuple(note for _, note in built if note))
 
@@ -260,6 +263,7 @@ def build_world(
         scene = dataclasses.replace(scene, bounds=bounds)
         notes += [note] if note else []
     margin = 0.15  # the robot's feet reach this far past its centre's bounds [m]
+    assert scene.bounds is not None  # given, or picked above
     (lo, hi) = scene.bounds
     area = (hi[0] - lo[0]) * (hi[1] - lo[1])
     if area > MAX_PLANNING_AREA:
@@ -290,13 +294,14 @@ def build_world(
                 raise SceneError(f"{scene.path}: {exc}") from None
             # The app shows such a world and says why its markers are invalid.
             notes.append(str(exc))
-            (xa, ya), (xb, yb) = scene.bounds
+            (xa, ya), (xb, yb) = lo, hi
             start = goal = ((xa + xb) / 2, (ya + yb) / 2, 0.0)
         scene = dataclasses.replace(scene, start=start, goal=goal)
         world = dataclasses.replace(world, scene=scene)
     if notes:
         world = dataclasses.replace(world, notes=tuple(notes))
     for key, pose in (("robot.start", scene.start), ("goal", scene.goal)) if check_poses else ():
+        assert pose is not None  # given, or picked above
         problem = pose_problem(world, pose)
         if problem:
             raise SceneError(f"{scene.path}: {key}: {problem}")

@@ -15,7 +15,7 @@ algorithms turn only on arcs) and ignores them."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -98,7 +98,7 @@ def motor_speeds(theta: float, omega0: float, gain: float, omega_max: float) -> 
 
 
 def next_waypoint(
-    path_xy: np.ndarray, i: int, p_xy: np.ndarray, r_path: float, r_end: float
+    path_xy: Sequence[Sequence[float]], i: int, p_xy, r_path: float, r_end: float
 ) -> tuple[int, bool]:
     """Algorithm 1: advance past every intermediate waypoint within r_path [m]; report whether
     the last one is within r_end [m]. Returns (index of the waypoint to steer to, arrived)."""
@@ -343,6 +343,7 @@ class _Tracking:
             if self.spinning:
                 self.advanced, self.spin_best = True, math.inf
         if self.spinning:
+            assert quat is not None, "a spin needs the body's orientation"  # drive_path gives it
             x, y, z, w = quat  # the heading of the body's forward axis, horizontally
             yaw = math.atan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
             self.spin_error = math.remainder(self.spins[0][1] - yaw, 2 * math.pi)

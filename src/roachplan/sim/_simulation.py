@@ -75,7 +75,8 @@ class Simulation:
         self.robot = robot
         self.cfg = cfg
         with _c_stdout_silenced():
-            self._bc = BulletClient(connection_mode=p.DIRECT)
+            self._bc: BulletClient = BulletClient(connection_mode=p.DIRECT)
+        self._open = True
         bc = self._bc
         bc.setGravity(0, 0, -9.81)
         bc.setPhysicsEngineParameter(
@@ -201,7 +202,7 @@ class Simulation:
             # surface under the feet then (the planner checked that the feet stand).
             c, s = np.cos(yaw), np.sin(yaw)
             feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-            z0 = max(self._ground_height(*f, surface) for f in feet)
+            z0 = max(self._ground_height(f[0], f[1], surface) for f in feet)
         if not np.isfinite(z0):
             raise SimError(f"no terrain under the start position ({x:.3f}, {y:.3f})")
         quat = bc.getQuaternionFromEuler((0.0, 0.0, yaw))
@@ -230,7 +231,7 @@ class Simulation:
         r = self.robot
         c, s = np.cos(yaw), np.sin(yaw)
         feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-        z = np.array([self._ground_height(*f, surface) for f in feet])
+        z = np.array([self._ground_height(f[0], f[1], surface) for f in feet])
         if not np.all(np.isfinite(z)) or np.ptp(z) < 1e-6:
             return None
         a, b, cy = np.linalg.lstsq(np.column_stack([np.ones(6), feet]), z, rcond=None)[0]
@@ -337,10 +338,10 @@ class Simulation:
         return float(self.energy_per_leg.sum())
 
     def close(self) -> None:
-        """Disconnect the PyBullet client."""
-        if self._bc is not None:
+        """Disconnect the PyBullet client (once)."""
+        if self._open:
             self._bc.disconnect()
-            self._bc = None
+            self._open = False
 
     def __enter__(self) -> Simulation:
         return self
