@@ -10,12 +10,14 @@ PORT   ?= 8080
 RUN_DEBS  := openscad libusb-1.0-0
 TEST_DEBS := $(RUN_DEBS) chromium
 
-.PHONY: setup run test fuzz bench loadtest lint clean
+LINTED := src tests examples benchmarks scripts
+
+.PHONY: setup run test test-fast lint fuzz bench loadtest clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/pip install -q -e '.[test,lint]'
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -24,9 +26,21 @@ setup: $(STAMP)
 run: setup
 	$(BIN)/roachplan serve --scene $(SCENE) --host $(HOST) --port $(PORT)
 
+# Every test; the 25 slowest are listed at the end.
 test: $(STAMP)
 	@scripts/install-system-deps.sh $(TEST_DEBS)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest --durations=25
+
+# The edit-test loop: every test not marked slow (no browser, no batches), a few minutes.
+test-fast: $(STAMP)
+	@scripts/install-system-deps.sh $(RUN_DEBS)
+	$(BIN)/python -m pytest -m "not slow" --durations=10
+
+# ruff (lint and format) and pyright over the package, tests, examples, benchmarks, scripts.
+lint: $(STAMP)
+	$(BIN)/ruff check $(LINTED)
+	$(BIN)/ruff format --check $(LINTED)
+	$(BIN)/pyright
 
 # Long property-based fuzzing of the readers and the scene loader; SEED=N repeats a run.
 SEED ?= $(shell date +%s)
