@@ -1,8 +1,11 @@
 # roachplan: `make run` sets everything up and starts the app; `make test` sets up and tests.
+# `make lint` and `make docs` add their tools (pyproject's extras) to the same .venv.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.installed-docs
+LINT_STAMP := $(VENV)/.installed-lint
 SCENE  ?= double_bridge
 HOST   ?= 127.0.0.1
 PORT   ?= 8080
@@ -10,7 +13,7 @@ PORT   ?= 8080
 RUN_DEBS  := openscad libusb-1.0-0
 TEST_DEBS := $(RUN_DEBS) chromium
 
-.PHONY: setup run test fuzz bench loadtest lint clean
+.PHONY: setup run test fuzz bench loadtest lint docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -44,9 +47,30 @@ bench: setup
 	$(BIN)/python benchmarks/bench_choose.py
 	$(BIN)/python benchmarks/load_test.py
 
-# Five browsers clicking and uploading at once for 2 minutes (issue 15); needs chromium.
+# Five browsers clicking and uploading at once for 2 minutes; needs chromium.
 loadtest: setup
 	$(BIN)/python benchmarks/load_test.py
 
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/pip install -q -e '.[test,docs]'
+	touch $(DOCS_STAMP)
+
+$(LINT_STAMP): $(STAMP)
+	$(BIN)/pip install -q -e '.[test,docs,lint]'
+	touch $(LINT_STAMP)
+
+# The documentation site (mkdocs.yml, docs/) into site/, warnings as errors. The variable
+# quiets Material's banner about its end of life (May 2027) and MkDocs 2.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+# Every check runs, and the target fails if any did.
+lint: $(LINT_STAMP)
+	@status=0; \
+	$(BIN)/ruff check . || status=1; \
+	$(BIN)/ruff format --check . || status=1; \
+	$(BIN)/pyright || status=1; \
+	exit $$status
+
 clean:
-	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts
+	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts site

@@ -46,7 +46,7 @@ def wait_for_http(url: str, seconds: float) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description="The README's screenshot (docs/app.png).")
     parser.add_argument("-o", "--output", default=str(ROOT / "docs" / "app.png"))
     parser.add_argument("--drive-s", type=float, default=8.0, help="seconds of Drive to show")
     parser.add_argument("--zoom", type=int, default=8, help="mouse-wheel steps towards the bridge")

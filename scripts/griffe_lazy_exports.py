@@ -27,8 +27,17 @@ class LazyExports(griffe.Extension):
                 continue
             where = call.args[1]
             if isinstance(where, ast.Dict):
-                mod.exports = [k.value for k in where.keys if isinstance(k, ast.Constant)]
+                mod.exports = _strings(where.keys)
             elif isinstance(where, ast.DictComp):  # {name: "._api" for name in (...)}
                 names = where.generators[0].iter
                 if isinstance(names, ast.Tuple | ast.List):
-                    mod.exports = [e.value for e in names.elts if isinstance(e, ast.Constant)]
+                    mod.exports = _strings(names.elts)
+
+
+def _strings(nodes: list[ast.expr | None] | list[ast.expr]) -> list[str | griffe.ExprName]:
+    """The string literals among nodes, in order."""
+    found: list[str | griffe.ExprName] = []
+    for node in nodes:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            found.append(node.value)
+    return found
