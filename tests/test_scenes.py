@@ -243,9 +243,9 @@ def test_trial_takes_a_scene_file_path(tmp_path, box_stl):
     assert '"scene": "scene"' in out.stdout and '"outcome": "success"' in out.stdout
 
 
-def test_the_readme_example_is_a_valid_scene(tmp_path):
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    example = readme.split("## Scene files", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+def test_the_documented_example_is_a_valid_scene(tmp_path):
+    page = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
+    example = page.split("## A complete example", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
     (tmp_path / "example.yaml").write_text(example)
     shutil.copy(LIBRARY / "double_bridge.scad", tmp_path)
     (tmp_path / "meshes").mkdir()
