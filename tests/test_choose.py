@@ -11,17 +11,11 @@ import pytest
 import trimesh
 
 from conftest import roachplan
-from roachplan.experiments._choose import (
-    Candidate,
-    ChooseConfig,
-    _eliminate,
-    _to_sample,
-    clopper_pearson,
-    race,
-    rank,
-    within_zone,
-    world_seed,
-)
+from roachplan.experiments import ChooseConfig
+from roachplan.experiments._choose_candidate import Candidate, Knockout
+from roachplan.experiments._choose_policy import eliminate, rank, to_sample, within_zone
+from roachplan.experiments._choose_race import race, world_seed
+from roachplan.experiments._choose_stats import clopper_pearson
 from roachplan.experiments._uncertainty import UncertaintyConfig, draw, rollout_seed
 
 
@@ -161,15 +155,15 @@ def test_rollouts_go_where_they_can_settle_the_decision():
     # settles nothing. The risky one's wide upper bound is its own to narrow.
     leader = _drawn(0, 40, 1.0, 1.60, 0.05)
     rival = _drawn(1, 40, 1.0, 2.40, 0.05, seed=1)
-    assert [c.index for c in _to_sample([leader, rival], conf, cfg)] == [0]
+    assert [c.index for c in to_sample([leader, rival], conf, cfg)] == [0]
     risky = _drawn(2, 4, 1.0, 1.0, 0.05, seed=2)  # 2 in 4: it might yet be as safe
     risky.rollouts = risky.rollouts[:2] + [{**r, "outcome": "fell"} for r in risky.rollouts[2:]]
-    assert {c.index for c in _to_sample([leader, rival, risky], conf, cfg)} >= {0, 2}
+    assert {c.index for c in to_sample([leader, rival, risky], conf, cfg)} >= {0, 2}
     # A newcomer first gets its first round; with the zone off every candidate is driven.
     fresh = _drawn(2, 0, 1.0, 1.0, 0.05)
-    assert [c.index for c in _to_sample([leader, rival, fresh], conf, cfg)] == [2]
+    assert [c.index for c in to_sample([leader, rival, fresh], conf, cfg)] == [2]
     off = ChooseConfig(candidates=2, batch=4, indifference=(0.0, 0.0))
-    assert len(_to_sample([leader, rival], conf, off)) == 2
+    assert len(to_sample([leader, rival], conf, off)) == 2
 
     # A race spends its rollouts where they decide: it stops in the zone, the first-ranked
     # driven most; the costly and the risky ones, beaten early, several times less.
@@ -233,7 +227,7 @@ def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
     risky = _drawn(1, 40, 0.5, 1.0, 0.05, seed=1)
     costly = _drawn(2, 200, 1.0, 2.6, 0.05, seed=2)
     alive = [good, risky, costly]
-    _eliminate(alive, conf, None, 0.05)
+    eliminate(alive, conf, None, 0.05)
     assert not good.out
     assert risky.out.startswith("less likely to succeed"), risky.out
     assert costly.out.startswith("costs more energy than candidate 0"), costly.out
@@ -241,11 +235,12 @@ def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
     # path that has not failed in its first 24 rollouts may still fail 6 times in 100.
     lucky = _drawn(3, 24, 1.0, 1.2, 0.05, seed=3)
     safe = _drawn(4, 200, 1.0, 1.8, 0.05, seed=4)
-    _eliminate([lucky, safe], conf, None, 0.05)
+    eliminate([lucky, safe], conf, None, 0.05)
     assert not safe.out and not lucky.out
     # One that left the race, however good its few rollouts look, ranks below those in it.
     early = _drawn(3, 8, 1.0, 1.7, 0.05, seed=3)
-    early.out = "costs more energy than candidate 0 (intervals apart)"
+    early.knocked_out = Knockout(reason="costs_more", by=0, own_bound=1.75, rival_bound=1.72)
+    assert early.out == "costs more energy than candidate 0 (intervals apart)"
     ordered = rank([early, _drawn(0, 200, 0.99, 1.8, 0.05)], 1 - 0.05 / 2, None)
     assert ordered[0].index == 0
     # The race drops both and stops separated with the good one.

@@ -20,8 +20,9 @@ from dataclasses import replace as dataclass_replace
 
 import numpy as np
 
-from roachplan.experiments._choose import ChooseConfig, ChooseError, plan_candidates, race
-from roachplan.experiments._trial import LabelledPlan
+from roachplan.experiments import ChooseConfig, ChooseError, LabelledPlan, RoundDone
+from roachplan.experiments._choose_planning import plan_candidates
+from roachplan.experiments._choose_race import race
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 
@@ -167,7 +168,6 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
         if not candidates:
             raise ChooseError(f"{scene.name}: the planner found no path to choose from")
         conn.send(("candidates", [(c.index, c.route, c.seed, c.path_xyz) for c in candidates]))
-        conf = 1 - (1 - cfg.confidence) / len(candidates)  # (as race() has it)
         mass = world.robot.mass
         spec = ExperimentSpec(
             name=f"choose-{scene.name}",
@@ -191,8 +191,9 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
                     )
                 ),
                 mass=mass,
-                progress=lambda message, _: conn.send(
-                    ("round", (message, [c.summary(conf, mass) for c in candidates]))
+                on_event=lambda e: (
+                    isinstance(e, RoundDone)
+                    and conn.send(("round", (e.message, [s.to_json() for s in e.standings])))
                 ),
             )
         finally:
