@@ -3,15 +3,24 @@ same seed the same ranking, and --validate, through the real planner and PyBulle
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 import trimesh
 
 from conftest import roachplan
-from roachplan.experiments import ChooseConfig
+from roachplan.experiments import (
+    CandidatesPlanned,
+    ChooseConfig,
+    Decided,
+    KnockedOut,
+    RoundDone,
+)
 from roachplan.experiments._choose_candidate import Candidate, Knockout
 from roachplan.experiments._choose_policy import eliminate, rank, to_sample, within_zone
 from roachplan.experiments._choose_race import race, world_seed
@@ -101,7 +110,7 @@ def _rollout(i: int, seed: int, p: float, energy: float, sd: float) -> dict:
     }
 
 
-def _race(truths, **cfg):
+def _race(truths, on_event=None, **cfg):
     """Race hand-made candidates whose rollouts come from truths[i] = (p, energy, sd): the
     race's own logic on seeded draws, no simulation."""
     racers = [
@@ -112,7 +121,13 @@ def _race(truths, **cfg):
     def run(calls):
         return [_rollout(i, seed, *truths[i]) for i, _path, seed in calls]
 
-    return race(racers, ChooseConfig(candidates=len(truths), budget_s=None, **cfg), run, mass=1.0)
+    return race(
+        racers,
+        ChooseConfig(candidates=len(truths), budget_s=None, **cfg),
+        run,
+        mass=1.0,
+        on_event=on_event,
+    )
 
 
 def test_practically_equal_candidates_stop_within_the_indifference_zone():
@@ -249,6 +264,109 @@ def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
     assert {c.index for c in choice.candidates if c.out} == {1, 2}
 
 
+def _check_events(events: list, choice) -> dict[int, str | None]:
+    """Assert that a race's events came in order (CandidatesPlanned first if at all, then
+    each round's KnockedOut before its RoundDone, one Decided last), that each candidate's
+    fate is told once, as values the round's standings agree with, and that the Decided
+    agrees with the Choice returned. Returns each candidate's fate: its OutReason, or None
+    (still racing when the race stopped)."""
+    kinds = "".join(
+        {CandidatesPlanned: "P", KnockedOut: "K", RoundDone: "R", Decided: "D"}[type(e)]
+        for e in events
+    )
+    assert re.fullmatch(r"P?(K*R)*D", kinds), kinds
+    rounds = [e for e in events if isinstance(e, RoundDone)]
+    assert [r.round for r in rounds] == list(range(1, len(rounds) + 1))
+    assert all(a.rollouts < b.rollouts for a, b in itertools.pairwise(rounds))
+    k = len(choice.candidates)
+    fate: dict[int, str | None] = dict.fromkeys(range(k))
+    told: list[KnockedOut] = []
+    for e in events:
+        if isinstance(e, KnockedOut):
+            assert fate[e.candidate] is None, f"candidate {e.candidate} left the race twice"
+            fate[e.candidate] = e.why.reason
+            told.append(e)
+        elif isinstance(e, RoundDone):
+            assert [s.candidate for s in e.standings] == list(range(k))  # index order
+            assert all(s.knocked_out is None for s in e.standings if fate[s.candidate] is None)
+            assert all(told_.round == e.round for told_ in told)  # (its own round's)
+            for t in told:
+                s, why = e.standings[t.candidate], t.why
+                assert s.state == "out" and s.knocked_out == why
+                if why.reason == "less_likely":  # its P interval wholly below the leader's
+                    assert why.own_bound == s.p_high < why.rival_bound
+                    assert why.rival_bound == e.standings[why.by].p_low
+                elif why.reason == "costs_more":  # its energy interval wholly above a rival's
+                    assert why.own_bound == s.relative_energy_low > why.rival_bound
+                    assert why.rival_bound == e.standings[why.by].relative_energy_high
+                    assert e.standings[why.by].state == "racing"
+                else:
+                    assert why.by is None and why.own_bound == s.p_high < why.rival_bound
+            told = []
+    decided = events[-1]
+    assert decided.rollouts == (rounds[-1].rollouts if rounds else 0) == choice.rollouts
+    assert decided.rounds == len(rounds)
+    assert decided.chosen == choice.chosen and decided.stop == choice.stop
+    assert decided.stopped == choice.stopped and decided.cut_short == choice.cut_short
+    assert decided.confidence_reached == choice.confidence_reached
+    assert decided.standings == choice.standings
+    assert [s.to_json() for s in decided.standings] == choice.ranking
+    assert sorted(s.candidate for s in decided.standings) == list(range(k))
+    by_index = {s.candidate: s for s in decided.standings}
+    for c in choice.candidates:  # every fate told is the one the result holds
+        assert fate[c.index] == (c.knocked_out and c.knocked_out.reason)
+        assert by_index[c.index].state == ("racing" if fate[c.index] is None else "out")
+        assert by_index[c.index].to_json()["out"] == c.out
+    return fate
+
+
+def test_a_race_tells_its_rounds_and_every_candidate_s_fate_as_values():
+    events: list = []
+    truths = [(1.0, 1.8, 0.05), (0.5, 1.0, 0.05), (1.0, 2.6, 0.05)]
+    choice = _race(truths, on_event=events.append, rollouts=600, seed=5)
+    fate = _check_events(events, choice)
+    assert fate == {0: None, 1: "less_likely", 2: "costs_more"}
+    (costly,) = [e.why for e in events if isinstance(e, KnockedOut) and e.candidate == 2]
+    assert costly.by == 0
+    decided = events[-1]
+    assert decided.stop == "separated" and not decided.cut_short and decided.chosen == 0
+    assert decided.confidence_reached is None and decided.standings[0].candidate == 0
+    # The first round drives every candidate; the words of choice.json come from the values.
+    assert next(e for e in events if isinstance(e, RoundDone)).driven == (0, 1, 2)
+    assert {c.index: c.out for c in choice.candidates} == {
+        0: "",
+        1: "less likely to succeed than another (intervals apart)",
+        2: "costs more energy than candidate 0 (intervals apart)",
+    }
+    # The same seed, the same events (all but the wall time).
+    again: list = []
+    _race(truths, on_event=again.append, rollouts=600, seed=5)
+    assert _without_time(again) == _without_time(events)
+
+    # Cut short by the cap: told so, with the confidence it reached.
+    short: list = []
+    truths = [(1.0, 1.6, 0.05), (1.0, 2.4, 0.05), (0.995, 1.61, 0.05)]
+    cut = _race(truths, on_event=short.append, rollouts=120, max_per_candidate=400, seed=2)
+    _check_events(short, cut)
+    assert short[-1].stop == "rollout_cap" and short[-1].cut_short
+    assert short[-1].confidence_reached == cut.confidence_reached is not None
+    # With min_success: the ones that cannot clear it leave, by a value, not a sentence.
+    qualified: list = []
+    truths = [(0.3, 1.2, 0.05), (1.0, 2.0, 0.05)]
+    picked = _race(truths, on_event=qualified.append, min_success=0.9, max_per_candidate=60)
+    assert _check_events(qualified, picked)[0] == "below_min_success"
+    out = next(e.why for e in qualified if isinstance(e, KnockedOut))
+    assert out.rival_bound == 0.9 and picked.candidates[0].out == "P(success) upper bound below 0.9"
+
+
+def _without_time(events: list) -> list[str]:
+    """The events as text, wall times left out (nan == nan there, as it is not in a float)."""
+    return [
+        repr(dataclasses.replace(e, wall_time_s=0.0) if isinstance(e, Decided) else e)
+        for e in events
+    ]
+
+
 def test_the_chosen_is_never_wholly_below_another_with_or_without_the_zone():
     rng = np.random.default_rng(17)
     zoned = 0
@@ -367,6 +485,27 @@ def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, t
     proc = roachplan("choose", "--scene", str(two_bridges), "--out", str(tmp_path / "mine"))
     assert proc.returncode == 2 and "--out" in proc.stderr
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+def test_choose_tells_the_candidates_it_planned_then_its_race(two_bridges):
+    """choose() through the real planner and PyBullet: its events, in order, agree with the
+    choice it returns, from the candidates' paths to the decision."""
+    from roachplan.experiments import choose
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene(str(two_bridges)))
+    cfg = ChooseConfig(candidates=2, rollouts=8, budget_s=None, seed=1)
+    events: list = []
+    choice, _ = choose(world, cfg, workers=2, on_event=events.append)
+    _check_events(events, choice)
+    planned = events[0]
+    assert isinstance(planned, CandidatesPlanned) and len(planned.candidates) == 2
+    assert planned.message == "2 candidates planned; racing them"
+    for p, c in zip(planned.candidates, choice.candidates, strict=True):
+        assert (p.index, p.route, p.seed, p.spins) == (c.index, c.route, c.seed, c.spins)
+        assert np.array_equal(p.path_xyz, c.path_xyz) and p.length == c.length
+    assert {p.route for p in planned.candidates} == {"wide", "narrow"}
+    assert events[-1].rollouts == choice.rollouts <= 8
 
 
 # -- the uncertainty model from scene and spec YAML (`uncertainty:`) ------------------------------
