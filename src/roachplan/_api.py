@@ -19,8 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the heavy modules load on first use, not on `import roachplan`
-    from roachplan.experiments import ExperimentReport, TrialResult
-    from roachplan.experiments._choose import Choice
+    from roachplan.experiments import Choice, ExperimentReport, TrialResult
     from roachplan.perception import Reconstruction
     from roachplan.planning import PlannerConfig, PlanResult
     from roachplan.scenes import World
@@ -114,8 +113,8 @@ def choose(
     scene's uncertainty model (`roachplan choose`). `choice.ranking` (best first: P(success)
     with its interval, energy, drive time, failures), `choice.chosen` (an index into
     `choice.candidates`, None when nothing succeeded), `choice.stopped` (why the race ended)."""
-    from roachplan.experiments._choose import ChooseConfig
-    from roachplan.experiments._choose import choose as race_candidates
+    from roachplan.experiments import ChooseConfig
+    from roachplan.experiments import choose as race_candidates
 
     cfg = ChooseConfig(
         candidates=candidates,
@@ -125,7 +124,7 @@ def choose(
         min_success=min_success,
         seed=seed,
     )
-    choice, _ = race_candidates(world.scene, cfg, workers=workers)
+    choice, _ = race_candidates(world, cfg, workers=workers)
     return choice
 
 

@@ -197,10 +197,15 @@ def cmd_choose(args: argparse.Namespace) -> int:
     import dataclasses
     import os
 
-    from roachplan.experiments import atomic_write, prepare_output_folder
-    from roachplan.experiments._choose import ChooseConfig, choose
+    from roachplan.experiments import (
+        ChooseConfig,
+        RoundDone,
+        atomic_write,
+        choose,
+        prepare_output_folder,
+    )
     from roachplan.experiments._spec import reference_settings
-    from roachplan.scenes import load_scene
+    from roachplan.scenes import build_world, load_scene
 
     _check(args)
     out = None
@@ -233,21 +238,24 @@ def cmd_choose(args: argparse.Namespace) -> int:
         100, "choose", unit="%", bar_format="{desc}: {percentage:3.0f}% |{bar}| {elapsed} {postfix}"
     )
 
-    def progress(message: str, fraction: float) -> None:
-        shown.n = round(100 * min(max(fraction, 0.0), 1.0))
-        shown.set_postfix_str(message)
+    shown.set_postfix_str(f"planning {cfg.candidates} candidate paths")
+
+    def progress(event) -> None:  # (a round moves the bar; it says who is still in the race)
+        if isinstance(event, RoundDone):
+            shown.n = round(100 * min(max(event.fraction, 0.0), 1.0))
+            shown.set_postfix_str(event.message)
 
     # Ray with a cluster address: one worker per CPU of the cluster unless told (as `experiment`).
     cluster = args.backend == "ray" and args.address is not None
     workers = args.workers or (None if cluster else os.cpu_count() or 1)
     choice, checked = choose(
-        scene,
+        build_world(scene),
         cfg,
         workers=workers,
         backend=args.backend,
         address=args.address,
         validate_repeats=args.validate,
-        progress=progress,
+        on_event=progress,
     )
     shown.close()
     result = _jsonable(

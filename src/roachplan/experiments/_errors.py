@@ -10,3 +10,7 @@ class OutputError(ValueError):
     """An output file or results folder a command was given cannot be written without losing
     something (an input, a file roachplan did not write) or cannot be written at all; the
     message names the flag, the path and what would be accepted."""
+
+
+class ChooseError(ExperimentError):
+    """A choice that cannot be made as asked (`roachplan choose`, the page's Choose path)."""
