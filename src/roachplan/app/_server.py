@@ -31,7 +31,6 @@ from roachplan.sim import Frame
 
 from ._batch import Batch, BatchPanel
 from ._choose_panel import ChooseCmd, ChoosePanel, do_choose
-from ._commands import do_best_path, do_drive, do_plan, record, show_trial
 from ._draw import (
     ROBOT_PIXELS,
     VIEW_DIRECTION,
@@ -70,6 +69,7 @@ from ._loading import BackgroundLoad, report_failure, swap_in
 from ._markers import StartGoal, pick_failure
 from ._panel import energy_plot, summary_markdown, trials_csv, trials_markdown
 from ._picking import ray_hit_heightfield
+from ._plan_drive import do_best_path, do_drive, do_plan, record, show_trial
 from ._relevel import CaptureView
 from ._replay import ShareCmd, share_trial
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, load_announcement, public_message
