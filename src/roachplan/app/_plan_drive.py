@@ -1,7 +1,8 @@
-"""The long commands of the Plan and drive folder, run on the app's loop thread: Plan (up to K
-distinct paths within one time budget for every try, each drawn as it is found), Drive and Best
-path (a drive in a child, played back as its frames come), and the trial records they leave.
-Each is followed by `app._follow`: progress and elapsed time on the page, Cancel at once.
+"""The handlers of the Plan and drive folder and of Results, run on the app's command loop: Plan
+(up to K distinct paths within one time budget for every try, each drawn as it is found), Drive
+and Best path (a drive in a child, played back as its frames come), Reset, Show trial and Export
+CSV. A plan or a drive is followed by `app.loop.follow`: progress and elapsed time on the page,
+Cancel at once.
 """
 
 from __future__ import annotations
@@ -13,26 +14,37 @@ import numpy as np
 from roachplan.experiments import TrialResult
 from roachplan.planning import PlanResult
 
+from ._app import App
+from ._commands import (
+    BestPathCmd,
+    Cmd,
+    DriveCmd,
+    ExportCmd,
+    PlanCmd,
+    ResetCmd,
+    ShowTrialCmd,
+)
 from ._draw import BLACK, BLUE, path_fraction
-from ._jobs import Cmd, _drive_job, _plan_job
+from ._jobs import _drive_job, _plan_job
+from ._panel import trials_csv
 
 PLAN_GRACE = 0.8
 """How long past its budget a plan's child may run before it is killed [s]: it stops by itself
 at the budget; this bounds what the wrap-up of its last attempt may add."""
 
 
-def do_plan(app, cmd: Cmd) -> None:
+def do_plan(app: App, cmd: PlanCmd) -> None:
     """Up to K distinct paths within one time budget for all tries (plan_many), each drawn
     as it is found; Cancel keeps those found so far."""
-    start, goal = app.markers.valid_poses(app.world)
-    count, seed, planner = int(app.count.value), app._next_seed, app._planner()
-    budget = planner.time_limit
-    app._show_robot_at_start()
+    start, goal = app.page.markers.valid_poses(app.world)
+    settings = app.page.plan_settings()
+    count, seed, planner = settings.count, app.next_seed, app.planner(settings)
+    budget, deadline = planner.time_limit, time.monotonic() + planner.time_limit
+    app.page.show_robot_at_start()
     # Only what this plan finds is shown: no earlier paths, roadmap or trajectories.
     app.set_plans([])
-    app.view.clear("/trajectories")
+    app.page.view.clear("/trajectories")
     tried, plans, errors = [], [], []
-    deadline = time.monotonic() + budget
     request = dict(seed=seed, start=start, goal=goal, planner=planner)
     job = app.world_job(_plan_job, count, request, deadline)
 
@@ -42,11 +54,11 @@ def do_plan(app, cmd: Cmd) -> None:
                 tried.append(payload[0])
                 if payload[1] is not None:
                     plans.append(payload[1])
-                    app.view.add_path(payload[1].plan.path_xyz)
+                    app.page.view.add_path(payload[1].plan.path_xyz)
             elif kind == "error":
                 errors.append(str(payload))
         t = job.elapsed
-        app._progress(
+        app.loop.progress(
             t / budget,
             f"Planning with {planner.name}: {len(plans)} of {count} "
             f"path(s), {len(tried)} tried (seeds from {seed}); {t:.1f} s of the "
@@ -54,13 +66,13 @@ def do_plan(app, cmd: Cmd) -> None:
         )
         return job.done
 
-    end = app._follow(job, "Plan", step, hard_stop=deadline + PLAN_GRACE)
+    end = app.loop.follow(job, "Plan", step, hard_stop=deadline + PLAN_GRACE)
     elapsed = job.elapsed
-    app._next_seed = seed + len(tried) + (end != "done")
+    app.next_seed = seed + len(tried) + (end != "done")
     if errors:
-        app.view.hide_paths()  # (Drive stays off: no half-plan is left drawn as current)
-        app.status.content = f"Planning failed: {errors[0]}"
-        app._notify(cmd.client_id, "Planning failed", errors[0], error=True)
+        app.page.view.hide_paths()  # (Drive stays off: no half-plan is left drawn as current)
+        app.page.set_status(f"Planning failed: {errors[0]}")
+        app.page.notify(cmd.client_id, "Planning failed", errors[0], error=True)
         return
     app.plan_endpoints = (start, goal)
     app.set_plans(plans, drawn=True)  # (drawn as they were found)
@@ -94,25 +106,28 @@ def do_plan(app, cmd: Cmd) -> None:
             f"**Drive** drives the marked one "
             f"(choose it in *Drive path*)."
         )
-    app.status.content = text
+    app.page.set_status(text)
 
 
-def do_drive(app, cmd: Cmd) -> None:
-    if not app.plans:
-        app._notify(cmd.client_id, "Nothing to drive", "Plan a path first.", error=True)
+def do_drive(app: App, cmd: DriveCmd) -> None:
+    """Drive the path marked for Drive; its trial joins the results."""
+    if not app.plans or app.plan_endpoints is None:
+        app.page.notify(cmd.client_id, "Nothing to drive", "Plan a path first.", error=True)
         return
     start, goal = app.plan_endpoints
-    if not app.view.path_nodes:  # (hidden by Best path or Show trial: show what is driven)
-        app.show_plans()
+    if not app.page.view.path_nodes:  # (hidden by Best path or Show trial: show what is driven)
+        app.page.show_plans(app.plans, app.drive_path)
     result = drive(app, app.plans[app.drive_path].plan, start, goal, cmd)
     if result is not None:
-        record(app, result.to_json(), "")
+        app.record(result.to_json(), "")
 
 
-def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialResult | None:
-    """Drive in a child and play its frames back at `speed` x real time as they come
-    (every frame the browser can take: at most 60 per second)."""
-    app.view.clear("/trajectories")
+def drive(
+    app: App, planned: PlanResult, start, goal, cmd: Cmd, *, name: str = "Drive"
+) -> TrialResult | None:
+    """Drive in a child and play its frames back at the playback speed x real time as they
+    come (every frame the browser can take: at most 60 per second)."""
+    app.page.view.clear("/trajectories")
     job = app.world_job(_drive_job, planned, start, goal)
     frames, results, errors = [], [], []
     path_xy = np.asarray(planned.path_xyz)[:, :2]
@@ -125,64 +140,57 @@ def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialR
             else:
                 (results if kind == "result" else errors).append(payload)
         now = time.monotonic()
-        play["t"] += (now - play["wall"]) * max(float(app.speed.value), 1.0)
+        play["t"] += (now - play["wall"]) * max(app.page.playback_speed(), 1.0)
         play["wall"] = now
         k = play["k"]
         while k + 1 < len(frames) and frames[k + 1].t <= play["t"]:
             k += 1
         if k > play["k"]:
             play["k"], f = k, frames[k]
-            app._show_frame(f)
+            app.page.show_frame(f)
             if now - play["drawn"] > 0.2:  # (the line and the words 5 times a second)
-                app._draw("/trajectories/current", [g.p_world_body for g in frames[: k + 1]], BLUE)
+                app.page.view.draw(
+                    "/trajectories/current", [g.p_world_body for g in frames[: k + 1]], BLUE
+                )
                 play["drawn"] = now
                 done = path_fraction(path_xy, f.p_world_body)
-                app._progress(
+                app.loop.progress(
                     done,
                     f"{name}: {100 * done:.0f} % of the path, {f.t:.1f} s "
                     f"simulated, {job.elapsed:.1f} s",
                 )
         return job.done and (bool(errors) or play["k"] >= len(frames) - 1)
 
-    end = app._follow(job, name, step)
-    app._draw("/trajectories/current", [g.p_world_body for g in frames[: play["k"] + 1]], BLUE)
+    end = app.loop.follow(job, name, step)
+    app.page.view.draw(
+        "/trajectories/current", [g.p_world_body for g in frames[: play["k"] + 1]], BLUE
+    )
     if end != "done":
-        app.status.content = f"{name} cancelled after {job.elapsed:.1f} s; no trial recorded."
+        app.page.set_status(f"{name} cancelled after {job.elapsed:.1f} s; no trial recorded.")
         return None
     if errors or not results:
         why = errors[0] if errors else "the driving process ended without a result"
-        app.status.content = f"{name} failed: {why}"
-        app._notify(cmd.client_id, f"{name} failed", why, error=True)
+        app.page.set_status(f"{name} failed: {why}")
+        app.page.notify(cmd.client_id, f"{name} failed", why, error=True)
         return None
     return results[0]
 
 
-def record(app, trial: dict, label: str) -> None:
-    trial = {**trial, "label": label}
-    app.scene_trials.append(trial)
-    app._refresh_results()
-    k = len(app.scene_trials)
-    app.status.content = (
-        f"Trial {k}: **{trial['outcome']}** ({trial['reason']}), {trial['drive_time']:.1f} s, "
-        f"{trial['energy']:.3f} J ({trial['relative_energy']:.2f} x a straight walk on the floor)."
-    )
-
-
-def do_best_path(app, cmd: Cmd) -> None:
+def do_best_path(app: App, cmd: BestPathCmd) -> None:
     """The report's best_path: drive the lowest-energy successful path again."""
     ok = [(k, t) for k, t in enumerate(app.scene_trials) if t["outcome"] == "success" and t["path"]]
     if not ok:
-        app._notify(
+        app.page.notify(
             cmd.client_id, "No best path yet", "Drive or run trials until one succeeds.", error=True
         )
         return
     k, best = min(ok, key=lambda kt: kt[1]["relative_energy"])
     planned = stub_plan(best)
-    app.view.hide_paths()  # (the plan's paths and roadmap: Drive shows them again)
-    app._draw("/plans/best", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
+    app.page.view.hide_paths()  # (the plan's paths and roadmap: Drive shows them again)
+    app.page.view.draw("/plans/best", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
     result = drive(app, planned, tuple(best["start"]), tuple(best["goal"]), cmd, name="Best path")
     if result is not None:
-        record(app, result.to_json(), f"best (trial {k + 1})")
+        app.record(result.to_json(), f"best (trial {k + 1})")
 
 
 def stub_plan(trial: dict):
@@ -199,12 +207,30 @@ def stub_plan(trial: dict):
     )
 
 
-def show_trial(app) -> None:
-    if app.show_trial.value == "-":
+def do_reset(app: App, cmd: ResetCmd) -> None:
+    """The roach back at the start marker, no trajectory drawn."""
+    app.page.show_robot_at_start()
+    app.page.view.clear("/trajectories")
+    app.page.set_status("Robot back at the start.")
+
+
+def show_trial(app: App, cmd: ShowTrialCmd) -> None:
+    """Draw the trial chosen in Show trial again: its path and trajectory."""
+    k = app.page.shown_trial()
+    if k is None:
         return
-    t = app.scene_trials[int(app.show_trial.value) - 1]
-    app.view.hide_paths()
-    app.view.clear("/trajectories")
-    app._draw("/plans/shown", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
-    app._draw("/trajectories/shown", [p[1:] for p in t["trajectory"]], BLUE)
-    app.status.content = f"Trial {app.show_trial.value}: {t['outcome']} ({t['reason']})."
+    t = app.scene_trials[k - 1]
+    app.page.view.hide_paths()
+    app.page.view.clear("/trajectories")
+    app.page.view.draw("/plans/shown", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
+    app.page.view.draw("/trajectories/shown", [p[1:] for p in t["trajectory"]], BLUE)
+    app.page.set_status(f"Trial {k}: {t['outcome']} ({t['reason']}).")
+
+
+def do_export(app: App, cmd: ExportCmd) -> None:
+    """The scene's trials as CSV, a download to the browser that clicked."""
+    app.page.send_file(
+        cmd.client_id,
+        f"{app.world.scene.name}-trials.csv",
+        trials_csv(app.scene_trials).encode(),
+    )
