@@ -276,7 +276,7 @@ def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_are
         page.screenshot(path=artifacts / "advice-03-model-raised.png")
 
     # Planning area (set as a browser would, through the panel's boxes and its command).
-    from roachplan.app._load_panel import PanelCmd
+    from roachplan.app._commands import PanelCmd
 
     before = app.world
     app.load_panel.area_min.value, app.load_panel.area_max.value = (-1.2, -0.6), (0.3, 0.9)

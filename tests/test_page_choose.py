@@ -36,7 +36,7 @@ def _race_processes(app) -> set[int]:
     (the fork server itself, and the world's host under it, stay for the next job)."""
     import os
 
-    host = {app._host._proc.pid} if app._host is not None else set()
+    host = {app.core.host._proc.pid} if app.core.host is not None else set()
     return {
         pid
         for server in _descendants(os.getpid())

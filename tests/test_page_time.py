@@ -83,7 +83,7 @@ def test_cancel_a_long_plan_then_a_budgeted_plan_ends_on_time(moat, artifacts):
         page.get_by_text(re.compile(r"Plan cancelled after")).scroll_into_view_if_needed()
         page.screenshot(path=artifacts / "time-02-plan-cancelled.png")
         assert cancelled < 60, "the plan stopped long before its 300 s budget"
-        assert moat.running is None and not moat.waiting
+        assert moat.running is None and not moat.loop.waiting
         page.get_by_text("Reset not run").wait_for(timeout=10_000)  # dropped, and said so
         page.get_by_role("button", name="Reset").click()  # control is back: a click works
         page.get_by_text("Robot back at the start.").wait_for(timeout=10_000)

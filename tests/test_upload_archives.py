@@ -158,7 +158,7 @@ def test_the_page_announces_a_capture_zip_as_meshing_while_it_loads(app, tmp_pat
     while the load runs."""
     import time
 
-    from roachplan.app._jobs import UploadCmd
+    from roachplan.app._commands import UploadCmd
 
     rtab = REAL / "rtabmap"
     data = _zip(

@@ -75,21 +75,23 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
     app = RoachApp(world, host="127.0.0.1", port=free_port())
     try:
         for _ in range(200):
-            if app._host is not None:
+            if app.core.host is not None:
                 break
             time.sleep(0.05)
-        assert app._host is not None and app._host.world is app.world
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
-        assert job._host is app._host
+        assert app.core.host is not None and app.core.host.world is app.world
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app.core.host
         hosted = _paths(job)
-        os.kill(app._host._proc.pid, signal.SIGKILL)
-        app._host._proc.join(timeout=5)
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        os.kill(app.core.host._proc.pid, signal.SIGKILL)
+        app.core.host._proc.join(timeout=5)
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is None, "a plain child, sent the world"
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
-        assert app._host is not None and app._host.alive, "and a new host for the next click"
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
-        assert job._host is app._host
+        assert app.core.host is not None and app.core.host.alive, (
+            "and a new host for the next click"
+        )
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app.core.host
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
     finally:
         app.stop()

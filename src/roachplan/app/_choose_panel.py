@@ -4,7 +4,7 @@ rollouts come in, a ranking table, the chosen path highlighted; Drive then takes
 
 The race runs in a child of the app's fork server (app/_jobs.py): choose() with its own pool of
 rollout workers, its events (CandidatesPlanned, KnockedOut, RoundDone, Decided) sent to the
-loop as they happen. The loop follows the child with `app._follow` (progress bar, status,
+loop as they happen. The loop follows the child with `app.loop.follow` (progress bar, status,
 Cancel kills the child and its workers at once) like Plan and Drive, folds the events into what
 the folder shows (follow_race) and draws from them. The candidates start at the scene's start
 and goal: the rollout workers rebuild the scene from its file, as `roachplan choose` does, so
@@ -37,8 +37,10 @@ from roachplan.experiments import (
 from roachplan.planning import PlanResult
 from roachplan.planning._isolated import limit_child_memory
 
+from ._app import App
+from ._commands import CancelCmd, ChooseCmd
 from ._draw import segments
-from ._jobs import NAMES, CancelCmd, Cmd, Job
+from ._jobs import Job
 
 UNTRIED = (150, 150, 150)
 """Colour of a candidate without rollouts yet."""
@@ -47,14 +49,6 @@ LIFT = 0.006
 GRACE = 60.0
 """How long past its budget the race's child may run before it is killed [s]: the race stops
 by itself before a round that would overrun the budget; this bounds a round gone slow."""
-
-
-@dataclass(frozen=True)
-class ChooseCmd(Cmd):
-    pass
-
-
-NAMES[ChooseCmd] = "Choose path"  # (how the page names it when it waits its turn)
 
 
 def p_colour(p: float) -> tuple[int, int, int]:
@@ -193,7 +187,7 @@ class ChoosePanel:
             self.summary = gui.add_markdown("")
             self.table = gui.add_markdown("")
         self.button.on_click(lambda ev: put(ChooseCmd(ev.client_id)))
-        self.cancel.on_click(lambda ev: put(CancelCmd(ev.client_id, "job")))
+        self.cancel.on_click(lambda ev: put(CancelCmd(ev.client_id)))
         self.lines: dict[int, object] = {}
         """Candidate index -> its line segments handle (recoloured as rollouts come in)."""
 
@@ -218,11 +212,11 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
     conn.close()
 
 
-def _at_scene_poses(app) -> None:
+def _at_scene_poses(app: App) -> None:
     """ChooseError unless the markers are at the scene's start and goal (the rollouts start
     there: their workers rebuild the scene from its file)."""
     scene = app.world.scene
-    for which, pose in zip(("start", "goal"), app.markers.valid_poses(app.world), strict=True):
+    for which, pose in zip(("start", "goal"), app.page.markers.valid_poses(app.world), strict=True):
         want = scene.start if which == "start" else scene.goal
         turn = abs((pose[2] - want[2] + math.pi) % (2 * math.pi) - math.pi)
         if math.dist(pose[:2], want[:2]) > 0.005 or turn > math.radians(0.6):
@@ -234,22 +228,23 @@ def _at_scene_poses(app) -> None:
             )
 
 
-def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
+def do_choose(app: App, cmd: ChooseCmd) -> None:
     """Race K candidates in a child followed by the loop; then Drive takes the chosen one."""
+    panel = app.page.choose_panel
     _at_scene_poses(app)
     cfg = ChooseConfig(
         candidates=int(panel.candidates.value),
         budget_s=float(panel.budget.value),
         confidence=float(panel.confidence.value),
-        seed=app._next_seed,
+        seed=app.next_seed,
     )
-    app._next_seed += 1  # (a second click draws fresh candidates and rollouts)
+    app.next_seed += 1  # (a second click draws fresh candidates and rollouts)
     workers = os.cpu_count() or 1  # (every core, as `roachplan choose` takes by default)
-    app._show_robot_at_start()
+    app.page.show_robot_at_start()
     # Only this race's candidates are shown, and Drive has nothing to take until it chooses.
     app.plan_endpoints = None
     app.set_plans([])
-    app.view.clear("/trajectories")
+    app.page.view.clear("/trajectories")
     panel.lines, panel.table.content = {}, ""
     view = RaceView(message=f"planning {cfg.candidates} candidate paths (seed {cfg.seed})")
     took = 0.0  # wall time from the job's start to the decision [s]
@@ -269,7 +264,7 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
                     took = job.elapsed
         t = job.elapsed
         text = f"Choose path: {view.message}; {t:.1f} s of the {cfg.budget_s:g} s budget"
-        app._progress(t / cfg.budget_s, f"{text} ({workers} workers)")
+        app.loop.progress(t / cfg.budget_s, f"{text} ({workers} workers)")
         value = round(100.0 * min(t / cfg.budget_s, 1.0), 1)
         if panel.progress.value != value:
             panel.progress.value = value
@@ -279,21 +274,23 @@ def do_choose(app, panel: ChoosePanel, cmd: Cmd) -> None:
 
     panel.progress.value, panel.progress.visible, panel.cancel.visible = 0.0, True, True
     try:
-        end = app._follow(
+        end = app.loop.follow(
             job, "Choose path", step, hard_stop=time.monotonic() + cfg.budget_s + GRACE
         )
     finally:
         panel.progress.visible = panel.cancel.visible = False
     if view.failed is not None:
-        app.status.content = panel.summary.content = f"Choose path failed: {view.failed}"
-        app._notify(cmd.client_id, "Choose path failed", view.failed, error=True)
+        panel.summary.content = f"Choose path failed: {view.failed}"
+        app.page.set_status(panel.summary.content)
+        app.page.notify(cmd.client_id, "Choose path failed", view.failed, error=True)
         return
     if end != "done" or view.decided is None:
         how = "cancelled" if end == "cancelled" else "stopped (past its budget)"
-        app.status.content = panel.summary.content = (
+        panel.summary.content = (
             f"Choose path {how} after {job.elapsed:.1f} s: nothing chosen; the candidates "
             f"drawn are coloured by the rollouts done."
         )
+        app.page.set_status(panel.summary.content)
         return
     _show_choice(app, panel, cfg, view.decided, view.paths, took=took)
 
@@ -302,14 +299,14 @@ def _draw_candidates(app, panel: ChoosePanel, paths: tuple[CandidatePlan, ...]) 
     """Each candidate's path, grey until its first rollouts, labelled with its number."""
     for c in paths:
         pts = np.asarray(c.path_xyz) + [0, 0, LIFT]
-        panel.lines[c.index] = app.server.scene.add_line_segments(
+        panel.lines[c.index] = app.page.view.scene.add_line_segments(
             f"/plans/choose/{c.index}",
             segments(pts),
             colors=UNTRIED,
             thickness=3.0,
             thickness_units="screen",
         )
-        app.server.scene.add_label(
+        app.page.view.scene.add_label(
             f"/plans/choose/{c.index}/label",
             str(c.index + 1),
             position=tuple(pts[len(pts) // 2] + [0, 0, 0.03]),
@@ -325,7 +322,7 @@ def _recolour(panel: ChoosePanel, standings: tuple[Standing, ...]) -> None:
 
 
 def _show_choice(
-    app,
+    app: App,
     panel: ChoosePanel,
     cfg: ChooseConfig,
     decided: Decided,
@@ -344,12 +341,12 @@ def _show_choice(
     ran = f"{decided.rollouts} rollouts in {took:.1f} s ({decided.stopped})"
     # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
     # marked for Drive (thick, "Drive") and every one keeping its P(success) colour.
-    app.server.scene.remove_by_name("/plans/choose")
+    app.page.view.scene.remove_by_name("/plans/choose")
     app.plan_endpoints = (scene.start, scene.goal)
     app.set_plans([_labelled(scene, c) for c in paths])  # (in index order)
     if chosen is not None:
         app.select_path(chosen)
-    panel.lines = dict(enumerate(app.view.path_nodes))
+    panel.lines = dict(enumerate(app.page.view.path_nodes))
     _recolour(panel, ranking)
     if chosen is None:
         why = (
@@ -357,10 +354,11 @@ def _show_choice(
             if decided.rollouts == 0
             else "no candidate succeeded in any rollout"
         )
-        app.status.content = panel.summary.content = (
+        panel.summary.content = (
             f"Nothing chosen: {why}; {ran}. **Drive** drives path 1 (*Drive path* picks another). "
             f"Same race: {again}"
         )
+        app.page.set_status(panel.summary.content)
         return
     row = next(s for s in ranking if s.candidate == chosen)
     text = (
@@ -368,7 +366,7 @@ def _show_choice(
         f"{_f(row.p_success)} [{_f(row.p_low)}, {_f(row.p_high)}], energy "
         f"{_f(row.relative_energy)} × a straight walk; {ran}."
     )
-    app.status.content = text + " **Drive** drives it (*Drive path* picks another)."
+    app.page.set_status(text + " **Drive** drives it (*Drive path* picks another).")
     panel.summary.content = f"{text}  \nSame race from the command line: {again}"
 
 

@@ -1,7 +1,6 @@
-"""What the page's callbacks enqueue (one frozen dataclass per command), and the work that runs
-outside the server's process: each plan, drive and scene load in a fresh child process (OMPL
-holds the GIL while it solves, and a fresh process is where its seed takes effect), which the
-loop follows without blocking and can kill at once (Cancel).
+"""The work that runs outside the server's process: each plan, drive and scene load in a fresh
+child process (OMPL holds the GIL while it solves, and a fresh process is where its seed takes
+effect), which the command loop follows without blocking and can kill at once (Cancel).
 
 A scene load is a child of the fork server. A plan or a drive is a fork of the current world's
 host (WorldHost): a child of the fork server that received the world once, when it was loaded,
@@ -19,7 +18,6 @@ import threading
 import time
 import traceback
 from contextlib import contextmanager
-from dataclasses import dataclass
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
@@ -30,101 +28,6 @@ from roachplan.planning._isolated import limit_child_memory
 from roachplan.scenes import World, build_world, load_scene
 
 from ._relevel import CaptureView
-
-# -- commands (what callbacks enqueue) ----------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Cmd:
-    client_id: int | None
-
-
-@dataclass(frozen=True)
-class PlanCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class DriveCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ResetCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class BestPathCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class LoadSceneCmd(Cmd):
-    name: str
-
-
-@dataclass(frozen=True)
-class UploadCmd(Cmd):
-    name: str
-    data: bytes
-
-
-@dataclass(frozen=True)
-class PlaceCmd(Cmd):
-    ray_origin: tuple[float, float, float]
-    ray_direction: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class MarkersCmd(Cmd):
-    """A marker was dragged or a yaw slider moved: re-check start and goal."""
-
-
-@dataclass(frozen=True)
-class RunTrialsCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ShowTrialCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ExportCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class CancelCmd(Cmd):
-    """Cancel: "job" (the running plan, drive or best path, and what is queued behind it),
-    "load" (the scene being loaded) or "batch"."""
-
-    what: str
-
-
-@dataclass(frozen=True)
-class ViewCmd(Cmd):
-    """A change of what is seen, handled at once even while a command runs: "roadmap",
-    "standable" (the toggles), "drive_path" (the Drive path picker), "follow", "zoom" (the
-    clicking client's camera)."""
-
-    what: str
-
-
-NAMES = {
-    PlanCmd: "Plan",
-    DriveCmd: "Drive",
-    ResetCmd: "Reset",
-    BestPathCmd: "Best path",
-    PlaceCmd: "Click",
-    MarkersCmd: "Marker check",
-    RunTrialsCmd: "Run trials",
-    ShowTrialCmd: "Show trial",
-}
-"""How the page names a queued command."""
-
 
 # -- work in child processes --------------------------------------------------------------------
 
