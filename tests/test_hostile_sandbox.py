@@ -28,7 +28,7 @@ import yaml
 
 from conftest import ROOT
 from hostile import Case, run_case
-from roachplan.planning._isolated import IsolationError, child_memory_limit, run_isolated
+from roachplan.processes import ChildError, call, child_memory_limit
 from roachplan.scenes._openscad import JAIL_OUT, _sandbox_available, confined
 
 SECRET_HEIGHT = 7.0
@@ -514,13 +514,13 @@ def _small() -> float:
 def test_a_runaway_planning_child_is_stopped_at_its_memory_limit(monkeypatch, isolation):
     monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", "2G")
     before = resource.getrlimit(resource.RLIMIT_AS)
-    assert run_isolated(resource.getrlimit, resource.RLIMIT_AS, isolation=isolation) == (
+    assert call(resource.getrlimit, (resource.RLIMIT_AS,), start=isolation) == (
         2 << 30,
         2 << 30,
     )
-    with pytest.raises(IsolationError, match=r"ran out of memory.*2 GiB.*ROACHPLAN_CHILD_MEMORY"):
-        run_isolated(_hungry, isolation=isolation)
-    assert run_isolated(_small, isolation=isolation) == 45.0  # the parent is unharmed
+    with pytest.raises(ChildError, match=r"ran out of memory.*2 GiB.*ROACHPLAN_CHILD_MEMORY"):
+        call(_hungry, start=isolation, task="planning")
+    assert call(_small, start=isolation) == 45.0  # the parent is unharmed
     assert resource.getrlimit(resource.RLIMIT_AS) == before
 
 
@@ -536,5 +536,5 @@ def test_a_real_plan_runs_under_the_default_limit(world, monkeypatch):
 @pytest.mark.parametrize("value", ["lots", "-1G", "10M", "1e3"])
 def test_a_bad_child_memory_setting_is_named(monkeypatch, value):
     monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", value)
-    with pytest.raises(IsolationError, match=f"ROACHPLAN_CHILD_MEMORY='{value}': expected"):
-        run_isolated(_small, isolation="fork")
+    with pytest.raises(ChildError, match=f"ROACHPLAN_CHILD_MEMORY='{value}': expected"):
+        call(_small, start="fork")
