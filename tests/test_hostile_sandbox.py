@@ -29,7 +29,7 @@ import yaml
 from conftest import ROOT
 from hostile import Case, run_case
 from roachplan.processes import ChildError, call, child_memory_limit
-from roachplan.scenes._openscad import JAIL_OUT, _sandbox_available, confined
+from roachplan.scenes._scad_sandbox import JAIL_OUT, confined, sandbox_available
 
 SECRET_HEIGHT = 7.0
 """Height of the secret height map and of the secret solids [m]; nothing a model may read
@@ -351,7 +351,7 @@ _NO_NAMESPACES = [
 
 
 @pytest.mark.skipif(
-    shutil.which("unshare") is None or not _sandbox_available(),
+    shutil.which("unshare") is None or not sandbox_available(),
     reason="needs unprivileged user namespaces to take them away",
 )
 @pytest.mark.parametrize("unsafe", [False, True], ids=["refused", "opted-out"])
@@ -385,7 +385,7 @@ def test_without_namespaces_a_render_is_refused_unless_opted_out(tmp_path, unsaf
 # -- the jail alone: models the scan would refuse, run in it directly -----------------------------
 
 needs_jail = pytest.mark.skipif(
-    not _sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
+    not sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
 )
 
 
@@ -484,7 +484,7 @@ def test_the_jail_writes_only_its_output_folder(tmp_path):
 
 @pytest.mark.parametrize("jail", [True, False], ids=["jail", "unconfined"])
 def test_the_limits_hold_in_and_out_of_the_jail(tmp_path, jail):
-    if jail and not _sandbox_available():
+    if jail and not sandbox_available():
         pytest.skip("no unprivileged user namespaces here")
     proc = _jailed_sh(
         tmp_path, "ulimit -v; ulimit -t; ulimit -f", memory=300 << 20, cpu=7.5, jail=jail
