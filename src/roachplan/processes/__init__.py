@@ -7,7 +7,7 @@ typed events in one stream (emit, listening), then one outcome (Returned, Raised
 Imports nothing of the other subpackages (they all use it) and never viser.
 """
 
-from ._child import Child, Host, Start, call, preload, unwrap, warm_up
+from ._child import Child, Host, Start, call, preload, unwrap
 from ._errors import ChildError, WorkerDied
 from ._events import (
     CHANNEL,
@@ -68,5 +68,4 @@ __all__ = [
     "size_text",
     "start_time",
     "unwrap",
-    "warm_up",
 ]

@@ -69,16 +69,6 @@ def _preload(modules) -> None:
         _FORKSERVER.set_forkserver_preload(sorted(_PRELOADED))
 
 
-def warm_up() -> None:
-    """Start the fork server now (about a second, its modules preloaded), not on the first
-    child that needs it."""
-    Child(_nothing, start="forkserver", task="warm-up").wait()
-
-
-def _nothing() -> None:
-    pass
-
-
 @dataclass(frozen=True)
 class _Work:
     """What a child runs, and under which limits (pickled to the fork server, a spawned
