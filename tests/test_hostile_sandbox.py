@@ -19,6 +19,7 @@ import resource
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -493,6 +494,54 @@ def test_the_limits_hold_in_and_out_of_the_jail(tmp_path, jail):
     assert int(memory_kib) == 300 << 10
     assert int(cpu_s) == 9  # the time limit rounded up, and a second for the start
     assert int(file_blocks) * 512 == 300 << 20
+
+
+_WAITS_FOR_A_RENDER = """
+import sys
+from pathlib import Path
+from roachplan.scenes._scad_sandbox import confined, run_confined
+folder, work, jail = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3] == "jail"
+cmd = confined(["sleep", "300"], folder, work, jail=jail)
+run_confined(cmd, model_dir=folder, timeout=300, what="m.scad")
+"""
+
+
+@pytest.mark.parametrize("jail", [True, False], ids=["jail", "unconfined"])
+def test_a_render_dies_with_the_process_that_waits_for_it(tmp_path, jail):
+    from roachplan.processes import descendants
+
+    if jail and not sandbox_available():
+        pytest.skip("no unprivileged user namespaces here")
+    (tmp_path / "model").mkdir()
+    (tmp_path / "work").mkdir()
+    args = [str(tmp_path / "model"), str(tmp_path / "work"), "jail" if jail else "open"]
+    waiting = subprocess.Popen([sys.executable, "-c", _WAITS_FOR_A_RENDER, *args])
+    try:
+        for _ in range(200):
+            program = [p for p in descendants(waiting.pid) if _sleeping(p)]
+            if program:
+                break
+            time.sleep(0.05)
+        assert program, "the program did not start"
+        waiting.kill()  # (SIGKILL: nothing of its own can end the program)
+        waiting.wait()
+        for _ in range(100):
+            if not _sleeping(program[0]):
+                break
+            time.sleep(0.05)
+        assert not _sleeping(program[0]), "the render outlived its parent"
+    finally:
+        waiting.kill()
+        waiting.wait()
+
+
+def _sleeping(pid: int) -> bool:
+    """pid runs `sleep` (and is not just a status left for its parent to read)."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    return os.path.basename(argv[0]) == b"sleep"
 
 
 # -- the planning child's memory limit ------------------------------------------------------------

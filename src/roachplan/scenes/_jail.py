@@ -21,6 +21,7 @@ import ctypes
 import json
 import os
 import resource
+import signal
 import stat
 import sys
 
@@ -161,7 +162,7 @@ def main(spec: dict) -> None:
         _limit(resource.RLIMIT_CORE, 0)  # a crash must not leave gigabytes of core behind
         if spec.get("parent") is not None:
             # Last before exec: the jail's new credentials must not clear it.
-            _check(_libc.prctl(_PR_SET_PDEATHSIG, 9, 0, 0, 0), "prctl(PDEATHSIG)")
+            _check(_libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0), "prctl(PDEATHSIG)")
             if os.getppid() != spec["parent"]:  # it ended before the request could cover it
                 sys.exit(SETUP_FAILED)
     except (OSError, ValueError, SetupError) as exc:
