@@ -39,11 +39,11 @@ def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = Non
 def render_progress(enabled: bool | None = None) -> Iterator[None]:
     """While inside, every OpenSCAD render shows a bar: seconds elapsed of its time limit (the
     Running events of roachplan.processes, from this process or a child it waits for)."""
-    from roachplan.processes import Running, listening
-
     if not (wanted() if enabled is None else enabled):
         yield
         return
+    from roachplan.processes import Running, listening
+
     bars: dict[str, object] = {}
 
     def hear(event: object) -> None:
