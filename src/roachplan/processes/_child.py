@@ -273,13 +273,10 @@ class Child:
         """Wait for the child's exit: its status (or -signal), None when not ours to reap
         (a fork of a Host: the host reaps it)."""
         if self._forked:
-            # (it exits right after its outcome; one that lingers is killed, not waited for)
-            for _ in range(100):
-                pid, status = os.waitpid(self.pid, os.WNOHANG)
-                if pid:
-                    return os.waitstatus_to_exitcode(status)
-                time.sleep(0.02)
-            kill_tree(self.pid)
+            # It exits right after its outcome, which closes its end of the pipe: wait for
+            # that, then for the exit itself. One that lingers is killed, not waited for.
+            if not wait([self._conn], timeout=2.0):
+                kill_tree(self.pid)
             return os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
         if self._proc is not None:
             self._proc.join(timeout=2)
@@ -416,8 +413,9 @@ def _leave_forkserver() -> None:
     started it does, and this child with it (die_with_parent). No use of the server is lost: a
     child of the server that asks for one starts its own (it does not know the first one's pid).
     Private attributes of multiprocessing's forkserver (CPython 3.11): nothing public says it."""
-    from multiprocessing import forkserver
-
+    forkserver = sys.modules.get("multiprocessing.forkserver")
+    if forkserver is None:  # (not imported here, so not a child of the server: it imports it)
+        return
     server = forkserver._forkserver
     if server._forkserver_pid is None and server._forkserver_alive_fd is not None:
         try:

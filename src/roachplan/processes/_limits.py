@@ -88,13 +88,15 @@ def limit_memory(limit: int | None = None, *, hard: bool = True) -> int:
 
 
 _PR_SET_PDEATHSIG = 1
+try:
+    _prctl = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # not Linux: an orphan finishes its work and exits
+    _prctl = None
 
 
 def die_with_parent() -> None:
     """Ask Linux to SIGKILL this process when the thread that started it ends (with its
     process, normally): a killed parent leaves no orphans working for nobody. Not inherited by
     this process's own children, which ask for themselves."""
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):  # not Linux: an orphan finishes its work and exits
-        pass
+    if _prctl is not None:
+        _prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
