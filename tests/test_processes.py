@@ -32,6 +32,7 @@ from roachplan.processes import (
     listening,
     memory_setting,
     run_program,
+    size_text,
 )
 
 STARTS = ["fork", "forkserver", "spawn"]
@@ -147,6 +148,21 @@ def test_an_error_comes_back_as_itself_with_the_childs_traceback(start):
     assert any("_fail" in note for note in caught.value.__notes__)
 
 
+def _say_and_exit() -> None:
+    print("printed by the child")
+    print("written to stderr by the child", file=sys.stderr)
+    sys.exit("the child exits")
+
+
+def test_a_childs_output_and_an_unusual_end_reach_the_log(capfd):
+    child = Child(_say_and_exit, start="fork")
+    _follow(child)
+    out, err = capfd.readouterr()
+    assert "printed by the child" in out and "written to stderr by the child" in err
+    assert isinstance(child.outcome, Raised) and child.outcome.message == "the child exits"
+    assert "SystemExit: the child exits" in err, "(not an Exception: its traceback is logged)"
+
+
 def test_call_hands_the_childs_events_to_this_processes_listeners():
     heard = []
     with listening(heard.append):
@@ -155,17 +171,25 @@ def test_call_hands_the_childs_events_to_this_processes_listeners():
     assert heard == [*(("step", k) for k in range(5)), ("job", "world", 3)]
 
 
+def _mapped() -> int:
+    """The address space this process maps [bytes] (a fork starts with as much)."""
+    status = open("/proc/self/status").read()
+    return int(status.split("VmSize:")[1].split()[0]) * 1024
+
+
 @pytest.mark.parametrize("start", ["fork", "forkserver"])
 def test_a_child_out_of_memory_says_which_limit_and_how_to_raise_it(monkeypatch, start):
-    monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", "1G")
+    limit = (_mapped() >> 30) + 2 << 30  # (room above what a fork of this process maps)
+    monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", f"{limit >> 20}M")
     child = Child(_hungry, start=start, task="meshing")
     _follow(child)
     assert isinstance(child.outcome, Died) and child.outcome.cause == "memory"
     why = child.outcome.why
     assert "the meshing process ran out of memory" in why
-    assert "1 GiB" in why and "ROACHPLAN_CHILD_MEMORY=SIZE" in why
-    assert call(_rlimit, start=start) == (1 << 30, 1 << 30)
-    assert call(_rlimit, start=start, memory=1 << 30, hard_memory=False)[0] == 1 << 30
+    assert size_text(limit) in why and "ROACHPLAN_CHILD_MEMORY=SIZE" in why
+    assert call(_rlimit, start=start) == (limit, limit)
+    soft, hard = call(_rlimit, start=start, memory=limit, hard_memory=False)
+    assert soft == limit and hard != limit
 
 
 def test_a_child_killed_by_a_signal_says_so_and_suggests_memory():
