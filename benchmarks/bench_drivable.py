@@ -34,9 +34,9 @@ from roachplan.experiments._spec import reference_settings
 from roachplan.planning import check_states
 from roachplan.planning._drivable import max_curvature
 from roachplan.planning._dubins import dubins_path
-from roachplan.planning._isolated import run_isolated
 from roachplan.planning._ompl import _budget_ptc, _se2_state, _seed_ompl, _TerrainSampler
 from roachplan.planning._ompl_import import ob, og
+from roachplan.processes import call
 from roachplan.scenes import build_world, load_scene
 
 
@@ -172,24 +172,26 @@ def dubins_space_plan(world, planner: str, radius: float, seed: int, shortcut: b
     from scipy import ndimage
 
     cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
-    return run_isolated(
+    return call(
         _plan_in_dubins_space,
-        world.heightfield,
-        world.footprint,
-        isolation="fork",
-        world_bounds=sc.bounds,
-        start=sc.start,
-        goal=sc.goal,
-        cells=cells,
-        cell=regions.cell,
-        planner=planner,
-        radius=radius,
-        seed=seed,
-        vcfg=cfg.validity,
-        time_limit=cfg.time_limit,
-        max_iterations=cfg.max_iterations,
-        step=cfg.check_resolution,
-        shortcut=shortcut,
+        (world.heightfield, world.footprint),
+        dict(
+            world_bounds=sc.bounds,
+            start=sc.start,
+            goal=sc.goal,
+            cells=cells,
+            cell=regions.cell,
+            planner=planner,
+            radius=radius,
+            seed=seed,
+            vcfg=cfg.validity,
+            time_limit=cfg.time_limit,
+            max_iterations=cfg.max_iterations,
+            step=cfg.check_resolution,
+            shortcut=shortcut,
+        ),
+        start="fork",
+        task="planning",
     )
 
 

@@ -66,7 +66,8 @@ import trimesh
 
 from roachplan.scenes import SceneError, list_scenes, load_scene, render_scad, render_scad_result
 from roachplan.scenes._mesh import disagreement, surface_distances
-from roachplan.scenes._openscad import TEXT_DEVIATION, manifold_version, scad_dependencies
+from roachplan.scenes._scad_manifold import TEXT_DEVIATION, manifold_version
+from roachplan.scenes._scad_source import scad_dependencies
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

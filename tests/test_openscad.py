@@ -13,7 +13,8 @@ import trimesh
 import yaml
 
 from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
-from roachplan.scenes._openscad import _sandbox_available, confined, scad_variables
+from roachplan.scenes._scad_sandbox import confined, sandbox_available
+from roachplan.scenes._scad_source import scad_variables
 
 LIBRARY = Path(__file__).resolve().parent.parent / "scenes" / "library"
 
@@ -192,7 +193,7 @@ def test_a_render_past_its_time_limit_is_killed(tmp_path, fresh_cache):
     assert not list(fresh_cache.rglob("*.stl"))
 
 
-@pytest.mark.skipif(not _sandbox_available(), reason="no unprivileged user namespaces here")
+@pytest.mark.skipif(not sandbox_available(), reason="no unprivileged user namespaces here")
 def test_the_sandbox_shows_the_model_folder_and_hides_the_rest():
     # Belt and braces behind the static check: inside, only the model's folder is readable.
     with (

@@ -55,14 +55,9 @@ def _running(pid: int) -> bool:
 
 
 def _descendants(pid: int) -> set[int]:
-    from roachplan.app._jobs import _children
+    from roachplan.processes import descendants
 
-    children, out, todo = _children(), set(), [pid]
-    while todo:
-        kids = children.get(todo.pop(), [])
-        out.update(kids)
-        todo += kids
-    return out
+    return descendants(pid)
 
 
 def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):

@@ -239,7 +239,8 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
     plan runs in a child of the clean fork server, and gives the very path a fork gives."""
     import threading
 
-    from roachplan.planning import _isolated, plan_path
+    from roachplan.planning import plan_path
+    from roachplan.processes import _child
 
     sc = world.scene
     kw = dict(bounds=sc.bounds, cfg=sc.planner, seed=5, regions=world.regions)
@@ -252,8 +253,14 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
     assert forked.found and np.array_equal(forked.path_xyz, served.path_xyz)
 
     used = []
-    real = _isolated._via_forkserver
-    monkeypatch.setattr(_isolated, "_via_forkserver", lambda *a: used.append(1) or real(*a))
+
+    class Recorded(_child.Child):  # (records how each child started)
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            if self.how == "forkserver":
+                used.append(1)
+
+    monkeypatch.setattr(_child, "Child", Recorded)
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()

@@ -40,14 +40,8 @@ from roachplan.scenes import (
 )
 from roachplan.scenes._manifold_main import openscad_quad_diagonal, openscad_rands
 from roachplan.scenes._mesh import clean_terrain_mesh, disagreement, surface_distances
-from roachplan.scenes._openscad import (
-    JAIL_OUT,
-    TEXT_DEVIATION,
-    _manifold_argv,
-    _sandbox_available,
-    confined,
-    manifold_version,
-)
+from roachplan.scenes._scad_manifold import TEXT_DEVIATION, manifold_argv, manifold_version
+from roachplan.scenes._scad_sandbox import JAIL_OUT, confined, sandbox_available
 
 AGREE = 1e-4
 """Largest surface distance between the two meshes [fraction of the bounding-box diagonal]."""
@@ -89,7 +83,7 @@ SECRET_HEIGHT = 7.0
 """Height of the secret solid outside a model's folder [model units]."""
 
 needs_jail = pytest.mark.skipif(
-    not _sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
+    not sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
 )
 
 
@@ -577,7 +571,7 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
         (work / "out").mkdir(parents=True)
         model = "/model/m.scad" if jail else str(src)
         target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
-        argv, layout = _manifold_argv(model, target)
+        argv, layout = manifold_argv(model, target)
         cmd = confined(argv, src.parent, work, jail=jail, layout=layout)
         proc = subprocess.run(
             cmd, cwd=src.parent, capture_output=True, text=True, timeout=120, check=False
@@ -596,7 +590,7 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
 def test_the_jail_shows_the_evaluator_only_its_own_packages(tmp_path):
     (tmp_path / "model").mkdir()
     (tmp_path / "work").mkdir()
-    argv, layout = _manifold_argv("/model/m.scad", f"{JAIL_OUT}/mesh.stl")
+    argv, layout = manifold_argv("/model/m.scad", f"{JAIL_OUT}/mesh.stl")
     python, paths = argv[0], argv[5]
     probe = (
         "import sys, json, os; sys.path[:0] = json.loads(sys.argv[1])\n"

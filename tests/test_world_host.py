@@ -12,17 +12,17 @@ import time
 import numpy as np
 import pytest
 
-from roachplan.app._jobs import Job, WorldHost, _plan_job
+from roachplan.app._jobs import Job, WorldHost, _plan_job, failure
 
 
 def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
     """The paths a plan job sent, once it has finished."""
     out, end = [], time.monotonic() + timeout
     while not job.done and time.monotonic() < end:
-        for kind, payload in job.poll(timeout=0.5):
-            assert kind != "error", payload
-            if kind == "attempt" and payload[1] is not None:
-                out.append(np.asarray(payload[1].plan.path_xyz))
+        for attempt in job.poll(timeout=0.5):
+            if attempt.plan is not None:
+                out.append(np.asarray(attempt.plan.plan.path_xyz))
+        assert failure(job) is None, failure(job)
     assert job.done, "the plan job did not finish"
     return out
 

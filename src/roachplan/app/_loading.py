@@ -15,7 +15,7 @@ from roachplan.scenes import World, list_scenes
 
 from ._app import App
 from ._commands import CancelLoadCmd, Cmd, LoadSceneCmd
-from ._jobs import Job, _load_job
+from ._jobs import Job, _load_job, load_outcome
 from ._load_panel import needs_millimetre_scale
 from ._placement import model_view
 from ._uploads import public_message
@@ -80,13 +80,9 @@ class BackgroundLoad:
         ld = self.current
         if ld is None or ld.result is not None or ld.error is not None:
             return ld
-        for kind, payload in ld.job.poll():
-            if kind == "error":
-                ld.error = str(payload)
-            else:
-                ld.result = payload
-        if ld.result is None and ld.error is None and ld.job.done:
-            ld.error = "the loading process ended without a result (out of memory?)"
+        ld.job.poll()  # (its events: an OpenSCAD render's Running; the status counts seconds)
+        if ld.job.done:
+            ld.result, ld.error = load_outcome(ld.job)
         if ld.result is None and ld.error is None:
             self.show()
         return ld if (ld.result is not None or ld.error is not None) else None

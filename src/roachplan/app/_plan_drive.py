@@ -13,6 +13,8 @@ import numpy as np
 
 from roachplan.experiments import TrialResult
 from roachplan.planning import PlanResult
+from roachplan.processes import Returned
+from roachplan.sim import Frame
 
 from ._app import App
 from ._commands import (
@@ -25,7 +27,7 @@ from ._commands import (
     ShowTrialCmd,
 )
 from ._draw import BLACK, BLUE, path_fraction
-from ._jobs import _drive_job, _plan_job
+from ._jobs import Attempt, _drive_job, _plan_job, failure
 from ._panel import trials_csv
 
 PLAN_GRACE = 0.8
@@ -48,15 +50,14 @@ def do_plan(app: App, cmd: PlanCmd) -> None:
     request = dict(seed=seed, start=start, goal=goal, planner=planner)
     job = app.world_job(_plan_job, count, request, deadline)
 
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            if kind == "attempt":
-                tried.append(payload[0])
-                if payload[1] is not None:
-                    plans.append(payload[1])
-                    app.page.view.add_path(payload[1].plan.path_xyz)
-            elif kind == "error":
-                errors.append(str(payload))
+    def step(events: list[Attempt]) -> bool:
+        for attempt in events:
+            tried.append(attempt.seed)
+            if attempt.plan is not None:
+                plans.append(attempt.plan)
+                app.page.view.add_path(attempt.plan.plan.path_xyz)
+        if failure(job) and not errors:
+            errors.append(failure(job))
         t = job.elapsed
         app.loop.progress(
             t / budget,
@@ -133,12 +134,13 @@ def drive(
     path_xy = np.asarray(planned.path_xyz)[:, :2]
     play = {"t": 0.0, "wall": time.monotonic(), "k": -1, "drawn": 0.0}
 
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            if kind == "frame":
-                frames.append(payload)
+    def step(events: list[Frame]) -> bool:
+        frames.extend(events)
+        if job.done and not (results or errors):
+            if isinstance(job.outcome, Returned):
+                results.append(job.outcome.value)
             else:
-                (results if kind == "result" else errors).append(payload)
+                errors.append(failure(job) or "the driving process ended without a result")
         now = time.monotonic()
         play["t"] += (now - play["wall"]) * max(app.page.playback_speed(), 1.0)
         play["wall"] = now

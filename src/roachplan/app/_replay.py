@@ -410,23 +410,19 @@ def replay_inputs(folder: str | Path) -> list[Path]:
 # -- the page's Share button ----------------------------------------------------------------------
 
 
-def _share_job(conn, world: World, record: dict, title: str) -> None:
+def _share_job(events, world: World, record: dict, title: str) -> bytes:
     """In a child (a re-drive holds the GIL for seconds): the replay page of one trial."""
-    try:
-        frames, note = redrive(world, record)
-        replay = Replay(
-            title=title, world=world, trials=(record,), shown=0, frames=frames, note=note
-        )
-        conn.send(("html", replay_html(replay).encode()))
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(("error", f"{exc}"))
-    conn.close()
+    frames, note = redrive(world, record)
+    replay = Replay(title=title, world=world, trials=(record,), shown=0, frames=frames, note=note)
+    return replay_html(replay).encode()
 
 
 def share_trial(app: App, cmd: ShareCmd) -> None:
     """Export the trial chosen in *Show trial* (else the last one) as a replay page, sent to the
     browser that clicked as a download. Followed like a drive: progress, Cancel."""
-    from ._jobs import Job
+    from roachplan.processes import Returned
+
+    from ._jobs import Job, failure
 
     trials = app.scene_trials
     if not trials:
@@ -435,11 +431,9 @@ def share_trial(app: App, cmd: ShareCmd) -> None:
     k = app.page.shown_trial() or len(trials)
     record = dict(trials[k - 1], label=f"trial {k} ({trials[k - 1].get('label') or 'drive'})")
     name = app.world.scene.name
-    job, out, errors = Job(_share_job, app.world, record, f"{name}: trial {k}"), [], []
+    job = Job(_share_job, app.world, record, f"{name}: trial {k}")
 
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            (out if kind == "html" else errors).append(payload)
+    def step(events: list) -> bool:  # (it sends none: its progress is its time)
         t, total = job.elapsed, max(record.get("drive_wall_time") or 1.0, 1.0) + 2.0
         app.loop.progress(
             min(t / total, 0.99), f"Share: re-driving trial {k} and recording it, {t:.1f} s"
@@ -447,13 +441,14 @@ def share_trial(app: App, cmd: ShareCmd) -> None:
         return job.done
 
     end = app.loop.follow(job, "Share", step)
-    if errors or not out:
-        why = errors[0] if errors else f"the export was {end}"
+    if not isinstance(job.outcome, Returned):
+        why = failure(job) or f"the export was {end}"
         app.page.notify(cmd.client_id, "Share failed", why, error=True)
         app.page.set_status(f"Share failed: {why}")
         return
-    app.page.send_file(cmd.client_id, f"{name}-trial-{k}.html", out[0])
+    html = job.outcome.value
+    app.page.send_file(cmd.client_id, f"{name}-trial-{k}.html", html)
     app.page.set_status(
-        f"Trial {k} exported as {name}-trial-{k}.html ({len(out[0]) / 1e6:.1f} "
+        f"Trial {k} exported as {name}-trial-{k}.html ({len(html) / 1e6:.1f} "
         f"MB): it opens offline in any browser."
     )

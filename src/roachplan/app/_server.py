@@ -535,7 +535,17 @@ def serve(*, scene: str, host: str, port: int) -> None:
     until interrupted."""
     import sys
 
-    world, view = load_world(scene, from_upload=False, check_poses=True)
+    from roachplan.processes import call
+
+    # In a child, as the page's loads are (its memory limit, a soft one: the OpenSCAD it may
+    # start sets its own); its renders' progress reaches the command line's bars.
+    world, view = call(
+        load_world,
+        (scene,),
+        {"from_upload": False, "check_poses": True},
+        hard_memory=False,
+        task="loading",
+    )
     for note in world.notes:
         print(f"roachplan: {note}", file=sys.stderr)
     app = RoachApp(world, host=host, port=port, view=view)

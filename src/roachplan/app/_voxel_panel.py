@@ -28,10 +28,11 @@ from roachplan.perception._voxel_study import (
     study_csv,
     voxel_study,
 )
+from roachplan.processes import Channel, Died, Returned
 
 from ._app import App
 from ._commands import VoxelCmd
-from ._jobs import Job
+from ._jobs import Job, failure
 
 MODES = ("Square", "Ground plane")
 """The region choices of the folder's dropdown."""
@@ -167,23 +168,24 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
     )
 
 
-def _study_job(conn, req: StudyRequest) -> None:
-    from roachplan.planning._isolated import limit_child_memory
+@dataclass(frozen=True, kw_only=True)
+class StudyStage:
+    """A study job's event: one of run_study's stages ("read", "region") is done."""
 
-    limit_child_memory()  # a study of a huge cloud ends in a notification, not the machine's
-    try:
-        result = run_study(req, on_stage=lambda name: conn.send(("stage", name)))
-        conn.send(("result", result))
-    except MemoryError:
-        conn.send(
-            (
-                "error",
-                "the study needed more memory than the server allows a job: pick a smaller square",
-            )
-        )
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(("error", f"{exc}"))
-    conn.close()
+    name: str
+
+
+def _study_job(events: Channel, req: StudyRequest) -> StudyResult:
+    """run_study in a child (under the child memory limit: a study of a huge cloud ends in a
+    notification, not by taking the machine), a StudyStage event per stage."""
+    return run_study(req, on_stage=lambda name: events.send(StudyStage(name=name)))
+
+
+def _study_failure(job: Job) -> str:
+    outcome = job.outcome
+    if isinstance(outcome, Died) and outcome.cause == "memory":
+        return "the study needed more memory than the server allows a job: pick a smaller square"
+    return failure(job) or "the study's process ended without a result"
 
 
 def table_markdown(result: StudyResult) -> str:
@@ -321,34 +323,30 @@ class VoxelPanel:
             side=side,
             seed=app.world.scene.seed,
         )
-        job, results, errors, stages = Job(_study_job, req), [], [], []
+        job, stages = Job(_study_job, req), []
         steps = {
             "read": (0.3, "capture read; finding the region"),
             "region": (0.5, f"fitting planes at {len(sizes) + 1} voxel sizes"),
         }
 
-        def step(messages) -> bool:
-            for kind, payload in messages:
-                if kind == "stage":
-                    stages.append(payload)
-                else:
-                    (results if kind == "result" else errors).append(payload)
+        def step(events: list[StudyStage]) -> bool:
+            stages.extend(event.name for event in events)
             done, what = (
                 steps.get(stages[-1], (0.5, "")) if stages else (0.05, "reading the capture")
             )
             app.loop.progress(done, f"Voxel study: {what}, {job.elapsed:.1f} s")
-            return job.done or bool(results or errors)
+            return job.done
 
         end = app.loop.follow(job, "Voxel study", step)
         if end != "done":
             app.page.set_status(f"Voxel study cancelled after {job.elapsed:.1f} s.")
             return
-        if errors or not results:
-            why = errors[0] if errors else "the study's process ended without a result"
+        if not isinstance(job.outcome, Returned):
+            why = _study_failure(job)
             app.page.set_status(f"Voxel study failed: {why}")
             app.page.notify(cmd.client_id, "Voxel study failed", why, error=True)
             return
-        self.result, self.scene_name = results[0], app.world.scene.name
+        self.result, self.scene_name = job.outcome.value, app.world.scene.name
         self.info.content = table_markdown(self.result)
         self.csv_button.disabled = False
         app.page.set_status(

@@ -8,7 +8,8 @@ Determinism: our sampler draws from a numpy Generator seeded by the plan's seed;
 process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, the
 informed samplers once a solution exists, the path simplifier) is seeded from the same seed,
 which takes effect only before OMPL's first random draw in a process; so every plan runs in a
-child forked from a process that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
+child forked from a process that never drew (roachplan.processes, planning/_isolated.py).
+Planners stop on an iteration budget rather than on
 the clock, optimizing planners at their first solution unless asked to optimize, and PRM's and
 PRM*'s roadmaps are grown in this thread in fixed batches (OMPL's PRM.solve grows it in a second
 thread and stops whenever that thread notices a solution, which is timing-dependent).
@@ -32,9 +33,11 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from roachplan.processes import call
+
 from ._drivable import DrivablePath, drivable_path, spin_states
 from ._heightfield import HeightField
-from ._isolated import Method, run_isolated
+from ._isolated import Method
 from ._names import PLANNER_NAMES, PlannerName, PlanningError
 from ._ompl_import import ob, og, ou
 from ._regions import StandableMap, homology_signature, standable_map
@@ -351,8 +354,8 @@ def plan_path(
     these bounds from start (computed when not given; pass it to save ~50 ms per plan).
     Raises PlanningError when the start or goal is itself invalid (naming the failed condition
     and leg); returns found=False when the planner gives up. Runs in a child process
-    (`run_isolated`, how: isolation), so the same seed gives the same plan whatever ran in this
-    process before.
+    (roachplan.processes.call; isolation: how it starts), so the same seed gives the same plan
+    whatever ran in this process before.
     """
     vcfg = cfg.validity
     (xa, ya), (xb, yb) = bounds
@@ -371,7 +374,9 @@ def plan_path(
     request: dict[str, Any] = dict(
         start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions
     )
-    return run_isolated(_plan_here, hf, fp, isolation=isolation, preload=__name__, **request)
+    return call(
+        _plan_here, (hf, fp), request, start=isolation, preload=(__name__,), task="planning"
+    )
 
 
 def _seed_ompl(seed: int) -> None:

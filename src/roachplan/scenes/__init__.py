@@ -16,7 +16,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "BACKENDS": "._openscad",
         "DEFAULT_BACKEND": "._openscad",
         "DEFAULT_TIMEOUT": "._openscad",
-        "MAX_TIMEOUT": "._openscad",
+        "MAX_TIMEOUT": "._scad_sandbox",
         "render_scad": "._openscad",
         "render_scad_result": "._openscad",
         "ScadRender": "._openscad",
@@ -58,10 +58,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._openscad import BACKENDS as BACKENDS
     from ._openscad import DEFAULT_BACKEND as DEFAULT_BACKEND
     from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
-    from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
     from ._openscad import ScadRender as ScadRender
     from ._openscad import render_scad as render_scad
     from ._openscad import render_scad_result as render_scad_result
+    from ._scad_sandbox import MAX_TIMEOUT as MAX_TIMEOUT
     from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
     from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
     from ._scene import Scene as Scene

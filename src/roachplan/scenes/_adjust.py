@@ -7,7 +7,8 @@ import dataclasses
 import math
 
 from ._errors import SceneError
-from ._openscad import backend_problem, timeout_problem
+from ._openscad import backend_problem
+from ._scad_sandbox import timeout_problem
 from ._scene import Scene
 
 

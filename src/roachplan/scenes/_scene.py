@@ -29,15 +29,9 @@ from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig, uncertaint
 
 from ._errors import SceneError
 from ._library import LIBRARY, MAX_SEED, library_names
-from ._openscad import (
-    DEFAULT_BACKEND,
-    DEFAULT_TIMEOUT,
-    Backend,
-    backend_problem,
-    param_problem,
-    scad_variables,
-    timeout_problem,
-)
+from ._openscad import DEFAULT_BACKEND, DEFAULT_TIMEOUT, Backend, backend_problem
+from ._scad_sandbox import timeout_problem
+from ._scad_source import param_problem, scad_variables
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
 TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
