@@ -10,9 +10,14 @@ __getattr__, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "BenchmarkResult": "._benchmark",
+        "benchmark_bar": "._benchmark",
         "benchmark_log": "._benchmark",
+        "is_benchmark_db": "._benchmark",
         "run_benchmark": "._benchmark",
         "write_benchmark_db": "._benchmark",
+        "ChooseConfig": "._choose_config",
+        "ChooseError": "._choose",
+        "choose": "._choose",
         "ExperimentError": "._errors",
         "OutputError": "._errors",
         "read_manifest": "._manifest",
@@ -31,6 +36,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "ExperimentSpec": "._spec",
         "list_experiments": "._library",
         "load_experiment": "._spec",
+        "reference_settings": "._spec",
         "ResultStore": "._store",
         "RouteSummary": "._summary",
         "format_table": "._summary",
@@ -49,9 +55,14 @@ __getattr__, __dir__, __all__ = lazy_exports(
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._benchmark import BenchmarkResult as BenchmarkResult
+    from ._benchmark import benchmark_bar as benchmark_bar
     from ._benchmark import benchmark_log as benchmark_log
+    from ._benchmark import is_benchmark_db as is_benchmark_db
     from ._benchmark import run_benchmark as run_benchmark
     from ._benchmark import write_benchmark_db as write_benchmark_db
+    from ._choose import ChooseError as ChooseError
+    from ._choose import choose as choose
+    from ._choose_config import ChooseConfig as ChooseConfig
     from ._errors import ExperimentError as ExperimentError
     from ._errors import OutputError as OutputError
     from ._library import list_experiments as list_experiments
@@ -70,6 +81,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._runner import run_experiment as run_experiment
     from ._spec import ExperimentSpec as ExperimentSpec
     from ._spec import load_experiment as load_experiment
+    from ._spec import reference_settings as reference_settings
     from ._store import ResultStore as ResultStore
     from ._summary import RouteSummary as RouteSummary
     from ._summary import format_table as format_table

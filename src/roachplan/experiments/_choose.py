@@ -55,40 +55,12 @@ from scipy import stats
 
 from roachplan.planning import PlanResult
 
+from ._choose_config import ChooseConfig
 from ._errors import ExperimentError
-from ._trial import _resample, plan, plan_many
-from ._uncertainty import UncertaintyConfig, rollout_seed
+from ._trial import MIN_ATTEMPT_TIME, _resample, plan, plan_many
+from ._uncertainty import rollout_seed
 
 GRAVITY = 9.81
-
-
-@dataclass(frozen=True, kw_only=True)
-class ChooseConfig:
-    """How to choose."""
-
-    candidates: int = 8
-    """K, the number of candidate paths [-]."""
-    rollouts: int | None = None
-    """Cap on rollouts over all candidates [-] (None: only the time budget)."""
-    budget_s: float | None = 60.0
-    """Wall-time budget of the race [s] (None: only the rollout cap)."""
-    confidence: float = 0.95
-    """Joint confidence of the decision [-]."""
-    min_success: float | None = None
-    """Choose the lowest-energy candidate whose P(success) lower bound is at least this [-];
-    None: the most likely to succeed, then the lowest energy."""
-    batch: int = 4
-    """Rollouts per candidate per round [-]."""
-    max_per_candidate: int = 200
-    """A candidate gets at most this many rollouts [-]."""
-    seed: int = 0
-    indifference: tuple[float, float] = (0.05, 0.05)
-    """(DP, DE): differences too small to matter, DP in P(success) [-] and DE in mean relative
-    energy [fraction, 0.05 = 5 %]; the race stops once the first-ranked candidate is within
-    them of the best (module docstring). (0, 0): off, stop only on separation."""
-    uncertainty: UncertaintyConfig | None = None
-    """What each rollout's world is drawn from; None: the scene's (its `uncertainty:` key,
-    else the defaults of experiments/_uncertainty.py)."""
 
 
 @functools.lru_cache(maxsize=65536)  # (ranking asks for the same few intervals many times)
@@ -243,7 +215,7 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
         for name, via in list(vias.items()):
             if len(picked) >= cfg.candidates or (deadline and time.monotonic() > deadline):
                 break
-            planned = _plan_via(world, via, seed=cfg.seed + tries)
+            planned = _plan_via(world, via, seed=cfg.seed + tries, deadline=deadline)
             before = len(picked)
             if planned is not None and world.route(planned.path_xyz[:, :2]) == name:
                 add(name, planned)
@@ -294,13 +266,14 @@ def _via_pose(world, region) -> tuple[float, float, float] | None:
     return None
 
 
-def _plan_via(world, via, *, seed: int) -> PlanResult | None:
-    """start -> via -> goal as one path (each leg planned with this seed), or None."""
+def _plan_via(world, via, *, seed: int, deadline: float | None = None) -> PlanResult | None:
+    """start -> via -> goal as one path (each leg planned with this seed, within what is left
+    of the planning budget at `deadline`, time.monotonic()), or None."""
     sc = world.scene
-    first = plan(world, seed=seed, start=sc.start, goal=via)
+    first = plan(world, seed=seed, start=sc.start, goal=via, planner=_within(sc.planner, deadline))
     if not first.found:
         return None
-    second = plan(world, seed=seed, start=via, goal=sc.goal)
+    second = plan(world, seed=seed, start=via, goal=sc.goal, planner=_within(sc.planner, deadline))
     if not second.found:
         return None
     return dataclass_replace(
@@ -312,6 +285,14 @@ def _plan_via(world, via, *, seed: int) -> PlanResult | None:
         plan_time=first.plan_time + second.plan_time,
         message=f"through ({via[0]:.2f}, {via[1]:.2f}): {first.message}; {second.message}",
     )
+
+
+def _within(planner, deadline: float | None):
+    """The planner with its time limit cut to what is left before deadline (time.monotonic())."""
+    if deadline is None:
+        return planner
+    left = max(deadline - time.monotonic(), MIN_ATTEMPT_TIME)
+    return dataclass_replace(planner, time_limit=min(planner.time_limit, left))
 
 
 def _eliminate(
