@@ -169,17 +169,9 @@ def boolean() -> Check:
     return lambda v: None if isinstance(v, bool) else "expected true or false"
 
 
-def optional(check: Check, none_means: str = "") -> Check:
-    """check, or None (which means none_means, said in the message)."""
-    aside = f" (or null: {none_means})" if none_means else " (or null)"
-
-    def either(v: Any) -> str | None:
-        if v is None:
-            return None
-        problem = check(v)
-        return None if problem is None else problem + aside
-
-    return either
+def optional(check: Check) -> Check:
+    """check, or None (what None means is the setting's docstring's to say)."""
+    return lambda v: None if v is None else check(v)
 
 
 def numbers(n: int, what: str, element: Callable[[float], bool] = math.isfinite) -> Check:

@@ -43,14 +43,14 @@ class ChooseConfig:
 
     candidates: int = s(8, integer(1, MAX_CANDIDATES))
     """K, the number of candidate paths [-]."""
-    rollouts: int | None = s(None, optional(integer(1), "only the time budget"))
+    rollouts: int | None = s(None, optional(integer(1)))
     """Cap on rollouts over all candidates [-] (None: only the time budget)."""
-    budget_s: float | None = s(60.0, optional(non_negative("s"), "only the rollout cap"))
+    budget_s: float | None = s(60.0, optional(non_negative("s")))
     """Wall-time budget of the race, candidates' planning included [s] (None: only the
     rollout cap; 0: none of it left)."""
     confidence: float = s(0.95, between(0.5, 1.0, high_included=False))
     """Joint confidence of the decision [-]."""
-    min_success: float | None = s(None, optional(_probability, "the most likely to succeed"))
+    min_success: float | None = s(None, optional(_probability))
     """Choose the lowest-energy candidate whose P(success) lower bound is at least this [-];
     None: the most likely to succeed, then the lowest energy."""
     batch: int = s(4, integer(1))

@@ -100,11 +100,11 @@ class MeshingConfig:
 
     voxel: tuple[float, float, float] = s((0.01, 0.01, 0.01), _voxel)
     """Voxel size dx, dy, dz in the camera frame [m] (section 3.1)."""
-    depth_range: tuple[float, float] | None = s(None, optional(_depth_range, "the default"))
+    depth_range: tuple[float, float] | None = s(None, optional(_depth_range))
     """Keep points this near/far [m]: along the optical axis in a camera frame, from the
     sensor in a world frame; None: 0.3-8 m for a camera, everything for a world frame."""
     crop: tuple[tuple[float, float, float], tuple[float, float, float]] | None = s(
-        None, optional(_crop, "no crop")
+        None, optional(_crop)
     )
     """World-frame box ((xmin, ymin, zmin), (xmax, ymax, zmax)) to keep [m]; None: all."""
     outlier_neighbours: int = s(16, integer(1))
@@ -114,19 +114,19 @@ class MeshingConfig:
     ground_threshold: float = s(0.015, positive("m"))
     """RANSAC inlier distance of the ground plane [m]."""
     ground_iterations: int = s(1000, integer(1))
-    camera_pose: tuple[float, ...] | None = s(None, optional(_camera_pose, "from the ground"))
+    camera_pose: tuple[float, ...] | None = s(None, optional(_camera_pose))
     """World pose of the camera x, y, z [m], qx, qy, qz, qw; None: from the ground plane."""
     frame: Frame = s("auto", one_of(FRAMES))
     """The capture's frame: "camera" (optical: x right, y down, z forward), "world" (z up,
     or `up`), or "auto": what the file says (depth images, organized clouds, a bag's frame
     id), else "world" for a georeferenced cloud or one all round the sensor, else "camera"."""
-    up: tuple[float, float, float] | None = s(None, optional(_up, "the gravity prior's default"))
+    up: tuple[float, float, float] | None = s(None, optional(_up))
     """Up in the capture's frame (the gravity prior); None: a calibration's camera pose, a
     bag's IMU, -y for a camera frame, +z for a world frame."""
-    ground_point: tuple[float, float, float] | None = s(None, optional(_point, "none"))
+    ground_point: tuple[float, float, float] | None = s(None, optional(_point))
     """A point on the intended ground, capture frame [m]: the plane through it is the ground
     (the page's "click the ground to re-level")."""
-    recentre: bool | None = s(None, optional(boolean(), "when georeferenced"))
+    recentre: bool | None = s(None, optional(boolean()))
     """Put the cloud's centre at x = y = 0 (world frame); None: when georeferenced."""
     method: Method = s("sensor", one_of(METHODS))
     """"sensor": samples joined at the density the sensor took them (perception/_surface.py);
@@ -134,7 +134,7 @@ class MeshingConfig:
     max_fill: float = s(0.3, positive("m"))
     """Sensor method: holes inside an observed surface at most this wide [m], with a flat rim,
     are filled from it; larger ones (and every shadow) stay unknown."""
-    cell: float | None = s(None, optional(positive("m"), "from the voxel and the cloud"))
+    cell: float | None = s(None, optional(positive("m")))
     """Grid method: cell size of the height field [m] (default: dx, or the cloud's point
     spacing when it is sparser, as an airborne lidar's metres)."""
     fill_holes: int = s(2, integer(0))
@@ -168,8 +168,8 @@ class PinholeNumbers:
     fy: float = s(check=_pixels)
     cx: float = s(check=_pixels)
     cy: float = s(check=_pixels)
-    width: int | None = s(None, optional(_image_side, "the depth image's"))
-    height: int | None = s(None, optional(_image_side, "the depth image's"))
+    width: int | None = s(None, optional(_image_side))
+    height: int | None = s(None, optional(_image_side))
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -219,10 +219,10 @@ class CaptureSettings:
     flags."""
 
     meshing: MeshingConfig = field(default_factory=MeshingConfig)
-    intrinsics: str | PinholeNumbers | None = s(None, optional(_intrinsics, "a file beside it"))
+    intrinsics: str | PinholeNumbers | None = s(None, optional(_intrinsics))
     """Preset name, calibration file path, or the numbers fx, fy, cx, cy[, width, height]
     (depth images; default: a calibration file beside the image)."""
-    depth_scale: float | None = s(None, optional(positive("units per metre"), "1000 or the file's"))
+    depth_scale: float | None = s(None, optional(positive("units per metre")))
     """Depth units per metre (depth images; default 1000 or the sidecar's)."""
     depth_units: DepthUnits | None = s(None, optional(one_of(DEPTH_UNITS)))
     """"kinect-disparity": the depth image holds a Kinect v1's raw disparity; None: depth in

@@ -73,7 +73,7 @@ class PlannerConfig:
     budget instead of stopping at their first solution."""
     waypoint_spacing: float = s(0.05, positive("m"))
     """Spacing of the waypoints handed to the driver [m]."""
-    turning_radius: float | None = s(0.13, optional(positive("m"), "the planner's raw path"))
+    turning_radius: float | None = s(0.13, optional(positive("m")))
     """Drivable plans (issue 18): turn the planner's route into arcs of this radius [m] and
     straight lines, every state checked (planning/_drivable.py). From the turning calibration
     (`roachplan calibrate-turning`, sim/_turning.py): the roach turns at most 10.3 /m on flat
@@ -81,7 +81,7 @@ class PlannerConfig:
     1 / (0.75 * 10.3) = 0.129 m, so the tracking driver keeps a third more to correct with
     (tests/test_robot.py re-derives it). None: the planner's raw path, as the report drove it
     (`reference: true`)."""
-    spin_margin: float | None = s(0.03, optional(positive("m"), "arcs only, no turns on the spot"))
+    spin_margin: float | None = s(0.03, optional(positive("m")))
     """Drivable plans: where no arc of turning_radius goes on, the robot may turn on the spot
     (its sides in opposite directions), every heading of the turn checked at the spin's point
     and round it within this distance [m]: how far the body centre wanders in a spin, 2.1 cm in

@@ -147,7 +147,7 @@ class Scene:
     """One line for people."""
     terrain: tuple[TerrainObject, ...]
     """Terrain objects, in world frame."""
-    ground: float | None = s(0.0, optional(finite("m"), "no ground"))
+    ground: float | None = s(0.0, optional(finite("m")))
     """Height of an endless ground plane [m], or None for no ground."""
     start: tuple[float, float, float] | None = None
     """Robot start pose: x [m], y [m], yaw [rad]; None: picked when the world is built
