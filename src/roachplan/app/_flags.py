@@ -98,13 +98,21 @@ FLAGS: dict[str, tuple[str, Callable[[], Check]]] = {
 }
 
 
+SCENE_WIDE = ("scale", "scad_timeout")
+"""Flags applied to every terrain object of a scene (scenes/_adjust.py), refused in the words
+those changes have always used: `--scale: expected ..., got -1.0`."""
+
+
 def check_flags(args: argparse.Namespace) -> None:
     """Before any work: every flag of FLAGS given is accepted by its validator, else
     UsageError naming the flag, the value and what is accepted."""
     for dest, (flag, check) in FLAGS.items():
         value = getattr(args, dest, None)
-        if value is not None and (expected := check()(value)) is not None:
-            raise refused(flag, value, expected)
+        if value is None or (expected := check()(value)) is None:
+            continue
+        if dest in SCENE_WIDE:
+            raise UsageError(f"{flag}: {SettingError('', value, expected).problem}")
+        raise refused(flag, value, expected)
 
 
 def setting_flag(exc: SettingError, flags: dict[str, tuple[str, Any]]) -> UsageError:

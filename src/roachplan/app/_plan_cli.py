@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from roachplan.experiments import ExperimentError, check_output_file
+from roachplan.experiments import check_output_file
 from roachplan.planning import PLANNER_NAMES
 from roachplan.scenes import MAX_SEED
 
@@ -63,10 +63,10 @@ def _rerun_trial(args: argparse.Namespace) -> int:
     from roachplan.experiments import rerun_trial
 
     if args.from_dir is None or args.trial is None:
-        raise ExperimentError("give both --from DIR and --trial K to re-run a stored trial")
+        raise UsageError("give both --from DIR and --trial K to re-run a stored trial")
     recorded = ("scene", "seed", "planner", "time_limit")
     if any(getattr(args, k) is not None for k in recorded):
-        raise ExperimentError(
+        raise UsageError(
             "--from re-runs a trial with its recorded scene, seed and planner; "
             "drop --scene/--seed/--planner/--time-limit"
         )
