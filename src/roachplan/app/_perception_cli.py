@@ -39,7 +39,7 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     import open3d  # noqa: F401 - mapped here, not under the child's address-space limit
     import tqdm  # noqa: F401
 
-    import roachplan.perception._pipeline  # noqa: F401 - likewise
+    from roachplan.perception import mesh_capture  # noqa: F401 - its pipeline, likewise
     from roachplan.planning import run_isolated
 
     # In a child under the memory limit (issue 15): a capture that needs more ends in a clear
