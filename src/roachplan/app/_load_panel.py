@@ -17,6 +17,7 @@ from pathlib import Path
 
 import yaml
 
+from roachplan import setting_problem
 from roachplan.perception import (
     DEPTH_UNITS,
     METHODS,
@@ -296,18 +297,17 @@ class LoadPanel:
         the pipeline's default is None (left out), the others plain data."""
         voxel, cell = round(float(self.voxel.value), 6), round(float(self.cell.value), 6)
         near, far = float(self.near.value), float(self.far.value)
-        if (near, far) != DEFAULT_RANGE and not 0 <= near < far:
-            raise CaptureError(f"depth range: near ({near:g} m) must be below far ({far:g} m)")
+        # The pipeline's own validators: what a scene file and `roachplan mesh` accept.
+        problem = setting_problem(MeshingConfig, "depth_range", (near, far))
+        if (near, far) != DEFAULT_RANGE and problem:
+            raise CaptureError(f"Depth near {near:g} m, far {far:g} m: {problem}")
         crop = None
         if self.crop.value:
             lo, hi = (
                 tuple(round(float(v), 4) for v in b.value) for b in (self.crop_min, self.crop_max)
             )
-            if not all(a < b for a, b in zip(lo, hi, strict=True)):
-                raise CaptureError(
-                    f"crop box: min {list(lo)} must be below max {list(hi)} in "
-                    f"x, y and z (metres, as drawn)"
-                )
+            if problem := setting_problem(MeshingConfig, "crop", (lo, hi)):
+                raise CaptureError(f"Crop box min {list(lo)}, max {list(hi)}: {problem} (as drawn)")
             crop = [list(lo), list(hi)]
         return {
             "method": None if self.mesh_method.value == DEFAULTS.method else self.mesh_method.value,

@@ -10,7 +10,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "BenchmarkResult": "._benchmark",
+        "benchmark_bar": "._benchmark",
         "benchmark_log": "._benchmark",
+        "is_benchmark_db": "._benchmark",
         "run_benchmark": "._benchmark",
         "write_benchmark_db": "._benchmark",
         "CandidatePlan": "._choose_candidate",
@@ -63,7 +65,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._benchmark import BenchmarkResult as BenchmarkResult
+    from ._benchmark import benchmark_bar as benchmark_bar
     from ._benchmark import benchmark_log as benchmark_log
+    from ._benchmark import is_benchmark_db as is_benchmark_db
     from ._benchmark import run_benchmark as run_benchmark
     from ._benchmark import write_benchmark_db as write_benchmark_db
     from ._choose import choose as choose

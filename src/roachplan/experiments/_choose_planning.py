@@ -15,7 +15,7 @@ from roachplan.planning import PlanResult
 
 from ._choose_candidate import Candidate
 from ._choose_config import ChooseConfig
-from ._trial import _resample, plan, plan_many
+from ._trial import MIN_ATTEMPT_TIME, _resample, plan, plan_many
 
 
 def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) -> list[Candidate]:
@@ -43,7 +43,7 @@ def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) ->
         for name, via in list(vias.items()):
             if len(picked) >= cfg.candidates or (deadline and time.monotonic() > deadline):
                 break
-            planned = _plan_via(world, via, seed=cfg.seed + tries)
+            planned = _plan_via(world, via, seed=cfg.seed + tries, deadline=deadline)
             before = len(picked)
             if planned is not None and world.route(planned.path_xyz[:, :2]) == name:
                 add(name, planned)
@@ -94,13 +94,14 @@ def _via_pose(world, region) -> tuple[float, float, float] | None:
     return None
 
 
-def _plan_via(world, via, *, seed: int) -> PlanResult | None:
-    """start -> via -> goal as one path (each leg planned with this seed), or None."""
+def _plan_via(world, via, *, seed: int, deadline: float | None = None) -> PlanResult | None:
+    """start -> via -> goal as one path (each leg planned with this seed, within what is left
+    of the planning budget at `deadline`, time.monotonic()), or None."""
     sc = world.scene
-    first = plan(world, seed=seed, start=sc.start, goal=via)
+    first = plan(world, seed=seed, start=sc.start, goal=via, planner=_within(sc.planner, deadline))
     if not first.found:
         return None
-    second = plan(world, seed=seed, start=via, goal=sc.goal)
+    second = plan(world, seed=seed, start=via, goal=sc.goal, planner=_within(sc.planner, deadline))
     if not second.found:
         return None
     return dataclass_replace(
@@ -112,3 +113,11 @@ def _plan_via(world, via, *, seed: int) -> PlanResult | None:
         plan_time=first.plan_time + second.plan_time,
         message=f"through ({via[0]:.2f}, {via[1]:.2f}): {first.message}; {second.message}",
     )
+
+
+def _within(planner, deadline: float | None):
+    """The planner with its time limit cut to what is left before deadline (time.monotonic())."""
+    if deadline is None:
+        return planner
+    left = max(deadline - time.monotonic(), MIN_ATTEMPT_TIME)
+    return dataclass_replace(planner, time_limit=min(planner.time_limit, left))

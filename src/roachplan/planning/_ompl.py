@@ -35,10 +35,11 @@ from scipy.sparse.csgraph import dijkstra
 
 from roachplan.processes import call
 
+from ._config import PlannerConfig
 from ._drivable import DrivablePath, drivable_path, spin_states
 from ._heightfield import HeightField
 from ._isolated import Method
-from ._names import PLANNER_NAMES, PlannerName, PlanningError
+from ._names import PLANNER_NAMES, PlanningError
 from ._ompl_import import ob, og, ou
 from ._regions import StandableMap, homology_signature, standable_map
 from ._validity import Footprint, ValidityConfig, check_states, describe_state
@@ -68,56 +69,6 @@ ou.setLogLevel(ou.LOG_WARN)
 
 DRIVABLE_ATTEMPTS = 5
 """Routes searched, at most, for one the robot can follow (drivable plans) [-]."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class PlannerConfig:
-    """How to plan."""
-
-    name: PlannerName = "prm"
-    """OMPL planner, by its class name in lower case."""
-    time_limit: float = 20.0
-    """Wall-clock cap on planning [s]; plans that hit it are not reproducible."""
-    max_iterations: int = 20000
-    """Iteration budget (PRM: milestones) after which planning gives up [-]."""
-    prm_batch: int = 25
-    """PRM: milestones added between two checks for a start-goal connection [-]."""
-    check_resolution: float = 0.01
-    """Spacing of validity checks along a motion [m]."""
-    simplify: bool = False
-    """Shortcut the path: drop needless vertices, then try shortcuts between random pairs of
-    points (the report drove raw PRM paths, so off by default)."""
-    smooth: bool = False
-    """Round the path's corners with B-spline smoothing, keeping it valid."""
-    optimize: bool = False
-    """Optimizing planners (RRT*, PRM*, BIT*, ...) refine path length until the iteration
-    budget instead of stopping at their first solution."""
-    waypoint_spacing: float = 0.05
-    """Spacing of the waypoints handed to the driver [m]."""
-    turning_radius: float | None = 0.13
-    """Drivable plans (issue 18): turn the planner's route into arcs of this radius [m] and
-    straight lines, every state checked (planning/_drivable.py). From the turning calibration
-    (`roachplan calibrate-turning`, sim/_turning.py): the roach turns at most 10.3 /m on flat
-    ground, at the driver's largest motor ratio of 3; plans use 3/4 of that (PLAN_HEADROOM),
-    1 / (0.75 * 10.3) = 0.129 m, so the tracking driver keeps a third more to correct with
-    (tests/test_robot.py re-derives it). None: the planner's raw path, as the report drove it
-    (`reference: true`)."""
-    spin_margin: float | None = 0.03
-    """Drivable plans: where no arc of turning_radius goes on, the robot may turn on the spot
-    (its sides in opposite directions), every heading of the turn checked at the spin's point
-    and round it within this distance [m]: how far the body centre wanders in a spin, 2.1 cm in
-    the spin calibration (sim/_turning.py CALIBRATED_SPIN, half turns entered from a walk) plus
-    1 cm for where the tracking driver begins it (measured on the floor: up to 2.4 cm in all).
-    None: arcs only, no turns on the spot."""
-    goal_radius: float = 0.05
-    """Start and goal closer than this [m] coincide: the plan is trivial (the robot stands where
-    the driver counts the goal as reached; a drivable plan turns on the spot to the goal's
-    heading when it differs and the turn is valid). The tracking and reference drivers' goal
-    radius r_end, 5 cm (Tong 2018, chapter 7)."""
-    keep_roadmap: bool = False
-    """Return the planner's graph (roadmap or tree) with the plan, for display."""
-    validity: ValidityConfig = field(default_factory=ValidityConfig)
-    """Tolerances of the validity conditions."""
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

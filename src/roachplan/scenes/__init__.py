@@ -21,7 +21,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "render_scad_result": "._openscad",
         "ScadRender": "._openscad",
         "LIBRARY": "._library",
-        "MAX_SEED": "._library",
+        "MAX_SEED": "roachplan._settings",
         "MESH_SUFFIXES": "._scene",
         "TERRAIN_SUFFIXES": "._scene",
         "terrain_file_scene": "._scene",
@@ -46,12 +46,13 @@ __getattr__, __dir__, __all__ = lazy_exports(
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from roachplan._settings import MAX_SEED as MAX_SEED
+
     from ._adjust import scaled_scene as scaled_scene
     from ._adjust import with_scad_backend as with_scad_backend
     from ._adjust import with_scad_timeout as with_scad_timeout
     from ._errors import SceneError as SceneError
     from ._library import LIBRARY as LIBRARY
-    from ._library import MAX_SEED as MAX_SEED
     from ._library import library_names as library_names
     from ._library import list_scenes as list_scenes
     from ._mesh import looks_like_millimetres as looks_like_millimetres
