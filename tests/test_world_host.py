@@ -8,11 +8,15 @@ from __future__ import annotations
 import os
 import signal
 import time
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import pytest
 
 from roachplan.app._jobs import Job, WorldHost, _plan_job
+
+if TYPE_CHECKING:
+    from roachplan.experiments import LabelledPlan
 
 
 def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
@@ -21,8 +25,12 @@ def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
     while not job.done and time.monotonic() < end:
         for kind, payload in job.poll(timeout=0.5):
             assert kind != "error", payload
-            if kind == "attempt" and payload[1] is not None:
-                out.append(np.asarray(payload[1].plan.path_xyz))
+            if kind != "attempt":
+                continue
+            # _plan_job's on_attempt sends (seed, its LabelledPlan or None)
+            _, labelled = cast("tuple[int, LabelledPlan | None]", payload)
+            if labelled is not None:
+                out.append(np.asarray(labelled.plan.path_xyz))
     assert job.done, "the plan job did not finish"
     return out
 
@@ -82,7 +90,9 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
         job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is app.core.host
         hosted = _paths(job)
-        os.kill(app.core.host._proc.pid, signal.SIGKILL)
+        host_pid = app.core.host._proc.pid
+        assert host_pid is not None  # the host has started
+        os.kill(host_pid, signal.SIGKILL)
         app.core.host._proc.join(timeout=5)
         job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is None, "a plain child, sent the world"
@@ -111,12 +121,14 @@ def test_cancel_kills_a_fork_whose_host_has_closed_meanwhile(world):
     # reach the plan, now a child of init's.
     old = WorldHost(world)
     job = Job(_plan_job, 50, _request(world, 0, time_limit=30.0), time.monotonic() + 300, host=old)
+    pid = job.pid
+    assert pid is not None  # a fork of the host
     time.sleep(0.3)
     old.close()
-    assert not old.is_parent_of(job.pid) and not _gone(job.pid), "it runs on, orphaned"
+    assert not old.is_parent_of(pid) and not _gone(pid), "it runs on, orphaned"
     job.cancel()
     for _ in range(100):
-        if _gone(job.pid):
+        if _gone(pid):
             break
         time.sleep(0.05)
-    assert _gone(job.pid)
+    assert _gone(pid)
