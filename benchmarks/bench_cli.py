@@ -32,6 +32,7 @@ def median_time(cmd: list[str], repeat: int) -> float:
 
 
 def main() -> None:
+    assert __doc__ is not None
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=7)
     args = ap.parse_args()

@@ -26,6 +26,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -152,7 +153,9 @@ def _plan_in_dubins_space(
         path = pdef.getSolutionPath()
         simplifier.reduceVertices(path)
         simplifier.collapseCloseVertices(path)
-    out = dict(found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace()))
+    out: dict[str, Any] = dict(
+        found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace())
+    )
     if found:
         poses = [(s.getX(), s.getY(), s.getYaw()) for s in pdef.getSolutionPath().getStates()]
         curves = [dubins_path(a, b, radius) for a, b in zip(poses, poses[1:])]
@@ -200,6 +203,7 @@ def compare_spaces(seeds: int) -> None:
     double_bridge: successes, median plan time and path length, largest curvature."""
     world = build_world(load_scene("double_bridge"))
     radius = world.scene.planner.turning_radius
+    assert radius is not None  # the default planner's: plans are drivable
     print(
         f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
         f"(curvature limit {1 / radius:.2f} /m)"

@@ -199,7 +199,9 @@ def test_cancel_a_batch_show_a_trial_and_the_roadmap(artifacts):
             page.get_by_role("button", name="Cancel batch").click()
             done = page.get_by_text(re.compile(r"Batch cancelled: \d+/40 trials"))
             done.wait_for(timeout=60_000)
-            n = int(re.search(r"cancelled: (\d+)/40", done.inner_text()).group(1))
+            said = re.search(r"cancelled: (\d+)/40", done.inner_text())
+            assert said is not None
+            n = int(said.group(1))
             assert 1 <= n < 40 and len(app.scene_trials) == n
             page.screenshot(path=artifacts / "app-09-batch-cancelled.png")
 

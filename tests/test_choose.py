@@ -294,9 +294,11 @@ def _check_events(events: list, choice) -> dict[int, str | None]:
                 s, why = e.standings[t.candidate], t.why
                 assert s.state == "out" and s.knocked_out == why
                 if why.reason == "less_likely":  # its P interval wholly below the leader's
+                    assert why.by is not None
                     assert why.own_bound == s.p_high < why.rival_bound
                     assert why.rival_bound == e.standings[why.by].p_low
                 elif why.reason == "costs_more":  # its energy interval wholly above a rival's
+                    assert why.by is not None
                     assert why.own_bound == s.relative_energy_low > why.rival_bound
                     assert why.rival_bound == e.standings[why.by].relative_energy_high
                     assert e.standings[why.by].state == "racing"
@@ -672,6 +674,7 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, m
         text=True,
         env={**os.environ, "RAY_AUTH_MODE": "disabled"},
     )
+    assert holder.stdin is not None and holder.stdout is not None  # both PIPE
     try:
         address = holder.stdout.readline().strip()
         assert address.startswith("127.0.0.1:"), (

@@ -84,7 +84,9 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
 
             done = page.get_by_text(re.compile(r"^Chosen: path \d+ \(")).first
             done.wait_for(timeout=150_000)
-            chosen = int(re.search(r"Chosen: path (\d+)", done.inner_text()).group(1))
+            said = re.search(r"Chosen: path (\d+)", done.inner_text())
+            assert said is not None
+            chosen = int(said.group(1))
             rows = _ranking_rows(page)
             assert len(rows) == k, rows
             assert re.fullmatch(rf"{chosen} \w+ chosen", rows[0][0])  # best first
