@@ -206,6 +206,7 @@ def test_a_child_killed_by_a_signal_says_so_and_suggests_memory():
 def test_a_child_past_its_time_limit_is_stopped_and_says_so(start):
     child = Child(_tree, (60,), start=start, time_limit=1.5, task="driving")
     events = _follow(child, 30)
+    assert isinstance(events[0], tuple)  # (_tree's ("pids", program, forked))
     (_, program, forked) = events[0]
     assert 1.5 <= child.elapsed < 10
     assert isinstance(child.outcome, Died) and child.outcome.cause == "time"
@@ -223,7 +224,7 @@ def test_cancel_leaves_no_process_of_the_tree_behind(start):
     (_, program, forked) = events[0]
     tree = {child.pid, program, forked} | descendants(child.pid)
     child.cancel()
-    assert child.done and child.outcome.cause == "cancelled"
+    assert child.done and isinstance(child.outcome, Died) and child.outcome.cause == "cancelled"
     for pid in tree:
         assert _until(lambda p=pid: _gone(p)), f"{pid} outlived Cancel"
     child.cancel()  # (again: nothing)
@@ -248,6 +249,7 @@ def test_a_child_dies_with_its_parent(start):
         [sys.executable, "-c", _ORPHAN, start], stdout=subprocess.PIPE, text=True, env=env
     )
     try:
+        assert parent.stdout is not None  # (stdout=PIPE)
         pid = int(parent.stdout.readline())
         assert not _gone(pid)
         parent.kill()  # (no exit handler runs: only the kernel can end the child)
@@ -336,8 +338,13 @@ def test_a_terminated_pool_raises_worker_died_and_leaves_no_worker():
 
 def test_a_program_is_followed_limited_and_its_output_kept_at_both_ends(tmp_path):
     heard: list[Running] = []
+
+    def hear(event: object) -> None:
+        assert isinstance(event, Running)  # (a program's only event)
+        heard.append(event)
+
     script = "yes roachplan | head -c 300000 >&2; sleep 60 & sleep 60"
-    with listening(heard.append):
+    with listening(hear):
         run = run_program(["sh", "-c", script], time_limit=2.0, what="slow.scad", keep=1000)
     assert run.timed_out and run.status == -signal.SIGKILL and 2.0 <= run.seconds < 10
     assert run.stderr.startswith("roachplan\n") and "bytes left out" in run.stderr

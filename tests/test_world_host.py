@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from roachplan.app._jobs import Job, WorldHost, _plan_job, failure
+from roachplan.app._jobs import Attempt, Job, WorldHost, _plan_job, failure
 
 
 def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
@@ -20,6 +20,7 @@ def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
     out, end = [], time.monotonic() + timeout
     while not job.done and time.monotonic() < end:
         for attempt in job.poll(timeout=0.5):
+            assert isinstance(attempt, Attempt)  # (a plan job's only event)
             if attempt.plan is not None:
                 out.append(np.asarray(attempt.plan.plan.path_xyz))
         assert failure(job) is None, failure(job)
@@ -82,7 +83,7 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
         job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is app.core.host
         hosted = _paths(job)
-        os.kill(app.core.host._proc.pid, signal.SIGKILL)
+        os.kill(app.core.host.pid, signal.SIGKILL)
         app.core.host._proc.join(timeout=5)
         job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is None, "a plain child, sent the world"

@@ -13,9 +13,11 @@ and forks on request. Handing the world (0.7 MB pickled) to a new child on every
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar, cast
 
 from roachplan.experiments import LabelledPlan, TrialResult, finish_trial, plan_many
 from roachplan.perception import mesh_capture
@@ -36,6 +38,8 @@ from ._relevel import CaptureView
 # -- work in child processes --------------------------------------------------------------------
 
 preload("roachplan.experiments._trial")
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,13 +81,13 @@ def _warm_job(events: Channel) -> None:
     pass
 
 
-def load_outcome(job: Job) -> tuple[tuple | None, str | None]:
+def load_outcome(job: Job) -> tuple[tuple[World, CaptureView | None] | None, str | None]:
     """(the (World, CaptureView | None) a finished load job returned, why it failed): one of
     them is None. A capture that needs more memory than a load may have ends in what to change
     in the page, not by taking the machine (issue 15)."""
     outcome = job.outcome
-    if isinstance(outcome, Returned):
-        return outcome.value, None
+    if isinstance(outcome, Returned):  # (what _load_job returned)
+        return cast("tuple[World, CaptureView | None]", outcome.value), None
     if isinstance(outcome, Died) and outcome.cause == "memory":
         return None, (
             f"loading this file needed more memory than the server allows a "
@@ -114,14 +118,14 @@ _JOBS = {
 memory ...", whether its memory limit is also the hard limit). Other targets: ("job", True)."""
 
 
-class Job(Child):
+class Job(Child[T]):
     """target(events, *args) in a fresh child of the fork server (roachplan.processes.Child),
     under the child memory limit; with host, target(events, host's world, *args) in a fork of
     that WorldHost instead. events: the child's Channel (send(event)); what target sends
     arrives in order (poll), then its outcome (`outcome`; `failure`). `cancel` kills it and
     whatever it started, at once."""
 
-    def __init__(self, target, *args, host: WorldHost | None = None) -> None:
+    def __init__(self, target: Callable[..., T], *args, host: WorldHost | None = None) -> None:
         task, hard_memory = _JOBS.get(target, ("job", True))
         if host is None:
             super().__init__(
@@ -139,7 +143,7 @@ def _in_world(world: World, target, args: tuple):
     return target(CHANNEL, world, *args)
 
 
-class WorldHost(Host):
+class WorldHost(Host[World]):
     """A long-lived child of the fork server holding one world, which forks a fresh child of
     itself for each job on that world (Job(..., host=)): a job starts in a few milliseconds, where a
     child of the fork server first has to receive the world (roachplan.processes.Host)."""

@@ -18,6 +18,7 @@ from ._commands import CancelLoadCmd, Cmd, LoadSceneCmd
 from ._jobs import Job, _load_job, load_outcome
 from ._load_panel import needs_millimetre_scale
 from ._placement import model_view
+from ._relevel import CaptureView
 from ._uploads import public_message
 
 
@@ -36,7 +37,7 @@ class Loading:
     """ref is a scene file the app wrote (and may write back into)."""
     what: str
     """What the panel says while it runs ("Loading ...", "Rendering ... with OpenSCAD")."""
-    result: tuple | None = None
+    result: tuple[World, CaptureView | None] | None = None
     """(World, CaptureView | None) once it arrived."""
     error: str | None = None
 
@@ -91,6 +92,7 @@ class BackgroundLoad:
         """The finished load, which is no longer current."""
         ld, self.current = self.current, None
         self.cancel_button.visible = False
+        assert ld is not None, "no load to take (poll returns it first)"
         return ld
 
     def show(self, text: str | None = None) -> None:

@@ -43,7 +43,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
-from typing import Literal
+from multiprocessing.process import BaseProcess
+from typing import Generic, Literal, TypeVar, cast
 
 from ._errors import ChildError
 from ._events import Died, Outcome, Raised, Returned, _only, emit
@@ -51,6 +52,8 @@ from ._limits import child_memory_limit, die_with_parent, limit_memory, memory_a
 from ._tree import kill_tree, parent_of, start_time
 
 Start = Literal["auto", "fork", "forkserver", "spawn"]
+T = TypeVar("T")
+V = TypeVar("V")
 
 _FORKSERVER = mp.get_context("forkserver")
 _SPAWN = mp.get_context("spawn")
@@ -92,7 +95,7 @@ _live: set[Child] = set()
 """Children started here and not yet ended: killed when this process exits."""
 
 
-class Child:
+class Child(Generic[T]):
     """fn(*args, **kwargs) in a fresh child process (module docstring: `start`), under a memory
     limit (`memory` bytes, default $ROACHPLAN_CHILD_MEMORY; 0: none) and, with time_limit [s],
     a wall-time limit counted from the start. Its events arrive in order (poll), then its
@@ -101,7 +104,7 @@ class Child:
 
     def __init__(
         self,
-        fn: Callable,
+        fn: Callable[..., T],
         args: tuple = (),
         kwargs: dict | None = None,
         *,
@@ -135,7 +138,7 @@ class Child:
             task=task,
             die_with_parent=self.host is None,
         )
-        self._proc: mp.process.BaseProcess | None = None
+        self._proc: BaseProcess | None = None
         self._forked = False
         self.started = time.monotonic()
         """When it started (time.monotonic()) [s]."""
@@ -176,14 +179,16 @@ class Child:
         self._conn, end = ctx.Pipe(duplex=False)
         # daemon: were this process to end without cancelling it, multiprocessing would stop
         # it rather than wait for it.
-        self._proc = ctx.Process(
+        proc = ctx.Process(
             target=_run, args=(end, work), daemon=True, name=f"roachplan {work.task}"
         )
+        self._proc = proc
         try:
-            self._proc.start()
+            proc.start()
         finally:
             end.close()
-        return self._proc.pid
+        assert proc.pid is not None  # (set by start)
+        return proc.pid
 
     @property
     def elapsed(self) -> float:
@@ -236,10 +241,16 @@ class Child:
         assert self.outcome is not None
         return self.outcome
 
-    def result(self, on_event: Callable[[object], None] = emit):
+    def result(self, on_event: Callable[[object], None] = emit) -> T:
         """What fn returned, once it has; its exception re-raised (with the child's traceback
         as a note), or ChildError saying how it died."""
-        return unwrap(self.wait(on_event))
+        return cast(T, unwrap(self.wait(on_event)))  # (a Returned holds what fn returned)
+
+    @property
+    def value(self) -> T:
+        """What fn returned, once it has (its outcome is a Returned)."""
+        assert isinstance(self.outcome, Returned), "the child has not returned"
+        return cast(T, self.outcome.value)  # (a Returned holds what fn returned)
 
     def kill(self) -> None:
         """SIGKILL the child and every process under it, now. Touches no pipe, so another
@@ -308,7 +319,7 @@ class Child:
         return Died(cause=cause, why=why, status=status)
 
 
-def unwrap(outcome: Outcome):
+def unwrap(outcome: Outcome) -> object:
     """The value of a Returned; a Raised's exception re-raised (with the child's traceback as
     a note), or ChildError with the message of one that did not travel or of a Died."""
     if isinstance(outcome, Returned):
@@ -324,7 +335,7 @@ def unwrap(outcome: Outcome):
 
 
 def call(
-    fn: Callable,
+    fn: Callable[..., T],
     args: tuple = (),
     kwargs: dict | None = None,
     *,
@@ -334,7 +345,7 @@ def call(
     time_limit: float | None = None,
     task: str = "child",
     preload: tuple[str, ...] = (),
-):
+) -> T:
     """fn(*args, **kwargs) in a fresh child process (Child, same settings), waited for: its
     return value, or its exception re-raised (ChildError when it died without one). Its events
     are emitted here as they come."""
@@ -465,14 +476,14 @@ def _end_children() -> None:
 # -- a host: a long-lived child that forks per job -------------------------------------------------
 
 
-class Host:
+class Host(Generic[V]):
     """A long-lived child of the fork server holding `value`, which forks a fresh child of
     itself for each Child(fn, ..., start=host): fn(value, *args) starts in a few milliseconds,
     where a child of the fork server first has to receive the value. The host itself never runs
     work (so each fork starts from the state the value was received in: no OMPL draw, no PRM
     thread) and has one thread, so a bare fork is safe."""
 
-    def __init__(self, value: object, *, name: str = "roachplan host") -> None:
+    def __init__(self, value: V, *, name: str = "roachplan host") -> None:
         self.value = value
         self._conn, end = _FORKSERVER.Pipe(duplex=True)  # (a socket pair: it can carry an fd)
         self._proc = _FORKSERVER.Process(
@@ -484,7 +495,9 @@ class Host:
 
     @property
     def pid(self) -> int:
-        return self._proc.pid
+        pid = self._proc.pid
+        assert pid is not None  # (started in __init__)
+        return pid
 
     @property
     def alive(self) -> bool:
