@@ -81,8 +81,7 @@ def drive(
     `relative_energy` (1.0 = walking straight on a floor), `trajectory` (world frame [m])."""
     from roachplan.experiments import finish_trial
 
-    scene = world.scene
-    return finish_trial(world, planned, start=start or scene.start, goal=goal or scene.goal)
+    return finish_trial(world, planned, start=start or world.start, goal=goal or world.goal)
 
 
 def trial(

@@ -59,8 +59,8 @@ class StartGoal:
         why they could not be picked (pick_failure, in the page's words), said above the
         markers' problems while either is invalid."""
         self.failure = None if failure is None else with_remedy(failure)
-        self.start_yaw.value = round(math.degrees(world.scene.start[2]))
-        self.goal_yaw.value = round(math.degrees(world.scene.goal[2]))
+        self.start_yaw.value = round(math.degrees(world.start[2]))
+        self.goal_yaw.value = round(math.degrees(world.goal[2]))
 
     def pose(self, which: str) -> tuple[float, float, float]:
         """The marker "start" or "goal" as (x [m], y [m], yaw [rad])."""
@@ -75,7 +75,7 @@ class StartGoal:
         for which in ("start", "goal"):
             pose = self.pose(which)
             problem = pose_problem(world, pose)
-            (lo, hi) = world.scene.bounds
+            (lo, hi) = world.bounds
             if not problem and not (lo[0] <= pose[0] <= hi[0] and lo[1] <= pose[1] <= hi[1]):
                 problem = (
                     f"outside the planning area x in [{lo[0]:g}, {hi[0]:g}], "

@@ -23,7 +23,7 @@ import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -215,9 +215,9 @@ def _choice_replay(folder: Path) -> Replay:
         "reason": driven.reason,
         "drive_time": driven.drive_time,
         "energy": driven.energy,
-        "relative_energy": driven.energy / reference_energy(world, scene.start, scene.goal),
-        "start": list(scene.start),
-        "goal": list(scene.goal),
+        "relative_energy": driven.energy / reference_energy(world, world.start, world.goal),
+        "start": list(world.start),
+        "goal": list(world.goal),
         "path": path.tolist(),
         "spins": [list(s) for s in spins],
         "trajectory": [list(p) for p in driven.trajectory],
@@ -279,7 +279,7 @@ def _record(replay: Replay):
         # The app's markers are draggable gizmos; a replay shows plain ones at the trial's poses.
         server.scene.remove_by_name("/markers")
         for which in ("start", "goal"):
-            pose = tuple(shown.get(which) or getattr(world.scene, which))
+            pose = tuple(shown.get(which) or getattr(world, which))
             server.scene.add_icosphere(
                 f"/markers/{which}",
                 radius=0.03,
@@ -295,13 +295,13 @@ def _record(replay: Replay):
         lo, hi = (
             np.asarray(world.mesh.bounds)
             if len(world.mesh.faces)
-            else np.asarray([[*world.scene.bounds[0], 0.0], [*world.scene.bounds[1], 0.0]])
+            else np.asarray([[*world.bounds[0], 0.0], [*world.bounds[1], 0.0]])
         )
         centre, span = (lo + hi) / 2, float(max(hi[0] - lo[0], hi[1] - lo[1], 0.5))
         server.initial_camera.look_at = tuple(centre)
         server.initial_camera.position = tuple(centre + np.array([-0.25, -0.6, 0.5]) * span)
         label = " · ".join(v for _, v in numbers(shown)[3:8])
-        start = on_surface(world, tuple(shown.get("start") or world.scene.start))
+        start = on_surface(world, tuple(shown.get("start") or world.start))
         server.scene.add_label(
             "/replay/numbers",
             f"{shown['label']}: {label}",
@@ -323,7 +323,7 @@ def _pose(server, view: SceneView, world: World, f: Frame | None, record: dict) 
     if f is not None:
         view.show_robot(server, f.p_world_body, wxyz_from_xyzw(f.quat_world_body), f.leg_angles)
         return
-    x, y, yaw = tuple(record.get("start") or world.scene.start)
+    x, y, yaw = tuple(record.get("start") or world.start)
     _, _, z = on_surface(world, (x, y))
     view.show_robot(
         server,
@@ -429,7 +429,9 @@ def share_trial(app: App, cmd: ShareCmd) -> None:
         app.page.notify(cmd.client_id, "Nothing to share", "Drive or run trials first.", error=True)
         return
     k = app.page.shown_trial() or len(trials)
-    record = dict(trials[k - 1], label=f"trial {k} ({trials[k - 1].get('label') or 'drive'})")
+    record: dict[str, Any] = dict(
+        trials[k - 1], label=f"trial {k} ({trials[k - 1].get('label') or 'drive'})"
+    )
     name = app.world.scene.name
     job = Job(_share_job, app.world, record, f"{name}: trial {k}")
 
@@ -446,7 +448,7 @@ def share_trial(app: App, cmd: ShareCmd) -> None:
         app.page.notify(cmd.client_id, "Share failed", why, error=True)
         app.page.set_status(f"Share failed: {why}")
         return
-    html = job.outcome.value
+    html = job.value
     app.page.send_file(cmd.client_id, f"{name}-trial-{k}.html", html)
     app.page.set_status(
         f"Trial {k} exported as {name}-trial-{k}.html ({len(html) / 1e6:.1f} "

@@ -117,6 +117,7 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
     scene = load_scene(req.scene_path)
     obj = next(o for o in scene.terrain if o.kind == "capture")
     s = obj.capture
+    assert s is not None  # (a capture object has its capture settings)
     cap = load_capture(
         obj.source,
         intrinsics=s.intrinsics,
@@ -346,7 +347,7 @@ class VoxelPanel:
             app.page.set_status(f"Voxel study failed: {why}")
             app.page.notify(cmd.client_id, "Voxel study failed", why, error=True)
             return
-        self.result, self.scene_name = job.outcome.value, app.world.scene.name
+        self.result, self.scene_name = job.value, app.world.scene.name
         self.info.content = table_markdown(self.result)
         self.csv_button.disabled = False
         app.page.set_status(

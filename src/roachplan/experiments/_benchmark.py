@@ -196,7 +196,7 @@ def run_benchmark(
     runs: int,
     seed: int,
     simulate: bool = False,
-    on_run: Callable[[BenchmarkRun], None] | None = None,
+    on_run: Callable[[BenchmarkRun], object] | None = None,
 ) -> BenchmarkResult:
     """Plan `runs` times with each planner config from the scene's start to its goal (run k:
     seed + k), driving each plan when `simulate`; on_run(run) after each (progress)."""
@@ -218,7 +218,7 @@ def run_benchmark(
                 trial = None
                 if sim is not None:
                     trial = finish_trial(
-                        world, planned, start=scene.start, goal=scene.goal, sim=sim
+                        world, planned, start=world.start, goal=world.goal, sim=sim
                     )
                 out.append(benchmark_run(planned, trial))
                 if on_run is not None:
@@ -226,14 +226,14 @@ def run_benchmark(
     finally:
         if sim is not None:
             sim.close()
-    (xa, ya), (xb, yb) = scene.bounds
+    (xa, ya), (xb, yb) = world.bounds
     setup = (
         "\n".join(
             [
                 WRITTEN_BY,
                 f"scene {scene.name}",
-                "start x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.start),
-                "goal x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in scene.goal),
+                "start x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in world.start),
+                "goal x y yaw [m, m, rad] " + " ".join(f"{v:g}" for v in world.goal),
                 f"bounds x [{xa:g}, {xb:g}] y [{ya:g}, {yb:g}] m",
                 f"run k plans with seed {seed} + k"
                 + (

@@ -36,17 +36,18 @@ class ResultStore:
 
     def append(self, record: dict) -> None:
         """Write one record ({"kind", "index", ...}) and sync it to disk before returning."""
-        if self._fd is None:
-            self._open()
+        fd = self._fd if self._fd is not None else self._open()
         line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
-        os.write(self._fd, line)  # one write of the whole line
-        os.fsync(self._fd)
+        os.write(fd, line)  # one write of the whole line
+        os.fsync(fd)
 
-    def _open(self) -> None:
+    def _open(self) -> int:
+        """Open the file to append to (its torn last line dropped); its descriptor."""
         _, good_bytes = _read(self.path)
         if self.path.exists() and self.path.stat().st_size > good_bytes:
             os.truncate(self.path, good_bytes)  # drop a line torn by a kill
         self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        return self._fd
 
     def close(self) -> None:
         if self._fd is not None:

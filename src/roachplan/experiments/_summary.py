@@ -150,7 +150,12 @@ def compare_routes(a: RouteSummary, b: RouteSummary, records: list[dict]) -> str
     from scipy.stats import fisher_exact, mannwhitneyu
 
     table = [[a.successes, a.trials - a.successes], [b.successes, b.trials - b.successes]]
-    p_success = fisher_exact(table).pvalue if a.trials and b.trials else math.nan
+    # (scipy's xp_capabilities decorator hides fisher_exact's SignificanceResult from pyright)
+    p_success = (
+        fisher_exact(table).pvalue  # pyright: ignore[reportAttributeAccessIssue]
+        if a.trials and b.trials
+        else math.nan
+    )
     ea, eb = (
         [
             r["relative_energy"]

@@ -94,17 +94,16 @@ def plan(
     planner: PlannerConfig | None = None,
 ) -> PlanResult:
     """Plan from start to goal (default: the scene's) over the world's terrain."""
-    scene = world.scene
     return plan_path(
         world.heightfield,
         world.footprint,
-        start or scene.start,
-        goal or scene.goal,
-        bounds=scene.bounds,
-        cfg=planner or scene.planner,
+        start or world.start,
+        goal or world.goal,
+        bounds=world.bounds,
+        cfg=planner or world.scene.planner,
         seed=seed,
         # The scene's standable map is from the scene's start; another start may lie elsewhere.
-        regions=world.regions if start is None or start == scene.start else None,
+        regions=world.regions if start is None or start == world.scene.start else None,
     )
 
 
@@ -190,7 +189,7 @@ def drive(
     can carry the solver's history of an earlier drive into this one (experiments/_workers.py).
     """
     scene = world.scene
-    x, y, yaw = start or scene.start
+    x, y, yaw = start or world.start
     if sim is None:
         with world.simulation() as fresh:
             return drive(world, path_xyz, start=start, on_frame=on_frame, sim=fresh, spins=spins)
@@ -220,8 +219,7 @@ def run_trial(
     sim: Simulation | None = None,
 ) -> TrialResult:
     """Plan, then drive the plan; 'no_path' when the planner gives up."""
-    scene = world.scene
-    start, goal = start or scene.start, goal or scene.goal
+    start, goal = start or world.start, goal or world.goal
     planned = plan(world, seed=seed, start=start, goal=goal, planner=planner)
     return finish_trial(world, planned, start=start, goal=goal, on_frame=on_frame, sim=sim)
 
@@ -236,21 +234,25 @@ def finish_trial(
     sim: Simulation | None = None,
 ) -> TrialResult:
     """Drive an existing plan and record the trial."""
-    common = dict(
-        scene=world.scene.name,
-        seed=planned.seed,
-        planner=planned.planner,
-        path_found=planned.found,
-        plan_time=planned.plan_time,
-        start=tuple(start),
-        goal=tuple(goal),
-        turning_radius=planned.turning_radius,
-        driver=world.scene.driver.kind,
-        spins=planned.spins,
-    )
-    if not planned.found:
+
+    def record(**how_it_went) -> TrialResult:
+        """The trial's record: what every trial records, and how_it_went (the drive's)."""
         return TrialResult(
-            **common,
+            scene=world.scene.name,
+            seed=planned.seed,
+            planner=planned.planner,
+            path_found=planned.found,
+            plan_time=planned.plan_time,
+            start=(start[0], start[1], start[2]),  # (a tuple, whatever sequence came in)
+            goal=(goal[0], goal[1], goal[2]),
+            turning_radius=planned.turning_radius,
+            driver=world.scene.driver.kind,
+            spins=planned.spins,
+            **how_it_went,
+        )
+
+    if not planned.found:
+        return record(
             outcome="no_path",
             reason=planned.message,
             route="",
@@ -265,8 +267,7 @@ def finish_trial(
     driven = drive(
         world, planned.path_xyz, start=start, on_frame=on_frame, sim=sim, spins=planned.spins
     )
-    return TrialResult(
-        **common,
+    return record(
         outcome=driven.outcome,
         reason=driven.reason,
         route=world.route(planned.path_xyz[:, :2]),

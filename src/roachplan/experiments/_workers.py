@@ -54,14 +54,13 @@ class TrialWorker:
         target_route: str,
         planned: PlanResult | None,
         *,
-        start: tuple | None = None,
-        goal: tuple | None = None,
+        start: tuple[float, float, float] | None = None,
+        goal: tuple[float, float, float] | None = None,
     ) -> dict:
         """Trial `index`: drive the plan of `seed` (planned now unless given: the census's
         plan of that seed is the same plan) from start to goal (default: the scene's); a store
         record."""
-        scene = self.world.scene
-        start, goal = start or scene.start, goal or scene.goal
+        start, goal = start or self.world.start, goal or self.world.goal
         if planned is None:
             planned = plan(self.world, seed=seed, start=start, goal=goal)
         result = finish_trial(self.world, planned, start=start, goal=goal)  # a fresh world
@@ -70,8 +69,8 @@ class TrialWorker:
     def redrive(self, index: int, of_trial: int, path: list, start: list, spins=()) -> dict:
         """Repeat `index` of the best path: drive the stored path (and its turns on the spot)
         from a jittered start."""
-        scene = self.world.scene
-        driven = drive(self.world, np.asarray(path), start=tuple(start), spins=spins)  # fresh
+        x, y, yaw = start
+        driven = drive(self.world, np.asarray(path), start=(x, y, yaw), spins=spins)  # fresh
         return {
             "kind": REDRIVE,
             "index": index,
@@ -81,7 +80,8 @@ class TrialWorker:
             "reason": driven.reason,
             "drive_time": driven.drive_time,
             "energy": driven.energy,
-            "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
+            "relative_energy": driven.energy
+            / reference_energy(self.world, (x, y, yaw), self.world.goal),
             "trajectory": [list(p) for p in driven.trajectory],
         }
 
@@ -91,7 +91,8 @@ class TrialWorker:
         (experiments/_uncertainty.py); a rollout record."""
         scene = self.world.scene
         w = draw(uncertainty, seed)
-        start = tuple(float(a + b) for a, b in zip(scene.start, w.start_offset, strict=True))
+        x, y, yaw = (float(a + b) for a, b in zip(self.world.start, w.start_offset, strict=True))
+        start = (x, y, yaw)
         # A fresh PyBullet world per rollout: after changed masses and friction a reused one
         # drove the same seed differently depending on what it had driven before (measured:
         # 8 of 28 rollouts), and a rollout must re-run exactly from its seed alone.
@@ -125,7 +126,7 @@ class TrialWorker:
             "reason": driven.reason,
             "drive_time": driven.drive_time,
             "energy": driven.energy,
-            "relative_energy": driven.energy / reference_energy(self.world, start, scene.goal),
+            "relative_energy": driven.energy / reference_energy(self.world, start, self.world.goal),
             "end": list(driven.trajectory[-1][1:3]),
         }
 
@@ -196,7 +197,8 @@ class RayPool:
                 num_cpus=workers if address is None else None,
                 include_dashboard=False,
                 log_to_driver=False,
-                logging_level="WARNING",
+                # Ray annotates it int, but its own default is a name ("info"), as here.
+                logging_level="WARNING",  # pyright: ignore[reportArgumentType]
             )
         n = workers or int(ray.cluster_resources().get("CPU", 1))
         actor = ray.remote(num_cpus=1)(TrialWorker)
@@ -213,6 +215,7 @@ class RayPool:
 
     def close(self) -> None:
         for a in self._actors:
-            self._ray.kill(a)
+            # Ray types remote() as ActorHandle | the class (its ActorProxy); it is a handle.
+            self._ray.kill(a)  # pyright: ignore[reportArgumentType]
         if self._owns_ray:
             self._ray.shutdown()

@@ -79,6 +79,29 @@ class World:
     """Of the notes, one per OpenSCAD object: who rendered it, why, and what that may change
     (ScadRender.note), for the page's status line."""
 
+    @property
+    def start(self) -> tuple[float, float, float]:
+        """The robot's start pose: x [m], y [m], yaw [rad] (the scene's, or picked by
+        build_world)."""
+        start = self.scene.start
+        assert start is not None  # build_world sets it
+        return start
+
+    @property
+    def goal(self) -> tuple[float, float, float]:
+        """The goal pose: x [m], y [m], yaw [rad] (the scene's, or picked by build_world)."""
+        goal = self.scene.goal
+        assert goal is not None  # build_world sets it
+        return goal
+
+    @property
+    def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The planning area ((x0, y0), (x1, y1)) [m] (the scene's, or picked by
+        build_world)."""
+        bounds = self.scene.bounds
+        assert bounds is not None  # build_world sets it
+        return bounds
+
     @functools.cached_property
     def footprint(self) -> Footprint:
         return footprint_of(self.robot)
@@ -87,17 +110,14 @@ class World:
     def regions(self) -> StandableMap:
         """Where the robot can stand within the scene's bounds, and the holes between those
         places (computed once, ~50 ms): the terrain sampler's support and the route labels."""
-        sc = self.scene
         # A hole smaller than the robot's own footprint is noise to go through or over, not
         # an obstacle to go round.
-        fp = self.footprint
-        assert sc.bounds is not None and sc.start is not None  # build_world sets both
         return standable_map(
             self.heightfield,
-            fp,
-            sc.planner.validity,
-            sc.bounds,
-            sc.start[:2],
+            self.footprint,
+            self.scene.planner.validity,
+            self.bounds,
+            self.start[:2],
             min_hole_area=self.robot.body_length * self.robot.body_width * 4,
         )
 
