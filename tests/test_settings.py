@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 import trimesh
@@ -67,7 +68,8 @@ def test_a_scene_file_and_the_command_line_refuse_a_bad_box_or_range_alike(
     assert ("NEAR < FAR" if key == "depth_range" else "each min below its max") in file_words
     # The same words again from the config itself, whoever makes it (a script, the page).
     with pytest.raises(SettingError) as made:
-        MeshingConfig(**{key: tuple(map(tuple, value)) if key == "crop" else tuple(value)})
+        given: dict[str, Any] = {key: tuple(map(tuple, value)) if key == "crop" else tuple(value)}
+        MeshingConfig(**given)
     assert made.value.expected == file_words
     assert not (tmp_path / "o.stl").exists()
 
@@ -97,7 +99,7 @@ def test_the_validators_that_were_separate_now_agree():
     [
         lambda: dataclasses.replace(PlannerConfig(), name="dijkstra"),
         lambda: SimConfig(timestep=0),
-        lambda: DriverConfig(kind="sideways"),
+        lambda: DriverConfig(kind=cast(Any, "sideways")),  # (no kind: as a file might say)
         lambda: UncertaintyConfig(friction=1.5),
         lambda: MeshingConfig(voxel=(0.01, 0.0, 0.01)),
         lambda: ChooseConfig(candidates=4, rollouts=2),

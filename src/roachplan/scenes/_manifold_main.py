@@ -375,7 +375,8 @@ def openscad_quad_diagonal(quad) -> tuple[int, int]:
         and cross(c, d, a) * cross(c, d, b) < 0
     ):
         a, b = c, d
-    return tuple(sorted((3 - a, 3 - b)))  # corners of the reversed face back in the call's order
+    lo, hi = sorted((3 - a, 3 - b))
+    return (lo, hi)  # corners of the reversed face back in the call's order
 
 
 PLANAR = 1e-9

@@ -31,7 +31,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypedDict
 
 from roachplan.perception import short_repr
 from roachplan.processes import run_program
@@ -338,13 +338,21 @@ def _read_facts(path: Path) -> dict:
     return facts if isinstance(facts, dict) else {}
 
 
-def _found(facts: dict) -> dict[str, float]:
+class _Found(TypedDict):
+    """ScadRender's fields of what the evaluator found."""
+
+    text_size: float
+    face_spread: float
+
+
+def _found(facts: dict) -> _Found:
     """ScadRender's fields from what the evaluator found (_manifold_main.FACTS)."""
-    out = {}
-    for key in ("text_size", "face_spread"):
+
+    def number(key: str) -> float:
         value = facts.get(key, 0.0)
-        out[key] = float(value) if isinstance(value, int | float) and math.isfinite(value) else 0.0
-    return out
+        return float(value) if isinstance(value, int | float) and math.isfinite(value) else 0.0
+
+    return _Found(text_size=number("text_size"), face_spread=number("face_spread"))
 
 
 def _short_failure(stderr: str, why: str) -> str:
@@ -434,6 +442,7 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
                 raise
             why = f"backend manifold could not render it alike: {exc.why}"
             if exc.remember:
+                assert refused is not None  # (manifold was tried: its cache path was found)
                 _write_atomic(refused, why)
         timeout = max(timeout - (time.monotonic() - t0), 1.0)
     return dataclasses.replace(_render_with("cgal", timeout=timeout, **job), asked="auto", why=why)

@@ -97,7 +97,7 @@ def manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
     (voxel_wall)."""
     import trimesh
 
-    m = trimesh.load(mesh, force="mesh")
+    m = trimesh.load_mesh(mesh)  # (what trimesh.load(mesh, force="mesh") does, typed)
     where = _touching_walls(m)
     if where is not None:
         x, y, z = (f"{c:.4g}" for c in where)
@@ -163,14 +163,16 @@ def _overlap(mesh, normal, faces: list[int], other: list[int], min_area: float):
         return None
     p = common.representative_point()
     offset = float(mesh.triangles[faces[0]][0] @ normal)
-    return tuple(float(v) for v in p.x * u + p.y * w + offset * np.asarray(normal))
+    x, y, z = (float(v) for v in p.x * u + p.y * w + offset * np.asarray(normal))
+    return (x, y, z)
 
 
 def _manifold_distributions() -> list:
     """The installed distributions of MANIFOLD_PACKAGES and everything they require."""
     from importlib import metadata
 
-    found, todo, seen = [], list(MANIFOLD_PACKAGES), set()
+    found, seen = [], set()
+    todo: list[str] = list(MANIFOLD_PACKAGES)
     while todo:
         name = todo.pop()
         key = re.sub(r"[-_.]+", "-", name).lower()
@@ -188,7 +190,9 @@ def _manifold_distributions() -> list:
         found.append(dist)
         for req in dist.requires or []:
             if "extra ==" not in req:
-                todo.append(re.match(r"[A-Za-z0-9._-]+", req).group())
+                project = re.match(r"[A-Za-z0-9._-]+", req)
+                assert project is not None  # (a requirement starts with the project's name)
+                todo.append(project.group())
     return found
 
 

@@ -104,7 +104,7 @@ def _unescape(body: str) -> str:
     (\\x00 is a space), \\uXXXX and \\UXXXXXX; any other backslash is dropped. So
     "\\x2fetc" is the absolute path /etc, whatever file name it spells undecoded."""
 
-    def one(m: re.Match) -> str:
+    def one(m: re.Match[str]) -> str:
         e = m.group(1)
         if len(e) > 1:  # a numbered character
             code = int(e[1:], 16)
@@ -300,7 +300,9 @@ def _value_kind(expr: str, variables: Mapping[str, str], seen: frozenset[str]) -
         m = _TOKEN.match(expr, i)
         if m is None:
             return None  # a character that is no part of these expressions
-        tokens.append((m.lastgroup, m.group(m.lastgroup)))
+        kind = m.lastgroup
+        assert kind is not None  # (every alternative of _TOKEN is a named group)
+        tokens.append((kind, m.group(kind)))
         i = m.end()
     if tokens and tokens[0] == ("op", "[") and tokens[-1] == ("op", "]"):
         return "vector"

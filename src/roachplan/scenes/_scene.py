@@ -306,6 +306,7 @@ class YamlFields:
         expected = check(whole)
         if expected is not None:
             raise self.refused(SettingError(key, value, expected))
+        assert isinstance(whole, int)  # (the check passed)
         return whole
 
     def seed(self, value: Any, key: str) -> int:
@@ -314,6 +315,7 @@ class YamlFields:
         expected = seed_number()(whole)
         if expected is not None:
             raise self.refused(SettingError(key, value, expected))
+        assert isinstance(whole, int)  # (the check passed)
         return whole
 
     def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]:
