@@ -15,11 +15,15 @@ import re
 import shutil
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 
 from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
 from roachplan.scenes import DEFAULT_BACKEND, DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
+
+if TYPE_CHECKING:
+    from roachplan.scenes import World
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
@@ -62,6 +66,35 @@ def scene_from_upload(
     capture object without a ground (the captured floor is the ground). Start, goal and bounds
     are left out: `prepare_upload_scene` picks them.
     """
+    fname, suffix = _accepted(name, data)
+    folder = Path(tempfile.mkdtemp(prefix="upload-", dir=root))
+    if suffix in (".yaml", ".yml"):
+        return _uploaded_scene(fname, data, folder)
+    scad: dict[str, object] = {"timeout": scad_timeout}  # (a .scad object's keys)
+    scad.update({"backend": scad_backend} if scad_backend != DEFAULT_BACKEND else {})
+    if suffix == ".zip":
+        obj = _zip_object(name, data, folder, capture=capture, scad=scad)
+    else:
+        (folder / fname).write_bytes(data)
+        obj = _file_object(
+            fname, suffix, data, folder, capture=capture, calibration=calibration, scad=scad
+        )
+    is_capture = "capture" in obj
+    fname = obj["capture"] if is_capture else fname  # (a capture in a .zip names the scene)
+    scene = {
+        "description": f"Loaded from {name}",
+        "terrain": [obj],
+        "ground": None if is_capture else 0.0,
+        "seed": 0,
+    }
+    path = folder / f"{Path(fname).stem}.yaml"
+    path.write_text(yaml.safe_dump(scene, sort_keys=False))
+    return path
+
+
+def _accepted(name: str, data: bytes) -> tuple[str, str]:
+    """(the upload's safe file name, its suffix in lower case), or SceneError saying why it is
+    not accepted (too large, a suffix the app does not load)."""
     if len(data) > MAX_UPLOAD_BYTES:
         raise SceneError(
             f"{name}: {len(data) / 1e6:.1f} MB is over the {MAX_UPLOAD_BYTES / 1e6:.0f} MB limit"
@@ -73,35 +106,59 @@ def scene_from_upload(
             f"{name}: cannot load {suffix or 'a file without extension'}; accepted: "
             f"{', '.join(UPLOAD_SUFFIXES)}"
         )
-    folder = Path(tempfile.mkdtemp(prefix="upload-", dir=root))
-    if suffix in (".yaml", ".yml"):
-        for f in LIBRARY.iterdir():  # library files an uploaded scene may refer to
-            if f.is_file() and f.suffix != ".yaml":
-                shutil.copy(f, folder / f.name)
-        path = folder / fname
-        path.write_bytes(data)
-        _check_sources_inside(path, folder)
-        return path
-    if suffix != ".zip":
-        (folder / fname).write_bytes(data)
-    if suffix == ".zip":
-        from ._archive import capture_in_zip, extract_zip, scad_model
+    return fname, suffix
 
-        paths = extract_zip(name, data, folder)
-        has_scad = any(p.suffix.lower() == ".scad" for p in paths)
-        found = None if has_scad else capture_in_zip(name, paths, CAPTURE_SUFFIXES)
-        if found is not None:  # a capture with its calibration, loaded together
-            fname, calib = found
-            capture = dict(capture)
-            if calib is not None:
-                capture["intrinsics"] = calib
-            obj = {"capture": fname, **({"perception": capture} if capture else {})}
-        else:
-            obj = {"scad": scad_model(name, paths, folder), "timeout": scad_timeout}
-            obj.update({"backend": scad_backend} if scad_backend != DEFAULT_BACKEND else {})
-    elif suffix == ".ply" and _ply_has_faces(data):
-        obj = {"mesh": fname}
-    elif suffix in CAPTURE_SUFFIXES:
+
+def _uploaded_scene(fname: str, data: bytes, folder: Path) -> Path:
+    """An uploaded scene .yaml, written into folder beside a copy of the library's files it
+    may refer to; SceneError when it reaches outside the folder."""
+    for f in LIBRARY.iterdir():  # library files an uploaded scene may refer to
+        if f.is_file() and f.suffix != ".yaml":
+            shutil.copy(f, folder / f.name)
+    path = folder / fname
+    path.write_bytes(data)
+    _check_sources_inside(path, folder)
+    return path
+
+
+def _capture_object(fname: str, capture: dict) -> dict:
+    """The terrain object of a capture file (its perception settings, unless none)."""
+    return {"capture": fname, **({"perception": capture} if capture else {})}
+
+
+def _zip_object(name: str, data: bytes, folder: Path, *, capture: dict, scad: dict) -> dict:
+    """The terrain object of an uploaded .zip, extracted into folder: its .scad model (with
+    the `scad` keys: timeout, backend) or, without one, its capture with its calibration."""
+    from ._archive import capture_in_zip, extract_zip, scad_model
+
+    paths = extract_zip(name, data, folder)
+    has_scad = any(p.suffix.lower() == ".scad" for p in paths)
+    found = None if has_scad else capture_in_zip(name, paths, CAPTURE_SUFFIXES)
+    if found is None:
+        return {"scad": scad_model(name, paths, folder), **scad}
+    fname, calib = found  # a capture with its calibration, loaded together
+    capture = dict(capture)
+    if calib is not None:
+        capture["intrinsics"] = calib
+    return _capture_object(fname, capture)
+
+
+def _file_object(
+    fname: str,
+    suffix: str,
+    data: bytes,
+    folder: Path,
+    *,
+    capture: dict,
+    calibration: Path | None,
+    scad: dict,
+) -> dict:
+    """The terrain object of an uploaded model, mesh or capture file (written into folder as
+    fname): a .scad with the `scad` keys (timeout, backend); a capture with the calibration
+    uploaded before it, when it is a depth image."""
+    if suffix == ".ply" and _ply_has_faces(data):
+        return {"mesh": fname}
+    if suffix in CAPTURE_SUFFIXES:
         capture = dict(capture)
         if calibration is not None and suffix in DEPTH_IMAGE_SUFFIXES:
             calib = safe_name(calibration.name)
@@ -109,22 +166,10 @@ def scene_from_upload(
                 calib = f"calibration-{calib}"
             shutil.copy(calibration, folder / calib)
             capture["intrinsics"] = calib
-        obj = {"capture": fname, **({"perception": capture} if capture else {})}
-    elif suffix == ".scad":
-        obj = {"scad": fname, "timeout": scad_timeout}
-        obj.update({"backend": scad_backend} if scad_backend != DEFAULT_BACKEND else {})
-    else:
-        obj = {"mesh": fname}
-    is_capture = "capture" in obj
-    scene = {
-        "description": f"Loaded from {name}",
-        "terrain": [obj],
-        "ground": None if is_capture else 0.0,
-        "seed": 0,
-    }
-    path = folder / f"{Path(fname).stem}.yaml"
-    path.write_text(yaml.safe_dump(scene, sort_keys=False))
-    return path
+        return _capture_object(fname, capture)
+    if suffix == ".scad":
+        return {"scad": fname, **scad}
+    return {"mesh": fname}
 
 
 def limit_uploads(server, max_bytes: int, refuse) -> None:
@@ -179,7 +224,7 @@ def _check_sources_inside(path: Path, folder: Path) -> None:
                 )
 
 
-def prepare_upload_scene(scene_path: Path):
+def prepare_upload_scene(scene_path: Path) -> World:
     """Build the world of an uploaded scene. What the file leaves out (bounds, start, goal) is
     picked by build_world (scenes/_autopose.py: inside the largest standable region, joined by a
     plan; both at the centre, with the reason in world.notes, when none is found) and written
@@ -192,13 +237,12 @@ def prepare_upload_scene(scene_path: Path):
     # The same picking as the command line's: a model on a ground plane gets the ground round
     # it and start and goal at either end of it (scenes/_autopose.py).
     world = build_world(scene, check_poses=False, terrain=build_terrain(scene))
-    sc = world.scene
     filled = {}
     if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:
-        filled["robot"] = {**(raw.get("robot") or {}), "start": _pose_yaml(sc.start)}
-        filled["goal"] = _pose_yaml(sc.goal)
+        filled["robot"] = {**(raw.get("robot") or {}), "start": _pose_yaml(world.start)}
+        filled["goal"] = _pose_yaml(world.goal)
     if raw.get("bounds") is None:
-        filled["bounds"] = [[round(float(v), 4) for v in corner] for corner in sc.bounds]
+        filled["bounds"] = [[round(float(v), 4) for v in corner] for corner in world.bounds]
     if filled:
         scene_path.write_text(yaml.safe_dump({**raw, **filled}, sort_keys=False))
         # Only what was picked was written: the same terrain, with the scene as now written.
