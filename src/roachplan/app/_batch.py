@@ -135,6 +135,7 @@ class BatchPanel:
 
     def end(self, how: str) -> None:
         b, self.batch = self.batch, None
+        assert b is not None  # (drain and cancel end a running batch)
         self.status.content = (
             f"Batch {how}: {b.done}/{b.total} trials, {b.successes} successes, {b.elapsed:.1f} s."
         )

@@ -179,9 +179,11 @@ class SceneView:
 
     def show_robot(self, server, position, wxyz, leg_angles) -> None:
         """Body pose (world frame, wxyz) and leg angles [rad] (rotations about body +y)."""
+        robot = self.robot_node
+        assert robot is not None, "show() draws the robot first"
         with server.atomic():
-            self.robot_node.position = position
-            self.robot_node.wxyz = wxyz
+            robot.position = position
+            robot.wxyz = wxyz
             for node, q in zip(self.hip_nodes, leg_angles, strict=True):
                 node.wxyz = (math.cos(q / 2), 0.0, math.sin(q / 2), 0.0)
 
@@ -305,9 +307,8 @@ def label_position(points: np.ndarray, k: int) -> tuple[float, float, float]:
     """Where path k's label goes [m]: 3 cm above its waypoint at 35, 50 or 65 % of the way
     (by k), so the labels of paths that share their middle do not overlap."""
     pts = np.asarray(points, dtype=float)
-    return tuple(
-        float(v) for v in pts[int((0.35 + 0.15 * (k % 3)) * (len(pts) - 1))] + [0, 0, 0.03]
-    )
+    x, y, z = pts[int((0.35 + 0.15 * (k % 3)) * (len(pts) - 1))] + [0, 0, 0.03]
+    return (float(x), float(y), float(z))
 
 
 def framing(

@@ -130,8 +130,10 @@ def numbers(text: str | None, flag: str, n: tuple[int, ...]) -> list[float] | No
     and what is wrong with it."""
     if text is None:
         return None
-    contiguous = len(n) > 2 and n == tuple(range(n[0], n[-1] + 1))
-    counts = f"{n[0]} to {n[-1]}" if contiguous else " or ".join(map(str, n))
+    if len(n) > 2 and n == tuple(range(n[0], n[-1] + 1)):
+        counts = f"{n[0]} to {n[-1]}"
+    else:
+        counts = " or ".join(map(str, n))
     expected = f"expected {counts} comma-separated numbers"
     parts = text.split(",")
     if len(parts) not in n:

@@ -510,6 +510,7 @@ class LoadPanel:
         """Change the loaded capture's settings and load it again, in the background. Its scene
         file is rewritten when the app wrote it; a library or command-line scene is never
         rewritten: a copy is (adopt_capture_scene), and joins the scene picker."""
+        assert self.view is not None  # (its callers checked that a capture is loaded)
         path, label = self.view.scene_path, app.picker_label()
         if not path.resolve().is_relative_to(Path(app.upload_dir).resolve()):
             folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
@@ -560,6 +561,7 @@ class LoadPanel:
 
     def _capture_name(self) -> str:
         """The loaded capture's file name (its suffix says whether Cloud units apply)."""
+        assert self.view is not None  # (its callers checked that a capture is loaded)
         return str(self._capture_object(self.view)["capture"])
 
     def relevel_at_click(self, app: App, cmd, p_world) -> None:

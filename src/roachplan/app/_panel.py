@@ -108,6 +108,8 @@ def energy_plot(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.ticker import MaxNLocator
 
     # figsize in inches at 72 dpi x scale: a font of N pt is N CSS px on the page.
     fig, ax = plt.subplots(figsize=(width / 72, height / 72), dpi=72 * scale)
@@ -126,14 +128,18 @@ def energy_plot(
             borderaxespad=0.2,
             handletextpad=0.2,
         )
-        ax.xaxis.get_major_locator().set_params(integer=True)
+        locator = ax.xaxis.get_major_locator()
+        assert isinstance(locator, MaxNLocator)  # (a linear axis's AutoLocator)
+        locator.set_params(integer=True)
     ax.set_xlabel("trial", fontsize=12)
     ax.set_ylabel("relative energy", fontsize=12)
     ax.tick_params(labelsize=11)
     ax.grid(alpha=0.3)
     fig.tight_layout(pad=0.4)
-    fig.canvas.draw()
-    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    canvas = fig.canvas
+    assert isinstance(canvas, FigureCanvasAgg)  # (the Agg backend's)
+    canvas.draw()
+    img = np.asarray(canvas.buffer_rgba())[..., :3].copy()
     plt.close(fig)
     return img
 

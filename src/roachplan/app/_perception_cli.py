@@ -77,6 +77,7 @@ def cmd_mesh(args: argparse.Namespace) -> int:
 def _study_flags(args: argparse.Namespace) -> tuple[list[float], list[float] | None]:
     """voxel-study's --sizes [cm] and --region (x0, y0, x1, y1 [m], camera frame), checked."""
     sizes = numbers(args.sizes, "--sizes", tuple(range(1, 32)))
+    assert sizes is not None  # (--sizes has a default)
     if not all(s > 0 for s in sizes):
         raise UsageError(
             f"--sizes {clip(repr(args.sizes), 80)}: voxel sizes must be numbers > 0 [cm]"
@@ -204,6 +205,7 @@ def cmd_synth_capture(args: argparse.Namespace) -> int:
         g = trimesh.creation.box((100.0, 100.0, 0.01))
         g.apply_translation((0, 0, scene.ground - 0.005))
         mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
+        assert isinstance(mesh, trimesh.Trimesh)  # (meshes concatenate to a mesh)
     intr = load_intrinsics(args.intrinsics)
     pose = look_at(eye, target)
     noise = NO_NOISE if args.no_noise else NoiseModel()

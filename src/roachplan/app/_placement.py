@@ -7,8 +7,10 @@ write (the library's, `serve --scene`'s) is never rewritten: a copy is (adopt_sc
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import yaml
 
@@ -44,10 +46,11 @@ def model_view(scene: Scene | str | Path, *, loaded: bool = True) -> ModelView |
     if len(scene.terrain) != 1 or scene.terrain[0].kind == "capture":
         return None
     obj = scene.terrain[0]
+    x, y, z = obj.position
     return ModelView(
         scene_path=Path(scene.path),
         model=obj.source.name,
-        position=tuple(float(v) for v in obj.position),
+        position=(float(x), float(y), float(z)),
         ground=scene.ground,
         loaded=loaded,
     )
@@ -92,7 +95,13 @@ def adopt_scene(scene_path: str | Path, folder: Path) -> Path:
     return out
 
 
-def rewrite_placement(scene_path: Path, *, position=None, ground="keep", bounds=None) -> None:
+def rewrite_placement(
+    scene_path: Path,
+    *,
+    position: Sequence[float] | None = None,
+    ground: float | None | Literal["keep"] = "keep",
+    bounds: list[list[float]] | None = None,
+) -> None:
     """Set the scene file's model `position` ([x, y, z] [m]; None: kept), `ground` (a height
     [m], None for no ground plane, "keep") and `bounds` ([[x0, y0], [x1, y1]]; None: picked
     again); start and goal are dropped (picked again: the terrain or the area moved)."""
@@ -111,5 +120,5 @@ def rewrite_placement(scene_path: Path, *, position=None, ground="keep", bounds=
 
 def area_of(world: World) -> tuple[tuple[float, float], tuple[float, float]]:
     """The loaded world's planning area ((x0, y0), (x1, y1)) [m], rounded for the page."""
-    (x0, y0), (x1, y1) = world.scene.bounds
+    (x0, y0), (x1, y1) = world.bounds
     return (round(float(x0), 3), round(float(y0), 3)), (round(float(x1), 3), round(float(y1), 3))

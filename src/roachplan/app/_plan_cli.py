@@ -259,7 +259,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         )
         if args.simulate:
             ok = [r for r in runs if r.simulated_success]
-            energy = f"{np.mean([r.energy for r in ok]):.3f} J" if ok else "-"
+            energies = [r.energy for r in ok if r.energy is not None]  # (all: each was driven)
+            energy = f"{np.mean(energies):.3f} J" if ok else "-"
             line += f"  reached the goal {len(ok)}/{len(runs)}  mean energy (reached) {energy}"
         print(line)
     print(

@@ -9,6 +9,10 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 
 def wanted() -> bool:
@@ -16,7 +20,9 @@ def wanted() -> bool:
     return os.environ.get("ROACHPLAN_PROGRESS") == "1" or sys.stderr.isatty()
 
 
-def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = None, **kw):
+def bar(
+    total: float | None, what: str, *, unit: str, enabled: bool | None = None, **kw
+) -> tqdm[Any]:
     """A tqdm bar on stderr in the experiment's style (experiments/_runner._bar)."""
     from tqdm import tqdm
 
@@ -44,7 +50,7 @@ def render_progress(enabled: bool | None = None) -> Iterator[None]:
         return
     from roachplan.processes import Running, listening
 
-    bars: dict[str, object] = {}
+    bars: dict[str, tqdm[Any]] = {}
 
     def hear(event: object) -> None:
         if not isinstance(event, Running):
@@ -69,7 +75,7 @@ def render_progress(enabled: bool | None = None) -> Iterator[None]:
             b.close()
 
 
-def stage_progress(stages: tuple[str, ...], what: str) -> tuple[object, Callable[[str], None]]:
+def stage_progress(stages: tuple[str, ...], what: str) -> tuple[tqdm[Any], Callable[[str], None]]:
     """(bar, on_stage): a bar over a pipeline's named stages; on_stage(name) marks one done."""
     b = bar(len(stages), what, unit=" stage")
 

@@ -69,6 +69,11 @@ from ._relevel import CaptureView
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
 from ._voxel_panel import VoxelPanel
 
+# The pickers' options before there are paths or trials (typed str, not the literal: the
+# options change to path and trial numbers).
+_NAMES_NONE: tuple[str, ...] = ("none",)
+_NAMES_NO_TRIAL: tuple[str, ...] = ("-",)
+
 
 class RoachApp:
     """Owns the viser server and the page's controls; shows the state of `core`, which the
@@ -216,8 +221,10 @@ class RoachApp:
             )
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
             self.show_roadmap = gui.add_checkbox("Show roadmap", False)
-            self.drive_path_picker = gui.add_dropdown(
-                "Drive path", ("none",), hint="The path Drive takes (the thick one, labelled Drive)"
+            self.drive_path_picker: viser.GuiDropdownHandle[str] = gui.add_dropdown(
+                "Drive path",
+                _NAMES_NONE,
+                hint="The path Drive takes (the thick one, labelled Drive)",
             )
             self.plan_button = gui.add_button("Plan")
             self.drive_button = gui.add_button("Drive", disabled=True)
@@ -239,7 +246,9 @@ class RoachApp:
         self.choose_panel = ChoosePanel(gui, put)
         self.batch_panel = BatchPanel(gui, put)
         with gui.add_folder("Results"):
-            self.show_trial = gui.add_dropdown("Show trial", ("-",))
+            self.show_trial: viser.GuiDropdownHandle[str] = gui.add_dropdown(
+                "Show trial", _NAMES_NO_TRIAL
+            )
             self.export_button = gui.add_button("Export CSV")
             self.share_button = gui.add_button("Share")  # the shown trial as an offline page
             self.table = gui.add_markdown(trials_markdown([]))
@@ -469,12 +478,21 @@ class RoachApp:
                 if self.view.standable_node is not None:
                     self.view.standable_node.visible = bool(self.show_standable.value)
             case "follow" | "zoom":
-                clients = self.server.get_clients()
-                chosen = clients.values() if cmd.what == "follow" else [clients.get(cmd.client_id)]
                 if cmd.what == "zoom" or self.follow.value:
-                    for client in chosen:
-                        if client is not None:
-                            self._aim(client, self.view.robot_node.position, zoom=True)
+                    self._aim_at_robot(cmd)
+
+    def _aim_at_robot(self, cmd: ViewCmd) -> None:
+        """Follow (every client's camera) or Zoom (the camera of the client that clicked): turn
+        to the robot."""
+        clients = self.server.get_clients()
+        if cmd.what == "follow":
+            chosen = list(clients.values())
+        else:
+            chosen = [clients[cmd.client_id]] if cmd.client_id in clients else []
+        for client in chosen:
+            robot = self.view.robot_node
+            assert robot is not None  # (drawn with the world, before the page is served)
+            self._aim(client, robot.position, zoom=True)
 
     def _aim(self, client, p_world_robot, *, zoom: bool) -> None:
         """Turn client's camera to the robot at p_world_robot [m]. zoom: from the camera's
@@ -516,9 +534,7 @@ class RoachApp:
             if (i, j) == cell or (inside and sm.reachable[j, i]):
                 return
         w = self.core.world
-        sm = standable_map(
-            w.heightfield, w.footprint, w.scene.planner.validity, w.scene.bounds, (x, y)
-        )
+        sm = standable_map(w.heightfield, w.footprint, w.scene.planner.validity, w.bounds, (x, y))
         self._standable = (sm, (round((x - sm.x0) / sm.cell), round((y - sm.y0) / sm.cell)))
         self.view.show_standable(w, sm)
 
