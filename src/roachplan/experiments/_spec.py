@@ -197,7 +197,7 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
             seed=as_written(int, data.get("seed", scene.seed)),
             max_plans=as_written(int, data.get("max_plans", 1000)),
             best_path_repeats=as_written(int, best.get("repeats", 10)),
-            best_path_jitter=jitter,  # type: ignore[arg-type]
+            best_path_jitter=jitter,
         )
     except SettingError as exc:
         raise f.refused(

@@ -1163,7 +1163,7 @@ def _with_imu_gravity(reader, cap: Capture, cloud_frame: str | None) -> Capture:
     if cloud_frame is not None and frame_id and frame_id.strip("/") != cloud_frame.strip("/"):
         note += f", assumed aligned with the cloud's frame {cloud_frame}"
     up = tuple(float(v) for v in mean / g)
-    return dataclasses.replace(cap, up=up, notes=(*cap.notes, note))  # type: ignore[arg-type]
+    return dataclasses.replace(cap, up=up, notes=(*cap.notes, note))
 
 
 def _bag_depth_image(reader, path: Path, conn, depth_scale: float | None) -> Capture:

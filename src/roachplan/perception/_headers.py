@@ -78,7 +78,11 @@ PCD_KEYS = (
     "POINTS",
     "DATA",
 )
-PCD_TYPES = {"F": (4, 8), "I": (1, 2, 4, 8), "U": (1, 2, 4, 8)}
+PCD_TYPES: dict[Literal["F", "I", "U"], tuple[int, ...]] = {
+    "F": (4, 8),
+    "I": (1, 2, 4, 8),
+    "U": (1, 2, 4, 8),
+}
 """TYPE letter -> the SIZEs PCL writes for it [bytes]."""
 
 
@@ -176,7 +180,7 @@ def parse_pcd_header(head: bytes, file_size: int, source: str) -> PcdHeader:
         viewpoint=viewpoint,
         data=data,
         data_offset=offset,
-    )  # type: ignore[arg-type]
+    )
     return _check_pcd_size(header, head, file_size, source)
 
 
@@ -229,7 +233,7 @@ def _pcd_fields(values: dict[str, list[str]], source: str) -> tuple[PcdField, ..
             )
         if count < 1:
             raise CaptureError(f"{source}: PCD field {_show(name)}: COUNT {count}; expected >= 1")
-        fields.append(PcdField(name=name, size=size, type=kind, count=count))  # type: ignore[arg-type]
+        fields.append(PcdField(name=name, size=size, type=kind, count=count))
     taken = [f.name for f in fields if f.name != "_"]  # PCL names padding "_", maybe repeatedly
     if len(set(taken)) != len(taken):
         raise CaptureError(
@@ -402,7 +406,7 @@ def parse_ply_header(head: bytes, file_size: int, source: str) -> PlyHeader:
     fmt, elements = _ply_lines(lines[1:-1], source)
     header = PlyHeader(
         format=fmt,
-        data_offset=offset,  # type: ignore[arg-type]
+        data_offset=offset,
         elements=_ply_elements(elements, source),
     )
     available = max(file_size - offset, 0)

@@ -11,7 +11,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, overload
 
 from roachplan._settings import (
     SettingError,
@@ -318,7 +318,16 @@ class YamlFields:
         assert isinstance(whole, int)  # (the check passed)
         return whole
 
+    @overload
+    def vector(self, value: Any, key: str, n: Literal[2]) -> tuple[float, float]: ...
+    @overload
+    def vector(self, value: Any, key: str, n: Literal[3]) -> tuple[float, float, float]: ...
+    @overload
+    def vector(self, value: Any, key: str, n: Literal[4]) -> tuple[float, float, float, float]: ...
+    @overload
+    def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]: ...
     def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]:
+        """A list of n finite numbers, as a tuple of floats."""
         if not isinstance(value, list | tuple) or len(value) != n:
             raise self.fail(key, f"expected a list of {n} numbers, got {short_repr(value)}")
         return tuple(self.number(v, f"{key}[{i}]") for i, v in enumerate(value))
@@ -329,7 +338,7 @@ class YamlFields:
         lo, hi = self.vector(value[0], f"{key}[0]", 2), self.vector(value[1], f"{key}[1]", 2)
         if not (lo[0] < hi[0] and lo[1] < hi[1]):
             raise self.fail(key, f"min {lo} must be below max {hi} in x and y")
-        return (lo, hi)  # type: ignore[return-value]
+        return (lo, hi)
 
     def config(self, cls: type, value: Any, key: str, base: Any = None) -> Any:
         """A config of class cls from the mapping under `key` (over `base`, default cls's
@@ -441,12 +450,14 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
     ctx.checked(orientation_problem, q, f"{key}.orientation")  # as written, then made unit
     norm = math.sqrt(sum(c * c for c in q))
+    qx, qy, qz, qw = (c / norm for c in q)
+    sx, sy, sz = (float(f) for f in (scale if isinstance(scale, list | tuple) else [scale] * 3))
     return TerrainObject(
         source=source,
         params=tuple(sorted(params.items())),
-        position=position,  # type: ignore[arg-type]
-        orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
-        scale=tuple(float(f) for f in (scale if isinstance(scale, list | tuple) else [scale] * 3)),  # type: ignore[arg-type]
+        position=position,
+        orientation=(qx, qy, qz, qw),
+        scale=(sx, sy, sz),  # (scale_problem: one factor, or 3)
         timeout=float(timeout),
         backend=backend,
         key=key,
