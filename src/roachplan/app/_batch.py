@@ -11,8 +11,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from roachplan.experiments import ExperimentSpec
-from roachplan.experiments._workers import LocalPool
+from roachplan.experiments import ExperimentSpec, LocalPool
 
 from ._app import App
 from ._commands import CancelBatchCmd, RunTrialsCmd

@@ -8,8 +8,7 @@ import math
 
 import numpy as np
 
-from roachplan.experiments import summarize
-from roachplan.experiments._summary import format_markdown
+from roachplan.experiments import format_markdown, summarize
 
 COLUMNS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "label")
 CSV_FIELDS = (

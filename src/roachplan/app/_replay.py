@@ -122,8 +122,12 @@ def load_replay(folder: str | Path, *, trial: int | None = None) -> Replay:
 
 
 def _experiment_replay(folder: Path, trial: int | None) -> Replay:
-    from roachplan.experiments import ResultStore
-    from roachplan.experiments._manifest import MANIFEST, check_same_world, spec_from_manifest
+    from roachplan.experiments import (
+        MANIFEST,
+        ResultStore,
+        check_same_world,
+        spec_from_manifest,
+    )
     from roachplan.scenes import build_world
 
     try:
@@ -180,7 +184,7 @@ def _best(folder: Path, records: list[dict]) -> int:
 
 
 def _choice_replay(folder: Path) -> Replay:
-    from roachplan.experiments._spec import reference_settings
+    from roachplan.experiments import reference_settings
     from roachplan.scenes import build_world, load_scene
 
     where = folder / "choice.json"

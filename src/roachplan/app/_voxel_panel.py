@@ -20,8 +20,8 @@ from typing import Literal
 
 import numpy as np
 
-from roachplan.perception import CaptureError
-from roachplan.perception._voxel_study import (
+from roachplan.perception import (
+    CaptureError,
     VoxelStudyRow,
     planarity_warning,
     plane_region,

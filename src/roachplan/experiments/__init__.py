@@ -31,7 +31,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "ChooseError": "._errors",
         "ExperimentError": "._errors",
         "OutputError": "._errors",
+        "MANIFEST": "._manifest",
+        "check_same_world": "._manifest",
         "read_manifest": "._manifest",
+        "spec_from_manifest": "._manifest",
         "WRITTEN_BY": "._outputs",
         "atomic_path": "._outputs",
         "atomic_write": "._outputs",
@@ -47,8 +50,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "ExperimentSpec": "._spec",
         "list_experiments": "._library",
         "load_experiment": "._spec",
+        "reference_settings": "._spec",
         "ResultStore": "._store",
         "RouteSummary": "._summary",
+        "format_markdown": "._summary",
         "format_table": "._summary",
         "summarize": "._summary",
         "LabelledPlan": "._trial",
@@ -60,6 +65,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "plan_many": "._trial",
         "reference_energy": "._trial",
         "run_trial": "._trial",
+        "LocalPool": "._workers",
     },
 )
 
@@ -87,7 +93,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._errors import ExperimentError as ExperimentError
     from ._errors import OutputError as OutputError
     from ._library import list_experiments as list_experiments
+    from ._manifest import MANIFEST as MANIFEST
+    from ._manifest import check_same_world as check_same_world
     from ._manifest import read_manifest as read_manifest
+    from ._manifest import spec_from_manifest as spec_from_manifest
     from ._outputs import WRITTEN_BY as WRITTEN_BY
     from ._outputs import atomic_path as atomic_path
     from ._outputs import atomic_write as atomic_write
@@ -102,8 +111,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._runner import run_experiment as run_experiment
     from ._spec import ExperimentSpec as ExperimentSpec
     from ._spec import load_experiment as load_experiment
+    from ._spec import reference_settings as reference_settings
     from ._store import ResultStore as ResultStore
     from ._summary import RouteSummary as RouteSummary
+    from ._summary import format_markdown as format_markdown
     from ._summary import format_table as format_table
     from ._summary import summarize as summarize
     from ._trial import LabelledPlan as LabelledPlan
@@ -115,3 +126,4 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._trial import plan_many as plan_many
     from ._trial import reference_energy as reference_energy
     from ._trial import run_trial as run_trial
+    from ._workers import LocalPool as LocalPool

@@ -202,7 +202,7 @@ def run_benchmark(
     seed + k), driving each plan when `simulate`; on_run(run) after each (progress)."""
     from importlib.metadata import version
 
-    from roachplan.planning._isolated import child_memory_limit
+    from roachplan.processes import child_memory_limit
 
     scene = world.scene
     started = datetime.now(UTC).strftime("%Y-%b-%d %H:%M:%S.%f")

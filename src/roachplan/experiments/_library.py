@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from roachplan.scenes._library import library_names
+from roachplan.scenes import library_names
 
 LIBRARY = Path(__file__).parent / "library"
 
