@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar, cast
 
 from roachplan.experiments import LabelledPlan, TrialResult, finish_trial, plan_many
-from roachplan.perception import mesh_capture
+from roachplan.perception import CaptureSettings, Reconstruction, mesh_capture
 from roachplan.processes import (
     CHANNEL,
     Channel,
@@ -167,33 +166,6 @@ def run_to_end(target, *args) -> list[object]:
 # -- loading a scene ------------------------------------------------------------------------------
 
 
-@contextmanager
-def _recording_reconstructions():
-    """The capture reconstructions made while a world is built, as (source, settings, rec).
-    scenes meshes a capture through perception.mesh_capture and keeps only the mesh; the page
-    also shows the camera and ground that meshing found, and meshing again for them doubled
-    every capture load. scenes has no hook to hand the reconstruction out, so its module's
-    reference is wrapped for the duration (in a load's own process)."""
-    import roachplan.scenes._world as world_module
-
-    made: list = []
-    original = getattr(world_module, "mesh_capture", None)
-    if original is None:  # scenes changed how it meshes: capture_view meshes once more
-        yield made
-        return
-
-    def recording(source, settings):
-        rec = original(source, settings)
-        made.append((Path(source), settings, rec))
-        return rec
-
-    world_module.mesh_capture = recording
-    try:
-        yield made
-    finally:
-        world_module.mesh_capture = original
-
-
 def capture_view(scene, made=()) -> CaptureView | None:
     """The reconstruction of a scene's one capture object (its camera pose and report, to show
     and re-level it), or None for other scenes; taken from `made` when it was recorded."""
@@ -219,10 +191,16 @@ def load_world(
     shows the markers red, with why)."""
     from ._uploads import prepare_upload_scene
 
-    with _recording_reconstructions() as made:
-        if from_upload:
-            world = prepare_upload_scene(Path(ref))
-        else:
-            world = build_world(load_scene(ref), check_poses=check_poses)
+    # scenes keeps only a capture's mesh; the page also shows the camera and ground that
+    # meshing found, and meshing again for them would double every capture load.
+    made: list[tuple[Path, CaptureSettings, Reconstruction]] = []
+
+    def record(source: Path, settings: CaptureSettings, rec: Reconstruction) -> None:
+        made.append((source, settings, rec))
+
+    if from_upload:
+        world = prepare_upload_scene(Path(ref), on_capture=record)
+    else:
+        world = build_world(load_scene(ref), check_poses=check_poses, on_capture=record)
     world.regions  # noqa: B018 - computed here, once, and sent along
     return world, capture_view(world.scene, made)

@@ -23,7 +23,7 @@ from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
 from roachplan.scenes import DEFAULT_BACKEND, DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
 if TYPE_CHECKING:
-    from roachplan.scenes import World
+    from roachplan.scenes import OnCapture, World
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest file the app accepts [bytes] (a 1920x1080 organized PCD is ~25 MB)."""
@@ -224,19 +224,22 @@ def _check_sources_inside(path: Path, folder: Path) -> None:
                 )
 
 
-def prepare_upload_scene(scene_path: Path) -> World:
+def prepare_upload_scene(scene_path: Path, *, on_capture: OnCapture | None = None) -> World:
     """Build the world of an uploaded scene. What the file leaves out (bounds, start, goal) is
     picked by build_world (scenes/_autopose.py: inside the largest standable region, joined by a
     plan; both at the centre, with the reason in world.notes, when none is found) and written
     back into the file, so batch workers and `roachplan trial` rebuild the same world without
-    picking again. Returns the World (its notes say what was picked)."""
+    picking again. Returns the World (its notes say what was picked). on_capture: told of each
+    capture's reconstruction as the terrain is built (roachplan.scenes.OnCapture)."""
     from roachplan.scenes import build_terrain, build_world, load_scene
 
     raw = load_yaml(scene_path.read_bytes(), scene_path.name, SceneError)
     scene = load_scene(scene_path)
     # The same picking as the command line's: a model on a ground plane gets the ground round
     # it and start and goal at either end of it (scenes/_autopose.py).
-    world = build_world(scene, check_poses=False, terrain=build_terrain(scene))
+    world = build_world(
+        scene, check_poses=False, terrain=build_terrain(scene, on_capture=on_capture)
+    )
     filled = {}
     if not isinstance(raw.get("robot"), dict) or raw["robot"].get("start") is None:
         filled["robot"] = {**(raw.get("robot") or {}), "start": _pose_yaml(world.start)}

@@ -34,6 +34,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "read_yaml": "._scene",
         "resolve_in_library": "._scene",
         "resolve_scene": "._scene",
+        "OnCapture": "._world",
         "World": "._world",
         "Terrain": "._world",
         "build_terrain": "._world",
@@ -73,6 +74,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._scene import resolve_in_library as resolve_in_library
     from ._scene import resolve_scene as resolve_scene
     from ._scene import terrain_file_scene as terrain_file_scene
+    from ._world import OnCapture as OnCapture
     from ._world import Terrain as Terrain
     from ._world import World as World
     from ._world import build_terrain as build_terrain

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import trimesh
 
-from roachplan.perception import CaptureError, mesh_capture
+from roachplan.perception import CaptureError, CaptureSettings, Reconstruction, mesh_capture
 from roachplan.planning import (
     VALID,
     Footprint,
@@ -153,7 +155,15 @@ def footprint_of(robot: RobotConfig) -> Footprint:
     )
 
 
-def load_terrain_object(obj: TerrainObject, scene_path) -> tuple[trimesh.Trimesh, str]:
+OnCapture = Callable[[Path, CaptureSettings, Reconstruction], None]
+"""Told of each capture object's reconstruction while a terrain is built: on_capture(its
+source, its settings, what perception made of it: the mesh, the camera pose, the report), for
+the app, which shows the camera and ground found without meshing the capture again."""
+
+
+def load_terrain_object(
+    obj: TerrainObject, scene_path, on_capture: OnCapture | None = None
+) -> tuple[trimesh.Trimesh, str]:
     """One terrain object's mesh, cleaned and placed in the world frame [m], and for a .scad
     object the note of who rendered it (ScadRender.note, at the object's scale), else ""."""
     label = f"{scene_path}: {obj.key}.{obj.kind}"
@@ -169,9 +179,12 @@ def load_terrain_object(obj: TerrainObject, scene_path) -> tuple[trimesh.Trimesh
     if obj.kind == "capture":
         assert obj.capture is not None  # a capture object has its settings
         try:
-            raw = mesh_capture(source, obj.capture).mesh
+            rec = mesh_capture(source, obj.capture)
         except CaptureError as exc:
             raise SceneError(f"{label}: {exc}") from None
+        if on_capture is not None:
+            on_capture(Path(source), obj.capture, rec)
+        raw = rec.mesh
     else:
         raw = read_mesh(source, label)
     if obj.scale != (1.0, 1.0, 1.0):  # before the unit check: a model in mm passes once scaled
@@ -197,12 +210,12 @@ class Terrain:
     """One line per OpenSCAD object: who rendered it, why, and what that may change."""
 
 
-def build_terrain(scene: Scene) -> Terrain:
+def build_terrain(scene: Scene, *, on_capture: OnCapture | None = None) -> Terrain:
     """All terrain objects of a scene merged into one mesh, world frame [m], with the notes of
-    their OpenSCAD renders."""
+    their OpenSCAD renders; on_capture: told of each capture's reconstruction (OnCapture)."""
     if not scene.terrain:
         return Terrain(trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)))
-    built = [load_terrain_object(o, scene.path) for o in scene.terrain]
+    built = [load_terrain_object(o, scene.path, on_capture) for o in scene.terrain]
     for obj, (placed, _) in zip(scene.terrain, built):
         problem = below_ground_problem(placed, scene.ground)
         if problem:
@@ -330,14 +343,16 @@ def build_world(
     *,
     check_poses: bool = True,
     terrain: Terrain | None = None,
+    on_capture: OnCapture | None = None,
 ) -> World:
     """Render/load the terrain and rasterise the planner's height field around the bounds;
     SceneError when the start or goal is not a place the robot can stand (unless check_poses
     is False: the app shows such a scene and says what is wrong with its markers).
     terrain: the scene's terrain if already built (build_terrain), not to build it twice; its
-    notes (who rendered each OpenSCAD model) come first in the world's."""
+    notes (who rendered each OpenSCAD model) come first in the world's. on_capture: told of
+    each capture's reconstruction as the terrain is built (OnCapture)."""
     robot = robot or RobotConfig()
-    terrain = build_terrain(scene) if terrain is None else terrain
+    terrain = build_terrain(scene, on_capture=on_capture) if terrain is None else terrain
     mesh = terrain.mesh
     notes = list(terrain.notes)
     notes += [note] if (note := below_ground_note(mesh, scene.ground)) else []
