@@ -30,8 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from roachplan.experiments import load_experiment, plan, run_experiment
-from roachplan.experiments._spec import reference_settings
+from roachplan.experiments import load_experiment, plan, reference_settings, run_experiment
 from roachplan.planning import check_states
 from roachplan.planning._drivable import max_curvature
 from roachplan.planning._dubins import dubins_path

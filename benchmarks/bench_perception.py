@@ -115,7 +115,7 @@ def walkable(path: Path, settings: dict) -> dict[str, float]:
     """Reconstruct path with settings into a planning world; the share of its observed ground
     the robot can stand on, its largest standing region [m^2], and the seconds it took."""
     from roachplan.perception import load_capture
-    from roachplan.scenes._scene import terrain_file_scene
+    from roachplan.scenes import terrain_file_scene
 
     t = time.perf_counter()
     cs = capture_settings(settings)

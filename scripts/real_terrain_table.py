@@ -16,8 +16,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from roachplan.experiments import run_trial  # noqa: E402
 from roachplan.perception import CaptureSettings, capture_settings, mesh_capture  # noqa: E402
-from roachplan.scenes import SceneError, build_world, load_scene  # noqa: E402
-from roachplan.scenes._scene import terrain_file_scene  # noqa: E402
+from roachplan.scenes import (  # noqa: E402
+    SceneError,
+    build_world,
+    load_scene,
+    terrain_file_scene,
+)
 from test_perception import REAL  # noqa: E402
 
 FILES = {

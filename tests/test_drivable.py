@@ -11,8 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from roachplan.experiments import plan
-from roachplan.experiments._trial import drive
+from roachplan.experiments import drive, plan
 from roachplan.planning._drivable import max_curvature
 from roachplan.planning._dubins import dubins_path
 from roachplan.scenes import build_world, load_scene
@@ -228,7 +227,7 @@ def _spins_are_valid(world, planned) -> bool:
 
 
 def test_a_dead_end_too_narrow_for_arcs_is_left_by_a_turn_on_the_spot(dead_end):
-    from roachplan.experiments._trial import finish_trial
+    from roachplan.experiments import finish_trial
     from roachplan.planning import check_states
 
     scene = dead_end.scene
@@ -276,7 +275,7 @@ def test_a_plan_with_spins_and_its_trial_are_the_same_for_the_same_seed(dead_end
 def test_spins_mid_path_are_driven_where_the_route_turns_back(switchback):
     """Where the second corridor turns back 150 degrees, some routes' key poses leave no room
     for an arc (others do); those plans turn on the spot there and drive through."""
-    from roachplan.experiments._trial import finish_trial
+    from roachplan.experiments import finish_trial
 
     scene = switchback.scene
     mid = [

@@ -87,7 +87,7 @@ def test_the_reference_driver_reproduces_its_recorded_drives_bit_for_bit(k):
     triangles, and a bit-for-bit drive follows the triangles."""
     import dataclasses
 
-    from roachplan.experiments._trial import drive
+    from roachplan.experiments import drive
     from roachplan.scenes import build_world, load_scene, with_scad_backend
 
     rec = json.loads(REFERENCE_DRIVES.read_text())["drives"][k]

@@ -574,7 +574,7 @@ def test_a_runaway_planning_child_is_stopped_at_its_memory_limit(monkeypatch, is
 
 
 def test_a_real_plan_runs_under_the_default_limit(world, monkeypatch):
-    from roachplan.experiments._trial import plan
+    from roachplan.experiments import plan
 
     monkeypatch.delenv("ROACHPLAN_CHILD_MEMORY", raising=False)
     limit = child_memory_limit()

@@ -42,8 +42,7 @@ INSTRUCTION = re.compile(
 def _scene_keys() -> set[str]:
     """Every key a scene file may hold: the scene's, a terrain object's, a capture's."""
     from roachplan.perception import SETTING_KEYS
-    from roachplan.scenes import Scene
-    from roachplan.scenes._scene import TerrainObject
+    from roachplan.scenes import Scene, TerrainObject
 
     keys = {f.name for f in dataclasses.fields(Scene)} | {
         f.name for f in dataclasses.fields(TerrainObject)

@@ -183,8 +183,7 @@ def _floor_seen_by_a_tum_camera(path) -> None:
     RGB-D dataset's units: 5000 per metre (the page's default is 1000)."""
     from PIL import Image
 
-    from roachplan.perception import PRESETS
-    from roachplan.perception._synthetic import NO_NOISE, look_at, render_depth
+    from roachplan.perception import NO_NOISE, PRESETS, look_at, render_depth
 
     floor = trimesh.creation.box((8.0, 8.0, 0.02))
     floor.apply_translation((0.0, 0.0, -0.01))

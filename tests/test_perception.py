@@ -364,7 +364,7 @@ def test_the_mesh_does_not_bridge_the_shadow_behind_the_box(box_capture, method)
 def test_voxel_study_of_a_wall_at_6_m(tmp_path):
     """Table 3.1's setup: a wall 6 m in front, a 2 m x 2 m square of it. Bigger voxels keep
     fewer points; the iterative 5-sigma fit discards injected gross outliers."""
-    from roachplan.perception._voxel_study import voxel_study
+    from roachplan.perception import voxel_study
 
     wall = trimesh.creation.box((4.0, 0.05, 4.0))
     wall.apply_translation((0, 6.025, 0))

@@ -33,7 +33,7 @@ RTAB = {"intrinsics": str(REAL / "rtabmap" / "calib_154.yaml")}
 
 def _capture_world(path, settings: dict | None = None):
     """The world of a capture used directly as a scene (start and goal not picked)."""
-    from roachplan.scenes._scene import terrain_file_scene
+    from roachplan.scenes import terrain_file_scene
 
     scene = terrain_file_scene(path)
     obj = dataclasses.replace(scene.terrain[0], capture=capture_settings(settings or {}))
@@ -250,7 +250,7 @@ def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
     """A synthetic Kinect capture, from 0.4 m up, of a table (top 0.7 m up, four legs) on a
     floor: the camera sees the floor under the table top, so there the robot stands on the
     floor (the top is overhead), and a drive under the table starts on the floor."""
-    from roachplan.experiments._trial import drive
+    from roachplan.experiments import drive
 
     floor = trimesh.creation.box((8.0, 8.0, 0.02))
     floor.apply_translation((0, 0, -0.01))

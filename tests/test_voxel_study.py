@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 from conftest import roachplan
-from roachplan.perception import CaptureError
-from roachplan.perception._voxel_study import (
-    MIN_KEPT,
+from roachplan.perception import (
+    CaptureError,
     VoxelStudyRow,
     planarity_warning,
     plane_region,
@@ -21,6 +20,7 @@ from roachplan.perception._voxel_study import (
     square_region,
     voxel_study,
 )
+from roachplan.perception._voxel_study import MIN_KEPT
 from test_perception import REAL
 
 ROOM = REAL / "tutorials_pairwise_capture0002.pcd"  # staircase, shelves; back wall 25 %, floor 8 %
