@@ -13,7 +13,7 @@ __version__ = "0.1.0"
 
 # The Python API (roachplan/_api.py), imported on first use: `import roachplan` stays quick; and
 # the errors of bad input and the settings' validators, which every package shares.
-__getattr__, __dir__, __all__ = lazy_exports(
+_getattr, __dir__, __all__ = lazy_exports(
     __name__,
     {
         **{n: "._api" for n in ("load", "plan", "drive", "trial", "choose", "experiment", "mesh")},
@@ -22,6 +22,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "setting_problem": "._settings",
     },
 )
+if not TYPE_CHECKING:  # (a type checker sees the names imported below instead, and so
+    # reports an import from here of a name that is not one of them)
+    __getattr__ = _getattr
+del _getattr
 
 if TYPE_CHECKING:
     from ._api import choose as choose

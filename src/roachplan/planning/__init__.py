@@ -5,7 +5,7 @@ from typing import TYPE_CHECKING
 from roachplan._lazy import lazy_exports
 
 # Public names, imported on first use (roachplan._lazy): the command line answers at once.
-__getattr__, __dir__, __all__ = lazy_exports(
+_getattr, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "HeightField": "._heightfield",
@@ -38,6 +38,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "describe_state": "._validity",
     },
 )
+if not TYPE_CHECKING:  # (a type checker sees the names imported below instead, and so
+    # reports an import from here of a name that is not one of them)
+    __getattr__ = _getattr
+del _getattr
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._config import MAX_TIME_LIMIT as MAX_TIME_LIMIT
