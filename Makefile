@@ -34,7 +34,8 @@ test: $(STAMP)
 	@scripts/install-system-deps.sh $(TEST_DEBS)
 	$(BIN)/python -m pytest --durations=25
 
-# The edit-test loop: every test not marked slow (no browser, no batches), a few minutes.
+# The edit-test loop: every test not marked slow (no browser, batch, real capture or hostile
+# corpus), under 3 minutes on 2 cores.
 test-fast: $(STAMP)
 	@scripts/install-system-deps.sh $(RUN_DEBS)
 	$(BIN)/python -m pytest -m "not slow" --durations=10

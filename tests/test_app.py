@@ -13,7 +13,10 @@ import pytest
 from conftest import ROOT, free_port
 
 CHROMIUM = shutil.which("chromium")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 ARGS = [
     "--no-sandbox",
     "--disable-gpu",

@@ -258,6 +258,7 @@ def _rows(db: Path, sql: str) -> list[dict]:
         conn.close()
 
 
+@pytest.mark.slow
 def test_log_reads_into_planner_arena_tables(bench):
     (exp,) = _rows(bench["parsed"], "SELECT * FROM experiments")
     assert exp["name"] == "double_bridge" and exp["version"] == "OMPL 1.7.0"
@@ -287,6 +288,7 @@ def test_log_reads_into_planner_arena_tables(bench):
         assert column in runs[0], column
 
 
+@pytest.mark.slow
 def test_physics_columns_match_the_trials_themselves(bench, world):
     from roachplan.experiments import run_trial
 
@@ -322,6 +324,7 @@ def test_physics_columns_match_the_trials_themselves(bench, world):
         assert r["time"] > 0
 
 
+@pytest.mark.slow
 def test_our_database_is_what_the_script_makes_of_the_log(bench):
     conn = sqlite3.connect(bench["db"])
     assert conn.execute("PRAGMA application_id").fetchone()[0] == 0x52504C4E
@@ -382,6 +385,7 @@ def test_bad_flags_are_refused_in_one_line(tmp_path, flags, says):
     assert list(tmp_path.iterdir()) == [], "nothing is written when refused"
 
 
+@pytest.mark.slow
 def test_replaces_its_own_outputs_only(bench, tmp_path):
     foreign_log, foreign_db = tmp_path / "notes.log", tmp_path / "mine.db"
     foreign_log.write_text("my notes\n")

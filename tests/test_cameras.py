@@ -371,6 +371,7 @@ def test_intrinsics_mapping_in_capture_settings(tmp_path):
             capture_settings({"intrinsics": bad})
 
 
+@pytest.mark.slow
 def test_cli_fx_fy_cx_cy_flags(tmp_path):
     png = tmp_path / "room.png"
     shutil.copy(RTAB_PNG, png)

@@ -7,7 +7,11 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from conftest import ROACHPLAN, ROOT
+
+pytestmark = pytest.mark.slow  # (meshing a capture until its memory limit stops it)
 
 
 def _mapped_after_imports() -> int:

@@ -9,6 +9,8 @@ import json
 import os
 import subprocess
 
+import pytest
+
 from conftest import ROACHPLAN, ROOT
 
 
@@ -39,6 +41,7 @@ def test_meshing_shows_its_stages_and_json_stays_clean(tmp_path):
     assert done and done[-1].rstrip().endswith("mesh]"), run.stderr[-500:]  # the last stage
 
 
+@pytest.mark.slow
 def test_a_render_shows_seconds_of_its_limit_and_many_paths_show_paths_found(tmp_path):
     model = tmp_path / "ramp.scad"
     model.write_text("cube([1.5, 1.5, 0.02]);\n")
@@ -60,6 +63,7 @@ def test_a_render_shows_seconds_of_its_limit_and_many_paths_show_paths_found(tmp
     assert "paths: 100%" in plans.stderr and "2/2" in plans.stderr, plans.stderr[-500:]
 
 
+@pytest.mark.slow
 def test_no_bar_without_a_terminal_unless_asked(tmp_path):
     capture = ROOT / "scenes/library/kinect_bridge_depth.png"
     run = _run("mesh", str(capture), "-o", str(tmp_path / "b.ply"), progress=False)

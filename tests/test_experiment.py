@@ -97,6 +97,7 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
+@pytest.mark.slow
 def test_printed_table_matches_stats_recomputed_from_the_raw_store(run_one_worker):
     out, stdout = run_one_worker
     trials = trials_of(out)
@@ -129,6 +130,7 @@ def test_printed_table_matches_stats_recomputed_from_the_raw_store(run_one_worke
     assert "| successful traversals |" in (out / "summary.md").read_text()
 
 
+@pytest.mark.slow
 def test_manifest_records_versions_hashes_settings_and_seeds(run_one_worker):
     out, _ = run_one_worker
     m = json.loads((out / "manifest.json").read_text())
@@ -141,6 +143,7 @@ def test_manifest_records_versions_hashes_settings_and_seeds(run_one_worker):
     assert sorted(seeds.values()) == [seeds[k] for k in range(N)]  # trial K: K-th chosen seed
 
 
+@pytest.mark.slow
 def test_kill_then_resume_gives_exactly_n_distinct_trials(run_killed_and_resumed):
     out, stdout, before, workers = run_killed_and_resumed
     records = read_store(out)
@@ -161,6 +164,7 @@ def test_kill_then_resume_gives_exactly_n_distinct_trials(run_killed_and_resumed
     assert not any(_alive(p) for p in workers)
 
 
+@pytest.mark.slow
 def test_same_seeds_give_the_same_table(run_one_worker, run_killed_and_resumed):
     """1 worker uninterrupted vs 2 workers killed and resumed: the same trials, bit for bit."""
     (out_a, stdout_a), (out_b, stdout_b, _, _) = run_one_worker, run_killed_and_resumed
@@ -172,6 +176,7 @@ def test_same_seeds_give_the_same_table(run_one_worker, run_killed_and_resumed):
     assert a == b
 
 
+@pytest.mark.slow
 def test_best_path_is_the_lowest_energy_success_re_driven(run_one_worker):
     out, stdout = run_one_worker
     best = json.loads((out / "best_path.json").read_text())
@@ -188,6 +193,7 @@ def test_best_path_is_the_lowest_energy_success_re_driven(run_one_worker):
     assert f"{best['repeat_successes']}/2 succeeded" in stdout
 
 
+@pytest.mark.slow
 def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_worker, tmp_path):
     """Against the same figure drawn without trials: the paths add dark and blue pixels."""
     import matplotlib.image
@@ -215,6 +221,7 @@ def test_figures_show_planned_paths_in_black_and_trajectories_in_blue(run_one_wo
     assert energy.shape[0] > 300
 
 
+@pytest.mark.slow
 def test_trial_from_dir_reruns_a_stored_trial_exactly(run_one_worker):
     out, _ = run_one_worker
     stored = next(t for t in trials_of(out) if t["index"] == 5)
@@ -228,6 +235,7 @@ def test_trial_from_dir_reruns_a_stored_trial_exactly(run_one_worker):
     assert bad.returncode == 2 and f"has trials 0 to {N - 1}" in bad.stderr
 
 
+@pytest.mark.slow
 def test_ray_backend_runs_the_same_trials(run_one_worker, tmp_path):
     """A local Ray instance, 2 actors: each trial equals the local run's trial of that seed."""
     out_local, _ = run_one_worker
@@ -257,6 +265,7 @@ def test_ray_backend_runs_the_same_trials(run_one_worker, tmp_path):
             assert t[key] == ref[key], (t["seed"], key)
 
 
+@pytest.mark.slow
 def test_existing_results_need_resume_and_the_same_settings(run_one_worker):
     out, _ = run_one_worker
     again = roachplan("experiment", *ARGS, "--out", str(out))
@@ -352,6 +361,7 @@ def test_summary_statistics_on_known_records():
     assert (b.trials, b.successes, b.failures) == (1, 0, {"stuck": 1}) and np.isnan(b.energy_mean)
 
 
+@pytest.mark.slow
 def test_a_workers_trial_does_not_depend_on_what_it_drove_before():
     """A worker's trial equals the same trial in a worker that ran nothing before. The case is
     one that broke a reused PyBullet client: on the kinect_bridge capture, with the report's

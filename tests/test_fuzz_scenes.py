@@ -266,6 +266,7 @@ def test_load_yaml_reads_any_text_or_raises_its_error(text):
         assert len(str(exc)) < 1000
 
 
+@pytest.mark.slow
 @given(depth=st.integers(1, 3000), width=st.integers(1, 12))
 def test_nesting_and_aliases_are_bounded_however_deep_or_wide(depth, width):
     nested = "a: " + "[" * depth + "]" * depth

@@ -497,6 +497,7 @@ def _cloud(tmp: Path, name: str) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_hostile_cli(case: Case, tmp_path: Path):
     run_case(case, tmp_path)

@@ -611,6 +611,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_hostile_capture(case: Case, tmp_path: Path):
     proc = run_case(case, tmp_path)

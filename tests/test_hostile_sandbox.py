@@ -326,6 +326,7 @@ def _assert_secret_unread(tmp: Path, written: bool) -> None:
         assert top < SECRET_HEIGHT / 2, f"the mesh reaches z = {top}: the secret was read"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_hostile_model(case, tmp_path, monkeypatch):
     for key, value in ENV.get(case.name, {}).items():
@@ -351,6 +352,7 @@ _NO_NAMESPACES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     shutil.which("unshare") is None or not sandbox_available(),
     reason="needs unprivileged user namespaces to take them away",

@@ -392,6 +392,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_a_hostile_scene_or_spec_is_refused_clearly(case, tmp_path):
     run_case(case, tmp_path)

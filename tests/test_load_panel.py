@@ -13,7 +13,10 @@ import yaml
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_perception import REAL
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 
 def _scene_of(app) -> dict:

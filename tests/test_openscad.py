@@ -60,6 +60,7 @@ def test_rough_bridge_bumps_follow_appendix_c2():
     assert bumps["left"][:, 2].mean() > bumps["right"][:, 2].mean() + 0.001
 
 
+@pytest.mark.slow
 def test_rough_bridge_renders_the_same_for_a_seed_and_differently_for_another(
     tmp_path, monkeypatch
 ):

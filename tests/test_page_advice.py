@@ -215,6 +215,7 @@ def _capture_settings(app) -> dict:
     return next(o for o in raw["terrain"] if "capture" in o).get("perception") or {}
 
 
+@pytest.mark.slow
 @pytestmark_browser
 def test_up_direction_re_meshes_the_loaded_capture_facing_that_way(app, artifacts):
     """A camera's +x (the image's right) as up: no plane faces that way, and the capture's
@@ -250,6 +251,7 @@ def test_up_direction_re_meshes_the_loaded_capture_facing_that_way(app, artifact
         assert not app.load_panel.view.report["warnings"]
 
 
+@pytest.mark.slow
 @pytestmark_browser
 def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_area(
     app, artifacts, tmp_path
@@ -290,6 +292,7 @@ def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_are
         assert -1.2 <= pose[0] <= 0.3 and -0.6 <= pose[1] <= 0.9
 
 
+@pytest.mark.slow
 @pytestmark_browser
 def test_start_and_goal_nobody_could_pick_are_explained_with_the_pages_controls(app, artifacts):
     """A ROS bag of a watering can (an object, not terrain): the robot can stand nowhere, so

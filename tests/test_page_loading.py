@@ -37,6 +37,7 @@ def count_meshing(monkeypatch):
     return calls
 
 
+@pytest.mark.slow
 def test_an_uploaded_capture_is_meshed_once_and_its_camera_shown(tmp_path, count_meshing):
     data = (LIBRARY / "kinect_bridge_depth.png").read_bytes()
     path = scene_from_upload("bridge.png", data, tmp_path, {"intrinsics": "kinect2-qhd"})
@@ -47,6 +48,7 @@ def test_an_uploaded_capture_is_meshed_once_and_its_camera_shown(tmp_path, count
     assert len(world.mesh.faces) > 1000
 
 
+@pytest.mark.slow
 def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
     """The RTAB-Map depth PNG with its OpenCV calibration, uploaded together with the page's
     default meshing, is the same scene as `roachplan trial --scene depth.png` with the
@@ -77,6 +79,7 @@ def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
     assert distance >= 1.0, page.notes
 
 
+@pytest.mark.slow
 def test_a_capture_from_elsewhere_is_copied_then_remeshed(tmp_path):
     """A command-line capture (and a calibration beside it) is never rewritten: re-meshing
     writes a scene of its own that points at it, with the crop box in world coordinates."""

@@ -13,7 +13,7 @@ import pytest
 from test_app import CHROMIUM, browser_pages, upload
 from test_perception import REAL
 
-pytestmark = pytest.mark.skipif(not CHROMIUM, reason="needs chromium")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not CHROMIUM, reason="needs chromium")]
 
 
 def _zip(tmp_path, name: str, *files) -> str:

@@ -17,7 +17,10 @@ import trimesh
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_page_view import dropdown
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 HEADERS = ("#", "seed", "route", "outcome", "drive time [s]", "energy [J]", "rel. energy", "label")
 

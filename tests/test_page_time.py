@@ -24,7 +24,10 @@ from test_app import CHROMIUM, browser_pages, set_value, title, upload
 from test_page_view import dropdown
 from test_perception import REAL
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 
 def _app(scene):

@@ -123,6 +123,7 @@ def check_the_standability_overlay(app, page, artifacts) -> None:
     wait_until(lambda: not overlay.visible, 5)
 
 
+@pytest.mark.slow
 def test_a_new_plan_clears_the_old_and_the_toggles_act_at_once(app, artifacts):
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         # The first view is on start and goal (not the terrain's bounds).
@@ -189,6 +190,7 @@ def test_a_new_plan_clears_the_old_and_the_toggles_act_at_once(app, artifacts):
         )
 
 
+@pytest.mark.slow
 def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts):
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         set_value(page, "Paths (K)", "3")
@@ -267,6 +269,7 @@ def framed(cameras, lo, hi, points) -> bool:
     return False
 
 
+@pytest.mark.slow
 def test_every_load_and_re_mesh_frames_the_terrain_with_start_and_goal(app, artifacts):
     """The camera each browser reports back (not what the server asked for) after a capture is
     loaded and after it is re-meshed: it looks at a point within the terrain's bounds, from a

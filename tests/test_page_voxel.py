@@ -96,6 +96,7 @@ def _points_in_square(app, centre, side: float) -> int:
     )
 
 
+@pytest.mark.slow
 def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artifacts, tmp_path):
     pcd = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
     sizes = [1, 2, 5, 10, 20]

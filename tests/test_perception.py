@@ -328,7 +328,9 @@ def test_box_on_floor_is_meshed_where_it_is(box_capture, given_pose):
     assert np.all(v[outside, 2] < 0.02)
 
 
-@pytest.mark.parametrize("method", ["sensor", "grid", "poisson", "ball-pivot"])
+@pytest.mark.parametrize(
+    "method", ["sensor", "grid", pytest.param("poisson", marks=pytest.mark.slow), "ball-pivot"]
+)
 def test_every_facet_faces_the_camera(box_capture, method):
     """Section 3.2: <x_i, n_i> <= 0 in camera coordinates, for every facet; and (a height
     field) every facet faces up in the world."""

@@ -87,6 +87,7 @@ def independent_check(world, states: np.ndarray) -> list[str]:
     return problems
 
 
+# Every test on `runs` is slow: the fixture plans 11 times with every planner (20-70 s).
 @pytest.fixture(scope="module")
 def runs(world):
     """Every planner, seeds 0-9 on the double bridge, then seed 0 again: the planners' own
@@ -100,6 +101,7 @@ def runs(world):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", PLANNER_NAMES)
 def test_every_planner_finds_valid_paths_for_ten_seeds(world, runs, name):
     plans, _ = runs[name]
@@ -110,12 +112,14 @@ def test_every_planner_finds_valid_paths_for_ten_seeds(world, runs, name):
         np.testing.assert_allclose(pl.states[-1], world.scene.goal, atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", PLANNER_NAMES)
 def test_every_planner_draws_from_the_terrain_sampler(runs, name):
     plans, _ = runs[name]
     assert all(pl.sampler_calls > 0 for pl in plans), [pl.sampler_calls for pl in plans]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", PLANNER_NAMES)
 def test_same_seed_same_path_after_other_plans_in_the_process(runs, name):
     plans, again = runs[name]
@@ -124,6 +128,7 @@ def test_same_seed_same_path_after_other_plans_in_the_process(runs, name):
     assert len({pl.states.tobytes() for pl in plans}) > 1
 
 
+@pytest.mark.slow
 def test_both_bridges_are_found_and_labelled(world, runs):
     for pl in runs["prm"][0]:
         route = world.route(pl.path_xyz[:, :2])
@@ -187,6 +192,7 @@ def test_simplify_and_smooth_keep_the_path_valid(world):
     np.testing.assert_allclose(smooth.path_xyz[on_bridge, 2], 0.2, atol=1e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -213,6 +219,7 @@ def test_invalid_requests_name_what_failed(args, message):
     assert "Traceback" not in out.stderr
 
 
+@pytest.mark.slow
 def test_plan_cli_json_single_and_many():
     one = roachplan(
         "plan", "--scene", "double_bridge", "--planner", "rrtconnect", "--seed", "4", "--json"

@@ -15,6 +15,9 @@ import yaml
 from conftest import roachplan
 from test_perception import REAL
 
+# Real captures meshed, planned and driven through the command line, seconds to a minute each.
+pytestmark = pytest.mark.slow
+
 RTAB = REAL / "rtabmap"
 # file, extra `mesh` flags, README's up in the camera frame, README's camera height [m]
 GROUND_FACTS = [

@@ -48,6 +48,7 @@ def _angle(a, b) -> float:
 # -- the ground, gravity first ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_floor_of_one_per_cent_of_the_points_is_found():
     """PCL's staircase room (floor 8 % of the points, the back wall 25 %) with the floor's
     nearer half of rows removed, so the floor is about 1 % of the points: the ground is still
@@ -86,6 +87,7 @@ def test_a_lidar_patch_is_a_world_frame_with_its_slope_kept():
 # -- a surface where the sensor saw one ---------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_floor_seen_from_a_low_camera_is_a_surface_not_holes():
     """rtabmap's 0.41 m camera sees the far floor at a grazing angle, sparser than any 1 cm
     grid: with the grid method most of it is holes and the robot stands on 1.5 m^2 in pieces;
@@ -141,6 +143,7 @@ def test_small_holes_are_filled_from_their_rim_and_said(tmp_path):
     assert len(z) and np.median(z) < 0.003 and z.max() < 0.01, (np.median(z), z.max())
 
 
+@pytest.mark.slow
 def test_an_unorganized_camera_cloud_is_meshed_like_the_organized_one(tmp_path):
     """PCL's floor-and-chair capture written as a plain .xyz list in shuffled order (no pixel
     grid): triangulated by its directions from the sensor, the robot stands on at least 80 %
@@ -176,6 +179,7 @@ def step_scene(tmp_path_factory):
     return world, centre[:2]
 
 
+@pytest.mark.slow
 def test_a_noisy_floor_is_flat_to_the_checks_and_a_step_is_still_a_step(step_scene):
     """The floor in front of the step, 1-2.5 m from the camera, is flat within the sensor's
     noise: the robot stands on nearly all of it at any heading. Astride the step's edge (its
@@ -246,6 +250,7 @@ def test_a_model_on_the_ground_is_crossed_from_the_ground(tmp_path):
     assert any("either end of the model" in n for n in world.notes)
 
 
+@pytest.mark.slow
 def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
     """A synthetic Kinect capture, from 0.4 m up, of a table (top 0.7 m up, four legs) on a
     floor: the camera sees the floor under the table top, so there the robot stands on the
@@ -279,6 +284,7 @@ def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
     assert result.trajectory[0][3] < 0.1, "placed on the table top, not the floor"
 
 
+@pytest.mark.slow
 def test_a_public_style_model_in_millimetres_is_crossed_from_the_ground(tmp_path):
     """A tile model as public ones are written (an include, a use, text(), a polyhedron wound
     the other way, millimetres) at `scale: 0.02` on `ground: 0`: rendered by the default

@@ -21,7 +21,10 @@ from test_app import ARGS, CHROMIUM
 if TYPE_CHECKING:
     from playwright.sync_api import FloatRect
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 
 @pytest.fixture(scope="module")

@@ -54,6 +54,7 @@ def reference_walks(dt: float) -> np.ndarray:
     return np.array(out)
 
 
+@pytest.mark.slow
 def test_halving_the_timestep_changes_a_reference_walk_by_a_few_percent():
     # Measured (README): 1/1000 s -> 1/2000 s moves distance -0.4 %, energy +1.7 %, mean
     # heading drift by < 0.1 deg.
@@ -71,6 +72,7 @@ def test_more_right_speed_turns_left_harder():
     assert 0.5 < gentle.curvature < hard.curvature
 
 
+@pytest.mark.slow
 def test_calibrate_turning_fits_the_curve_the_driver_and_the_plans_use(tmp_path):
     from roachplan.app._calibrate import DEFAULT_RATIOS, REPORT_RATIOS
     from roachplan.planning import PlannerConfig
@@ -163,6 +165,7 @@ def test_a_curve_from_too_few_ratios_is_refused(tmp_path):
     assert "--ratios '1,2,2,3'" in out.stderr and "5 or more distinct" in out.stderr
 
 
+@pytest.mark.slow
 def test_calibrate_turning_measures_the_spins_on_the_spot_the_driver_and_the_plans_use(tmp_path):
     """Re-runs the spin calibration (through the command line, with a short ratio sweep) and
     checks the recorded numbers (sim/_turning.py CALIBRATED_SPINS) and what follows from them:

@@ -109,6 +109,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @needs_jail
 @pytest.mark.parametrize("name", CASES)
 def test_manifold_agrees_with_the_binary(name, tmp_path):
@@ -153,6 +154,7 @@ LIBRARY_BACKENDS = {
 face (plywood_bridge) go to the binary."""
 
 
+@pytest.mark.slow
 @needs_jail
 @pytest.mark.parametrize("name", LIBRARY_BACKENDS)
 def test_every_library_model_renders_by_default_as_the_binary_renders_it(name):
@@ -200,6 +202,7 @@ def test_a_public_style_tile_loads_with_manifold_by_default_and_says_what_it_may
     assert np.quantile(d, 0.99) <= AGREE_P99 * np.linalg.norm(binary.extents)
 
 
+@pytest.mark.slow
 @needs_jail
 def test_the_tolerance_catches_a_real_difference():
     """Control: the same rough bridge with another seed (bumps moved) is not 'agreeing'."""
@@ -247,6 +250,7 @@ TEXTS = {
 font this system lacks (fontconfig's fallback, DejaVu Sans Bold), alignments, $fn."""
 
 
+@pytest.mark.slow
 @needs_jail
 @pytest.mark.parametrize("name", TEXTS)
 def test_text_renders_within_the_stated_deviation_of_the_binary(name, tmp_path):
@@ -264,6 +268,7 @@ def test_text_renders_within_the_stated_deviation_of_the_binary(name, tmp_path):
     assert "text(): glyphs may sit up to" in fast.note(scale=0.02)
 
 
+@pytest.mark.slow
 @needs_jail
 def test_the_text_bound_catches_glyphs_moved_by_more(tmp_path):
     """Control: the same label moved by twice the bound is not within it."""
@@ -519,6 +524,7 @@ def test_a_syntax_error_is_shown_with_its_line(tmp_path):
     assert f"Syntax error in {src} at line 2" in text  # the jail's /model turned back
 
 
+@pytest.mark.slow
 @needs_jail
 def test_the_time_limit_stops_the_evaluator(tmp_path):
     src = _model(
@@ -563,6 +569,7 @@ JAIL_CASES = {
 }
 
 
+@pytest.mark.slow
 @needs_jail
 @pytest.mark.parametrize("name", JAIL_CASES)
 def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
@@ -688,6 +695,7 @@ def _dropdown(page, label: str, option: str) -> None:
     page.get_by_role("option", name=option, exact=True).click()
 
 
+@pytest.mark.slow
 @needs_jail
 def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, artifacts):
     import zipfile

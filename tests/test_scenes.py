@@ -245,6 +245,7 @@ def test_trial_takes_a_scene_file_path(tmp_path, box_stl):
     assert '"scene": "scene"' in out.stdout and '"outcome": "success"' in out.stdout
 
 
+@pytest.mark.slow
 def test_the_documented_example_is_a_valid_scene(tmp_path):
     page = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
     example = page.split("## A complete example", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
@@ -327,6 +328,7 @@ def test_scaled_scene_scales_every_terrain_object_on_top_of_its_own_scale(tmp_pa
         scaled_scene(scene, -1.0)
 
 
+@pytest.mark.slow
 def test_scene_build_takes_scale_and_scad_timeout(tmp_path, millimetre_stl):
     path = write_scene(tmp_path, VALID)
     out = roachplan("scene", "build", str(path), "-o", str(tmp_path / "mm.stl"))

@@ -195,6 +195,7 @@ def _timed(*args: str) -> tuple[float, subprocess.CompletedProcess]:
     return time.monotonic() - t0, done
 
 
+@pytest.mark.slow
 def test_plan_time_limit_bounds_the_whole_command_every_seed_and_try(tmp_path):
     """`plan --count 3 --time-limit 3` on a scene with no path: before, each of its up to 19
     seeds had 3 s (about 40 s in all); now all of them share the 3 s.

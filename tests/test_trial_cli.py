@@ -155,6 +155,7 @@ def _spec(tmp_path, reference: bool):
     return path
 
 
+@pytest.mark.slow
 def test_a_spec_with_reference_true_runs_and_records_the_reports_setting(tmp_path):
     from roachplan.experiments import load_experiment
 

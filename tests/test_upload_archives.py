@@ -29,6 +29,7 @@ def _zip(files: dict[str, bytes], links: tuple[str, ...] = ()) -> bytes:
     return buf.getvalue()
 
 
+@pytest.mark.slow
 def test_a_zip_with_a_scad_and_its_data_file_builds(tmp_path):
     scad = (REAL / "openscad" / "example010.scad").read_bytes()
     dat = (REAL / "openscad" / "example010.dat").read_bytes()
@@ -82,6 +83,7 @@ def test_messages_name_the_file_not_the_upload_folder(tmp_path):
     assert public_message(msg, tmp_path) == "cube.yaml: terrain[0].scad: too big"
 
 
+@pytest.mark.slow
 def test_a_zip_of_a_depth_image_with_its_calibration_loads_them_together(tmp_path):
     rtab = REAL / "rtabmap"  # the calibration's name differs from the image's
     data = _zip(

@@ -59,6 +59,7 @@ def test_points_kept_excludes_the_gross_outliers_of_a_plane(tmp_path):
     assert study["warning"] is None and "warning" not in stderr
 
 
+@pytest.mark.slow
 def test_a_whole_room_warns_and_its_planes_do_not():
     """No region: the fit is over walls, floor, shelves and stairs; the 5-sigma band covers the
     whole room so nothing is discarded, and the study says the region is not one surface.
@@ -83,6 +84,7 @@ def test_a_whole_room_warns_and_its_planes_do_not():
     assert raw["error_mm"] < 10.0 and raw["points"] < wall["rows"][0]["points"]
 
 
+@pytest.mark.slow
 def test_the_text_table_and_csv(tmp_path):
     done = roachplan(
         "voxel-study", str(ROOM), "--plane", "--sizes", "2,10", "--csv", str(tmp_path / "s.csv")

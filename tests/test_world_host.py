@@ -42,6 +42,7 @@ def host(world):
     h.close()
 
 
+@pytest.mark.slow
 def test_a_fork_of_the_host_plans_what_a_child_sent_the_world_plans(world, host):
     far = time.monotonic() + 60
     hosted = [_paths(Job(_plan_job, 2, _request(world, 5), far, host=host)) for _ in range(2)]
@@ -69,6 +70,7 @@ def test_cancel_kills_the_fork_and_the_host_serves_the_next_job(world, host):
     assert len(_paths(Job(_plan_job, 1, _request(world, 3), time.monotonic() + 60, host=host))) == 1
 
 
+@pytest.mark.slow
 def test_the_app_plans_without_its_host_once_it_has_died(world):
     from conftest import free_port
     from roachplan.app._server import RoachApp
