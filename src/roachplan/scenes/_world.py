@@ -244,7 +244,7 @@ def build_world(
     is False: the app shows such a scene and says what is wrong with its markers).
     terrain: the scene's terrain if already built (build_terrain), not to build it twice; its
     notes (who rendered each OpenSCAD model) come first in the world's."""
-    robot = robot or RobotConfig()
+    robot = robot or scene.robot
     terrain = build_terrain(scene) if terrain is None else terrain
     mesh = terrain.mesh
     notes = list(terrain.notes)

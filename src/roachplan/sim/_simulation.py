@@ -107,7 +107,7 @@ class Simulation:
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
         self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
-        self._motor_gain = (1.0, 1.0)  # each side's speed / its command (perturb) [-]
+        self._motor_gain = robot.motor_gain  # each side's speed / its command [-]
         self._base_inertia: tuple[float, float, float] | None = None  # nominal, for perturb
         self.time = 0.0
         self.energy_per_leg = np.zeros(6)
@@ -257,7 +257,8 @@ class Simulation:
     ) -> None:
         """Set this world's physical uncertainty for the next drives (choose's rollouts):
         the Coulomb friction of terrain, ground and robot [-], the body's mass as a multiple
-        of its nominal one [-], and the (left, right) motors' speed gains [-].
+        of the robot's [-], and the (left, right) motors' speed gains [-] as multiples of the
+        robot's own (RobotConfig.motor_gain, 1 on the nominal robot).
         perturb(friction=cfg.friction, mass_scale=1, motor_gain=(1, 1)) is the nominal world."""
         bc, r = self._bc, self.robot
         for body in (self.terrain_id, self.ground_id):
@@ -276,7 +277,8 @@ class Simulation:
             -1,
             localInertiaDiagonal=tuple(v * mass_scale for v in self._base_inertia),
         )
-        self._motor_gain = (float(motor_gain[0]), float(motor_gain[1]))
+        own = self.robot.motor_gain
+        self._motor_gain = (float(motor_gain[0]) * own[0], float(motor_gain[1]) * own[1])
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
