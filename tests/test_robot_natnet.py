@@ -99,7 +99,7 @@ def test_the_client_parses_descriptions_and_frames_exactly_as_motive_sends_them(
         ("roach", 7, 2**32 - 1),
     ]
     roach = desc.rigid_bodies[1]
-    assert [m.pos for m in roach.markers] == pytest.approx(list(MARKERS))
+    assert [c for m in roach.markers for c in m.pos] == pytest.approx([c for m in MARKERS for c in m])
     assert [m.name for m in roach.markers] == ["Marker1", "Marker2", "Marker3"]
     frame = frames[-1]
     assert frame.prefix.frame_number == 4242
