@@ -30,7 +30,10 @@ class Served:
 
     def __init__(self) -> None:
         self.server = NatNetServer(
-            [RigidBodyModel(name="other", id=3), RigidBodyModel(name="roach", id=7, markers=MARKERS)]
+            [
+                RigidBodyModel(name="other", id=3),
+                RigidBodyModel(name="roach", id=7, markers=MARKERS),
+            ]
         )
         self.packet: bytes | None = None
         self._stop = False
@@ -99,7 +102,9 @@ def test_the_client_parses_descriptions_and_frames_exactly_as_motive_sends_them(
         ("roach", 7, 2**32 - 1),
     ]
     roach = desc.rigid_bodies[1]
-    assert [c for m in roach.markers for c in m.pos] == pytest.approx([c for m in MARKERS for c in m])
+    assert [c for m in roach.markers for c in m.pos] == pytest.approx(
+        [c for m in MARKERS for c in m]
+    )
     assert [m.name for m in roach.markers] == ["Marker1", "Marker2", "Marker3"]
     frame = frames[-1]
     assert frame.prefix.frame_number == 4242
@@ -135,7 +140,9 @@ def test_the_pose_source_follows_its_rigid_body_by_name(up_axis):
                 p, q = (0.2, 0.3, 0.025), (0.0, 0.0, half, half)
             else:  # the same robot as a y-up stream gives it: y up, z = -y_world
                 p, q = (0.2, 0.025, -0.3), (-0.5, 0.5, 0.5, 0.5)
-            served.packet = frame_packet(1, [RigidBodyFrame(id=7, position=p, quat=q)], timestamp=0.5)
+            served.packet = frame_packet(
+                1, [RigidBodyFrame(id=7, position=p, quat=q)], timestamp=0.5
+            )
             deadline = time.monotonic() + 5
             while source.latest() is None and time.monotonic() < deadline:
                 time.sleep(0.02)

@@ -17,7 +17,7 @@ angle = st.floats(-math.pi, math.pi)
 
 @given(x=coord, y=coord, z=st.floats(0, 1), yaw=angle, sx=coord, sy=coord, syaw=angle)
 def test_the_transform_measured_at_the_start_maps_the_robot_onto_the_start(
-    x, y, z, yaw, sx, sy, syaw
+    *, x, y, z, yaw, sx, sy, syaw
 ):
     tilt = (0.02, -0.01, 0.0, math.sqrt(1 - 0.02**2 - 0.01**2))  # standing a little tilted
     q_mocap = quat_multiply(yaw_quat(yaw), tilt)

@@ -104,7 +104,13 @@ def _simulation(world: World, params: SimParams):
 
     robot = params.robot_file().robot()
     cfg = dataclasses.replace(world.scene.sim, friction=params.friction)
-    return Simulation(world.mesh.vertices, world.mesh.faces, ground_height=world.scene.ground, robot=robot, cfg=cfg)
+    return Simulation(
+        world.mesh.vertices,
+        world.mesh.faces,
+        ground_height=world.scene.ground,
+        robot=robot,
+        cfg=cfg,
+    )
 
 
 def replay_commands(world: World, log: RunLog, params: SimParams, times: np.ndarray) -> Track:
@@ -412,7 +418,9 @@ def fit(
         v[i] = x0[i] + steps[i] * rng.choice([-1.0, 1.0])
         simplex.append(v)
     bounds = [BOUNDS[n] for n in names]
-    simplex = np.array([np.clip(v, [b[0] for b in bounds], [b[1] for b in bounds]) for v in simplex])
+    simplex = np.array(
+        [np.clip(v, [b[0] for b in bounds], [b[1] for b in bounds]) for v in simplex]
+    )
     error_before = cost(x0)
     res = minimize(
         cost,

@@ -97,7 +97,9 @@ class SerialCommandLink:
         import serial  # pyserial: only a serial link loads it
 
         try:
-            self._port = serial.Serial(settings.port, settings.baudrate, timeout=0, write_timeout=0.01)
+            self._port = serial.Serial(
+                settings.port, settings.baudrate, timeout=0, write_timeout=0.01
+            )
         except (serial.SerialException, ValueError) as exc:
             raise RobotError(
                 f"command link serial: cannot open {settings.port!r} at {settings.baudrate} "

@@ -246,7 +246,7 @@ class RobotLoop:
             self._finish(Stop(reason="error", detail=f"{type(exc).__name__}: {exc}"), t, t)
             raise
 
-    def _loop(self) -> None:
+    def _loop(self) -> None:  # noqa: PLR0912, PLR0915 - one period's state machine; to split into steps
         cfg, drv = self.cfg, self.driver
         follower = self._follower
         last_seq: int | None = None

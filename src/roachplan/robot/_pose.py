@@ -96,7 +96,12 @@ def parse_pose_json(data: bytes) -> tuple[int, float, tuple, tuple] | None:
 def pose_json(seq: int, t: float, position, quat) -> bytes:
     """One UDP/JSON pose datagram."""
     return json.dumps(
-        {"seq": int(seq), "t": float(t), "p": [float(v) for v in position], "q": [float(v) for v in quat]}
+        {
+            "seq": int(seq),
+            "t": float(t),
+            "p": [float(v) for v in position],
+            "q": [float(v) for v in quat],
+        }
     ).encode("utf-8")
 
 

@@ -70,7 +70,9 @@ class RunRecorder:
 
         self.target = Path(target)
         if not self.target.parent.is_dir():
-            raise RobotError(f"run log {self.target}: the folder {self.target.parent} does not exist")
+            raise RobotError(
+                f"run log {self.target}: the folder {self.target.parent} does not exist"
+            )
         self.partial = self.target.with_name(self.target.name + ".partial")
         self._file = open(self.partial, "wb")
         self._writer = Writer(self._file, compression=CompressionType.NONE, use_chunking=False)

@@ -84,9 +84,7 @@ def start_height(world: World, xy) -> float:
     return float(world.heightfield.sample(np.asarray(xy[:2]))) + world.robot.standing_height
 
 
-def predict(
-    world: World, path_xyz: np.ndarray, spins, start: tuple[float, float, float]
-) -> dict:
+def predict(world: World, path_xyz: np.ndarray, spins, start: tuple[float, float, float]) -> dict:
     """The simulation of the plan from start (x, y [m], yaw [rad]) with the world's own
     parameters: outcome, reason, drive_time [s], trajectory [[t, x, y, z, yaw]...]."""
     from roachplan.experiments import drive
@@ -106,7 +104,7 @@ def predict(
     }
 
 
-def drive_robot(
+def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     world: World,
     settings: RobotSettings,
     *,

@@ -115,7 +115,7 @@ def _small_rotation(rng: np.random.Generator, sigma: float) -> tuple[float, floa
     return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(angle / 2))
 
 
-def run_twin(cfg: TwinConfig, announce=print) -> int:
+def run_twin(cfg: TwinConfig, announce=print) -> int:  # noqa: PLR0912, PLR0915 - to split
     """Run a twin until it is told to quit or gets SIGTERM/SIGINT; announce(line) is called
     once with the JSON line of its ports when it is ready. Returns an exit status."""
     from roachplan.scenes import build_world, load_scene
@@ -148,7 +148,13 @@ def run_twin(cfg: TwinConfig, announce=print) -> int:
     if cfg.pose == "natnet":
         rb_id, rb_name = cfg.rigid_body
         natnet = NatNetServer(
-            [RigidBodyModel(name=rb_name, id=rb_id, markers=((0.04, 0.0, 0.01), (-0.04, 0.02, 0.01), (-0.04, -0.02, 0.01)))],
+            [
+                RigidBodyModel(
+                    name=rb_name,
+                    id=rb_id,
+                    markers=((0.04, 0.0, 0.01), (-0.04, 0.02, 0.01), (-0.04, -0.02, 0.01)),
+                )
+            ],
             host=cfg.host,
             port=cfg.natnet_port,
         )
@@ -293,4 +299,3 @@ def run_twin(cfg: TwinConfig, announce=print) -> int:
         json_sock.close()
     sim.close()
     return 0
-

@@ -31,7 +31,9 @@ def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m roachplan.robot.twin", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m roachplan.robot.twin", description=__doc__.split("\n")[0]
+    )
     ap.add_argument("--scene", default="double_bridge")
     ap.add_argument("--start", help="X,Y,YAW_DEG where the robot stands (default: the scene's)")
     ap.add_argument("--friction", type=float, help="ground friction (default: the scene's)")
