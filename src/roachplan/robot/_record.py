@@ -236,7 +236,7 @@ def read_run(path: str | os.PathLike) -> RunLog:
         raise RobotError(f"run log {path}: an MCAP file, but no roachplan robot run")
     complete = not path.name.endswith(".partial") and _finished(path)
 
-    def col(rows, key, sub=None, width=None):
+    def col(rows, key, sub=None, width: int = 1):
         if sub is None:
             return np.array([r[key] for r in rows], dtype=float)
         return np.array([r[key][sub] for r in rows], dtype=float).reshape(-1, width)

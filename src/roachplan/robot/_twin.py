@@ -231,7 +231,13 @@ def run_twin(cfg: TwinConfig, announce=print) -> int:  # noqa: PLR0912, PLR0915 
                     if natnet is not None:
                         packet = frame_packet(
                             frame_number,
-                            [RigidBodyFrame(id=cfg.rigid_body[0], position=p_m, quat=q_m)],
+                            [
+                                RigidBodyFrame(
+                                    id=cfg.rigid_body[0],
+                                    position=(float(p_m[0]), float(p_m[1]), float(p_m[2])),
+                                    quat=q_m,
+                                )
+                            ],
                             timestamp=sim.time,
                         )
                     else:

@@ -32,7 +32,7 @@ def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
 
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="python -m roachplan.robot.twin", description=__doc__.split("\n")[0]
+        prog="python -m roachplan.robot.twin", description=(__doc__ or "").split("\n")[0]
     )
     ap.add_argument("--scene", default="double_bridge")
     ap.add_argument("--start", help="X,Y,YAW_DEG where the robot stands (default: the scene's)")
