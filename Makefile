@@ -1,8 +1,11 @@
 # roachplan: `make run` sets everything up and starts the app; `make test` sets up and tests.
+# `make lint` and `make docs` add their tools (pyproject's extras) to the same .venv.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.installed-docs
+LINT_STAMP := $(VENV)/.installed-lint
 SCENE  ?= double_bridge
 HOST   ?= 127.0.0.1
 PORT   ?= 8080
@@ -12,12 +15,12 @@ TEST_DEBS := $(RUN_DEBS) chromium
 
 LINTED := src tests examples benchmarks scripts
 
-.PHONY: setup run test test-fast lint fuzz bench loadtest clean
+.PHONY: setup run test test-fast lint docs fuzz bench loadtest clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[test,lint]'
+	$(BIN)/pip install -q -e '.[test]'
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -36,12 +39,6 @@ test-fast: $(STAMP)
 	@scripts/install-system-deps.sh $(RUN_DEBS)
 	$(BIN)/python -m pytest -m "not slow" --durations=10
 
-# ruff (lint and format) and pyright over the package, tests, examples, benchmarks, scripts.
-lint: $(STAMP)
-	$(BIN)/ruff check $(LINTED)
-	$(BIN)/ruff format --check $(LINTED)
-	$(BIN)/pyright
-
 # Long property-based fuzzing of the readers and the scene loader; SEED=N repeats a run.
 SEED ?= $(shell date +%s)
 fuzz: $(STAMP)
@@ -58,9 +55,32 @@ bench: setup
 	$(BIN)/python benchmarks/bench_choose.py
 	$(BIN)/python benchmarks/load_test.py
 
-# Five browsers clicking and uploading at once for 2 minutes (issue 15); needs chromium.
+# Five browsers clicking and uploading at once for 2 minutes; needs chromium.
 loadtest: setup
 	$(BIN)/python benchmarks/load_test.py
 
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/pip install -q -e '.[test,docs]'
+	touch $(DOCS_STAMP)
+
+$(LINT_STAMP): $(STAMP)
+	$(BIN)/pip install -q -e '.[test,lint]'
+	touch $(LINT_STAMP)
+
+# The documentation site (mkdocs.yml, docs/) into site/, warnings as errors. The variable
+# quiets Material's banner about its end of life (May 2027) and MkDocs 2.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+# ruff (lint and format) and pyright over the package, tests, examples, benchmarks and
+# scripts (not the top-level links, which would be the same files twice). Every check runs,
+# and the target fails if any did.
+lint: $(LINT_STAMP)
+	@status=0; \
+	$(BIN)/ruff check $(LINTED) || status=1; \
+	$(BIN)/ruff format --check $(LINTED) || status=1; \
+	$(BIN)/pyright || status=1; \
+	exit $$status
+
 clean:
-	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts
+	rm -rf $(VENV) *.egg-info .pytest_cache test-artifacts site

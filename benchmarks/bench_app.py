@@ -78,7 +78,7 @@ def count_messages(page) -> list[int]:
 def click_to_path(app: RoachApp, page) -> float:
     """Click Plan; seconds until the page shows the path found from a seed not used before."""
     plan = page.get_by_role("button", name="Plan")
-    seeds = "|".join(str(s) for s in range(app._next_seed, app._next_seed + 40))
+    seeds = "|".join(str(s) for s in range(app.core.next_seed, app.core.next_seed + 40))
     found = page.get_by_text(re.compile(rf"Path found in .*\(seed ({seeds})\)"))
     t0 = time.perf_counter()
     plan.click()

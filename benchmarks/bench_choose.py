@@ -4,8 +4,8 @@
                        [--bank N] [--races N] [--fresh N] [--scenes A,B]: fewer counts on a
                        busy machine; [--indifference DP,DE]: parts 1-2's zone, default 0.05,0.05)
 
-Parts 1-2 race with an indifference zone (experiments/_choose.py): on double_bridge_rough the best
-candidates succeed 194-200 times in 200 and never separate. Part 2's bank is therefore 200
+Parts 1-2 race with an indifference zone (experiments/_choose_policy.py): on double_bridge_rough
+the best candidates succeed 194-200 times in 200 and never separate. Part 2's bank is therefore 200
 rollouts per candidate (the race's own cap, max_per_candidate): the zone is out of reach below
 about 120 (with every rollout a success the Clopper-Pearson lower bound at 1 - 0.05/8 reaches
 0.95 at n = 113), and with a bank of 40 every race ran to the bank's end. The bank drives every
@@ -41,14 +41,11 @@ from collections import Counter
 
 import numpy as np
 
-from roachplan.experiments._choose import (
-    Candidate,
-    ChooseConfig,
-    choose,
-    plan_candidates,
-    race,
-    rank,
-)
+from roachplan.experiments import ChooseConfig, choose
+from roachplan.experiments._choose_candidate import Candidate
+from roachplan.experiments._choose_planning import plan_candidates
+from roachplan.experiments._choose_policy import rank
+from roachplan.experiments._choose_race import race
 from roachplan.experiments._runner import _make_pool
 from roachplan.experiments._spec import ExperimentSpec
 from roachplan.experiments._trial import plan
@@ -97,7 +94,7 @@ def decision_time(quick: bool, args) -> None:
     cfg = ChooseConfig(
         candidates=4 if quick else 8, budget_s=60.0, seed=0, indifference=args.indifference
     )
-    choice, _ = choose(scene, cfg, workers=2)
+    choice, _ = choose(build_world(scene), cfg, workers=2)
     row = next(r for r in choice.ranking if r["candidate"] == choice.chosen)
     print(
         f"1. double_bridge_rough, K={cfg.candidates}, indifference {cfg.indifference}: "
@@ -129,7 +126,7 @@ def racing_vs_bank(quick: bool, args) -> None:
         bank = _drive_all(pool, cfg, candidates, n_full, stream=2, paired=True)
     finally:
         pool.close()
-    full = [dataclasses.replace(c, rollouts=bank[c.index], out="") for c in candidates]
+    full = [dataclasses.replace(c, rollouts=bank[c.index], knocked_out=None) for c in candidates]
     truth = rank(full, 1 - (1 - cfg.confidence) / len(full), None)[0].index
     # How firm brute force's own choice is: its choice on 200 resamples of the bank's worlds
     # (with replacement, the same worlds for every candidate). Between near-equal candidates it
@@ -139,7 +136,9 @@ def racing_vs_bank(quick: bool, args) -> None:
         pick = np.random.default_rng([7, b]).integers(0, n_full, n_full)
         resampled = [
             dataclasses.replace(
-                c, out="", rollouts=[{**bank[c.index][i], "seed": j} for j, i in enumerate(pick)]
+                c,
+                knocked_out=None,
+                rollouts=[{**bank[c.index][i], "seed": j} for j, i in enumerate(pick)],
             )
             for c in candidates
         ]
@@ -169,7 +168,7 @@ def racing_vs_bank(quick: bool, args) -> None:
                 recs.append({**bank[index][order[index][k]], "seed": seed})
             return recs
 
-        racers = [dataclasses.replace(c, rollouts=[], out="") for c in candidates]
+        racers = [dataclasses.replace(c, rollouts=[], knocked_out=None) for c in candidates]
         choice = race(
             racers,
             dataclasses.replace(cfg, seed=100 + r, max_per_candidate=n_full),
@@ -207,14 +206,14 @@ def chosen_vs_first(quick: bool, args) -> None:
             seed=scene.seed,
             uncertainty=scene.uncertainty,
         )
-        choice, _ = choose(scene, cfg, workers=2)
+        world = build_world(scene)
+        choice, _ = choose(world, cfg, workers=2)
         if choice.chosen is None:
             print(f"3. {name}: no candidate succeeded in any rollout; nothing to compare")
             continue
         picked = next(c for c in choice.candidates if c.index == choice.chosen)
         # The planner's plain first plan: what a user gets without choose (`roachplan trial
         # --seed S` plans the same path).
-        world = build_world(scene)
         planned = plan(world, seed=cfg.seed)
         if not planned.found:
             print(f"3. {name}: the planner's first plan found no path ({planned.message})")

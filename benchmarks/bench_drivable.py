@@ -26,6 +26,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,9 +35,9 @@ from roachplan.experiments._spec import reference_settings
 from roachplan.planning import check_states
 from roachplan.planning._drivable import max_curvature
 from roachplan.planning._dubins import dubins_path
-from roachplan.planning._isolated import run_isolated
 from roachplan.planning._ompl import _budget_ptc, _se2_state, _seed_ompl, _TerrainSampler
 from roachplan.planning._ompl_import import ob, og
+from roachplan.processes import call
 from roachplan.scenes import build_world, load_scene
 
 
@@ -152,7 +153,9 @@ def _plan_in_dubins_space(
         path = pdef.getSolutionPath()
         simplifier.reduceVertices(path)
         simplifier.collapseCloseVertices(path)
-    out = dict(found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace()))
+    out: dict[str, Any] = dict(
+        found=found, plan_time=time.perf_counter() - t0, metric=bool(space.isMetricSpace())
+    )
     if found:
         poses = [(s.getX(), s.getY(), s.getYaw()) for s in pdef.getSolutionPath().getStates()]
         curves = [dubins_path(a, b, radius) for a, b in zip(poses, poses[1:])]
@@ -172,24 +175,26 @@ def dubins_space_plan(world, planner: str, radius: float, seed: int, shortcut: b
     from scipy import ndimage
 
     cells = regions.cell_centres(ndimage.binary_dilation(regions.reachable))
-    return run_isolated(
+    return call(
         _plan_in_dubins_space,
-        world.heightfield,
-        world.footprint,
-        isolation="fork",
-        world_bounds=sc.bounds,
-        start=sc.start,
-        goal=sc.goal,
-        cells=cells,
-        cell=regions.cell,
-        planner=planner,
-        radius=radius,
-        seed=seed,
-        vcfg=cfg.validity,
-        time_limit=cfg.time_limit,
-        max_iterations=cfg.max_iterations,
-        step=cfg.check_resolution,
-        shortcut=shortcut,
+        (world.heightfield, world.footprint),
+        dict(
+            world_bounds=sc.bounds,
+            start=sc.start,
+            goal=sc.goal,
+            cells=cells,
+            cell=regions.cell,
+            planner=planner,
+            radius=radius,
+            seed=seed,
+            vcfg=cfg.validity,
+            time_limit=cfg.time_limit,
+            max_iterations=cfg.max_iterations,
+            step=cfg.check_resolution,
+            shortcut=shortcut,
+        ),
+        start="fork",
+        task="planning",
     )
 
 
@@ -198,6 +203,7 @@ def compare_spaces(seeds: int) -> None:
     double_bridge: successes, median plan time and path length, largest curvature."""
     world = build_world(load_scene("double_bridge"))
     radius = world.scene.planner.turning_radius
+    assert radius is not None  # the default planner's: plans are drivable
     print(
         f"\ndrivable plans on double_bridge, {seeds} seeds, radius {radius:g} m "
         f"(curvature limit {1 / radius:.2f} /m)"

@@ -64,9 +64,18 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from roachplan.scenes import SceneError, list_scenes, load_scene, render_scad, render_scad_result
+from roachplan.scenes import (
+    ScadRender,
+    SceneError,
+    list_scenes,
+    load_scene,
+    render_scad,
+    render_scad_result,
+)
 from roachplan.scenes._mesh import disagreement, surface_distances
-from roachplan.scenes._openscad import TEXT_DEVIATION, manifold_version, scad_dependencies
+from roachplan.scenes._openscad import Backend
+from roachplan.scenes._scad_manifold import TEXT_DEVIATION, manifold_version
+from roachplan.scenes._scad_source import scad_dependencies
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -96,7 +105,9 @@ def cases(extra: list[Path]) -> list[tuple[str, Path, dict]]:
     return out
 
 
-def render(model: Path, params: dict, backend: str, out: Path, timeout: float):
+def render(
+    model: Path, params: dict, backend: Backend, out: Path, timeout: float
+) -> tuple[float, ScadRender | None, str]:
     """(wall time [s], ScadRender or None, error text) of roachplan's render of model by backend
     with an empty cache (so it really runs); the mesh copied to out."""
     os.environ["ROACHPLAN_CACHE"] = tempfile.mkdtemp(dir=out.parent)
@@ -111,7 +122,7 @@ def render(model: Path, params: dict, backend: str, out: Path, timeout: float):
 
 
 def compare(cgal: Path, other: Path, text_size: float) -> str:
-    a, b = trimesh.load(cgal, force="mesh"), trimesh.load(other, force="mesh")
+    a, b = trimesh.load_mesh(cgal), trimesh.load_mesh(other)
     apart = disagreement(a, b)
     closed = a.is_watertight and b.is_watertight
     volume = abs(a.volume - b.volume) / abs(a.volume) if closed else float("nan")
@@ -148,10 +159,9 @@ def bench_backends(args) -> None:
             chose = r.backend + (f" ({r.why[:70]})" if r.why else "") if r else "-"
             if err_cgal or err_auto:
                 verdict = f"cgal: {err_cgal or 'ok'}; auto: {err_auto or 'ok'}"
-            elif r.backend == "cgal":
-                verdict = "the binary's mesh"
             else:
-                verdict = compare(a, b, r.text_size)
+                assert r is not None  # auto rendered: no error text
+                verdict = "the binary's mesh" if r.backend == "cgal" else compare(a, b, r.text_size)
             print(
                 f"{name:40s} {t_cgal:9.2f} {t_auto:9.2f} {t_cgal / t_auto:6.1f}  {chose}  "
                 f"{verdict}",
@@ -159,7 +169,11 @@ def bench_backends(args) -> None:
             )
             if args.manifold:
                 t_mf, rm, err_mf = render(model, params, "manifold", b, args.timeout)
-                shown = err_mf or (compare(a, b, rm.text_size) if not err_cgal else "")
+                if err_mf or err_cgal:
+                    shown = err_mf
+                else:
+                    assert rm is not None  # manifold rendered: no error text
+                    shown = compare(a, b, rm.text_size)
                 print(
                     f"{'  manifold alone':40s} {'':9s} {t_mf:9.2f} {t_cgal / t_mf:6.1f}  {shown}",
                     flush=True,
@@ -194,8 +208,8 @@ def bench_text(args) -> None:
                         f'linear_extrude(2) text("{text}", size = {size}, '
                         f'font = "{font}", {align});\n'
                     )
-                    a = trimesh.load(render_scad(model, backend="cgal"))
-                    b = trimesh.load(render_scad(model, backend="manifold"))
+                    a = trimesh.load_mesh(render_scad(model, backend="cgal"))
+                    b = trimesh.load_mesh(render_scad(model, backend="manifold"))
                     d = np.concatenate([surface_distances(a, b), surface_distances(b, a)])
                     worst = max(worst, d.max() / size)
                     print(
@@ -208,6 +222,7 @@ def bench_text(args) -> None:
 
 
 def main() -> None:
+    assert __doc__ is not None
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", default=None, help="case names containing these")
     parser.add_argument(

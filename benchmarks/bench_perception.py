@@ -22,6 +22,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -38,6 +39,7 @@ from roachplan.perception import (
     render_depth,
     save_depth,
 )
+from roachplan.perception._choices import Method
 from roachplan.scenes import build_terrain_mesh, build_world, load_scene
 
 REAL_CAPTURES = {
@@ -52,7 +54,7 @@ REAL_CAPTURES = {
 """The real captures with a floor or a table (file -> capture settings, paths relative)."""
 
 
-def run_once(png: Path, stl: Path, method: str = "sensor") -> dict[str, float]:
+def run_once(png: Path, stl: Path, method: Method = "sensor") -> dict[str, float]:
     t0 = time.perf_counter()
     cap = load_capture(png)
     load = time.perf_counter() - t0
@@ -133,7 +135,8 @@ def walkable(path: Path, settings: dict) -> dict[str, float]:
     ij = np.unique(
         ij[(ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)], axis=0
     )
-    labels, n = ndimage.label(sm.standable)
+    # scipy.ndimage.label is unannotated: pyright infers the int it returns given `output`
+    labels, n = cast("tuple[np.ndarray, int]", ndimage.label(sm.standable))
     largest = ndimage.sum(np.ones_like(labels), labels, np.arange(1, n + 1)).max() if n else 0.0
     return {
         "share": float(sm.standable[ij[:, 1], ij[:, 0]].mean()) if len(ij) else 0.0,

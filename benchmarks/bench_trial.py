@@ -51,6 +51,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     world = build_world(load_scene("double_bridge"))
+    start = world.scene.start
+    assert start is not None  # given by the scene, or picked by build_world
     planned = plan(world, seed=args.seed)
     dt = world.scene.sim.timestep
 
@@ -58,7 +60,7 @@ def main() -> None:
     for _ in range(args.repeat):
         t0 = time.perf_counter()
         with world.simulation() as sim:
-            sim.reset(*world.scene.start)
+            sim.reset(*start)
             t1 = time.perf_counter()
             result = drive_path(sim, planned.path_xyz, world.scene.driver)
             drive_wall.append(time.perf_counter() - t1)
@@ -73,7 +75,7 @@ def main() -> None:
         best = []
         for _ in range(args.repeat):
             with world.simulation() as sim:
-                sim.reset(*world.scene.start)
+                sim.reset(*start)
                 cid, rid, joints = sim._bc._client, sim.robot_id, list(range(6))
                 t0 = time.perf_counter()
                 if name == "replay":

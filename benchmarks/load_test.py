@@ -237,6 +237,7 @@ def answers_http(url: str) -> bool:
 
 
 def main() -> int:
+    assert __doc__ is not None
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=120.0, help="how long the pages click [s]")
     parser.add_argument("--seed", type=int, default=int(time.time()) % 100_000)

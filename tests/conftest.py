@@ -86,6 +86,7 @@ def server_url():
     url = None
     deadline = time.monotonic() + 60
     lines = []
+    assert proc.stdout is not None  # stdout=PIPE
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
         if not line:

@@ -149,7 +149,8 @@ def test_batch_of_trials_with_progress_then_export(server_url, artifacts, tmp_pa
 def test_click_places_the_start_and_invalid_markers_say_why(artifacts):
     """In-process server: a click on the terrain (viser's ray, intersected with the terrain) moves
     the start; a start dragged into the gap is shown invalid with the failed condition."""
-    from roachplan.app._server import MarkersCmd, RoachApp
+    from roachplan.app._commands import MarkersCmd
+    from roachplan.app._server import RoachApp
     from roachplan.scenes import build_world, load_scene
 
     app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
@@ -198,7 +199,9 @@ def test_cancel_a_batch_show_a_trial_and_the_roadmap(artifacts):
             page.get_by_role("button", name="Cancel batch").click()
             done = page.get_by_text(re.compile(r"Batch cancelled: \d+/40 trials"))
             done.wait_for(timeout=60_000)
-            n = int(re.search(r"cancelled: (\d+)/40", done.inner_text()).group(1))
+            said = re.search(r"cancelled: (\d+)/40", done.inner_text())
+            assert said is not None
+            n = int(said.group(1))
             assert 1 <= n < 40 and len(app.scene_trials) == n
             page.screenshot(path=artifacts / "app-09-batch-cancelled.png")
 

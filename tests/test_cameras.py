@@ -11,6 +11,7 @@ import shutil
 import struct
 import tracemalloc
 import zlib
+from typing import TypedDict
 
 import numpy as np
 import pytest
@@ -44,6 +45,14 @@ def _write_png16(path, depth: np.ndarray) -> None:
     Image.fromarray(depth.astype(np.uint16)).save(path)
 
 
+class _PgmOptions(TypedDict, total=False):
+    """_write_pgm's keyword arguments."""
+
+    channels: int
+    ascii_: bool
+    comment: bool
+
+
 def _write_pgm(
     path, depth: np.ndarray, *, channels: int = 1, ascii_: bool = False, comment: bool = True
 ) -> None:
@@ -73,6 +82,7 @@ def _write_pgm(
 def test_real_depth_png_with_its_opencv_calibration():
     cap = load_capture(RTAB_PNG, intrinsics=RTAB_YAML)
     k = cap.intrinsics
+    assert k is not None
     assert (k.fx, k.fy, k.cx, k.cy, k.width, k.height) == (525, 525, 319.5, 239.5, 640, 480)
     assert cap.depth_scale == 1000  # no scale in the file: millimetres
     z = cap.finite_points()[:, 2]
@@ -80,6 +90,7 @@ def test_real_depth_png_with_its_opencv_calibration():
     assert 0.3 < np.percentile(z, 1) and np.percentile(z, 99) < 12.0
     # local_transform: the camera 0.429 m above the base, optical y (image down) pointing down
     T = cap.base_from_camera
+    assert T is not None
     assert T.shape == (4, 4) and np.allclose(T[3], (0, 0, 0, 1))
     assert abs(T[2, 3] - 0.4289) < 1e-3
     assert T[:3, 1] @ (0, 0, 1) < -0.99  # camera y in the base frame: down
@@ -208,7 +219,7 @@ def test_tum_image_at_5000_per_metre_and_the_advice_when_read_at_1000(tmp_path):
     cap = load_capture(tum, intrinsics="tum-fr1")
     assert cap.depth_scale == 5000
     assert np.allclose(cap.points[:, 2], ref.points[:, 2], equal_nan=True, atol=1e-12)
-    assert cap.intrinsics.fx == 517.3
+    assert cap.intrinsics is not None and cap.intrinsics.fx == 517.3
     assert depth_scale_advice(cap, (0.3, 8.0)) is None
     # the same image read as millimetres: five times too far
     wrong = load_capture(tum, intrinsics="tum-fr1", depth_scale=1000)
@@ -252,12 +263,14 @@ def test_sidecar_found_by_stem(tmp_path):
         load_capture(png)
     shutil.copy(RTAB_YAML, tmp_path / "scan.yml")
     cap = load_capture(png)
-    assert cap.intrinsics.cx == 319.5 and cap.base_from_camera is not None
+    assert cap.intrinsics is not None and cap.intrinsics.cx == 319.5
+    assert cap.base_from_camera is not None
     # the _depth rule: frame_depth.pgm finds frame.yaml
     pgm = tmp_path / "frame_depth.pgm"
     _write_pgm(pgm, _raw_mm())
     shutil.copy(RTAB_YAML, tmp_path / "frame.yaml")
-    assert load_capture(pgm).base_from_camera[2, 3] == pytest.approx(0.4289, abs=1e-3)
+    T = load_capture(pgm).base_from_camera
+    assert T is not None and T[2, 3] == pytest.approx(0.4289, abs=1e-3)
     # intrinsics given: the sidecar JSON still gives the depth scale
     json_side = tmp_path / "tum.json"
     json_side.write_text('{"depth_scale": 5000, "fx": 1, "fy": 1, "cx": 1, "cy": 1}')
@@ -271,12 +284,13 @@ def test_sidecar_found_by_stem(tmp_path):
 def test_pgm_and_ppm_round_trip_to_the_png_points(tmp_path):
     ref = load_capture(RTAB_PNG, intrinsics=RTAB_YAML)
     mm = _raw_mm()
-    for name, kw in (
+    files: list[tuple[str, _PgmOptions]] = [
         ("d.pgm", {}),
         ("a.pgm", {"ascii_": True}),
         ("c.ppm", {"channels": 3}),
         ("n.pgm", {"comment": False}),
-    ):
+    ]
+    for name, kw in files:
         _write_pgm(tmp_path / name, mm, **kw)
         cap = load_capture(tmp_path / name, intrinsics=RTAB_YAML)
         assert cap.shape == (480, 640)
@@ -344,6 +358,7 @@ def test_intrinsics_mapping_in_capture_settings(tmp_path):
     assert hash(s)  # settings stay a frozen, hashable value
     sized = capture_settings({"intrinsics": {**RTAB_K, "width": 320, "height": 240}})
     half = load_capture(RTAB_PNG, intrinsics=sized.intrinsics)  # scaled up to the image
+    assert half.intrinsics is not None
     assert half.intrinsics.fx == 1050 and half.intrinsics.width == 640
     for bad, message in (
         ({**RTAB_K, "fx": -1}, r"intrinsics\.fx: expected a number > 0"),

@@ -3,25 +3,28 @@ same seed the same ranking, and --validate, through the real planner and PyBulle
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 import trimesh
 
 from conftest import roachplan
-from roachplan.experiments._choose import (
-    Candidate,
+from roachplan.experiments import (
+    CandidatesPlanned,
     ChooseConfig,
-    _eliminate,
-    _to_sample,
-    clopper_pearson,
-    race,
-    rank,
-    within_zone,
-    world_seed,
+    Decided,
+    KnockedOut,
+    RoundDone,
 )
+from roachplan.experiments._choose_candidate import Candidate, Knockout
+from roachplan.experiments._choose_policy import eliminate, rank, to_sample, within_zone
+from roachplan.experiments._choose_race import race, world_seed
+from roachplan.experiments._choose_stats import clopper_pearson
 from roachplan.experiments._uncertainty import UncertaintyConfig, draw, rollout_seed
 
 
@@ -107,7 +110,7 @@ def _rollout(i: int, seed: int, p: float, energy: float, sd: float) -> dict:
     }
 
 
-def _race(truths, **cfg):
+def _race(truths, on_event=None, **cfg):
     """Race hand-made candidates whose rollouts come from truths[i] = (p, energy, sd): the
     race's own logic on seeded draws, no simulation."""
     racers = [
@@ -118,7 +121,13 @@ def _race(truths, **cfg):
     def run(calls):
         return [_rollout(i, seed, *truths[i]) for i, _path, seed in calls]
 
-    return race(racers, ChooseConfig(candidates=len(truths), budget_s=None, **cfg), run, mass=1.0)
+    return race(
+        racers,
+        ChooseConfig(candidates=len(truths), budget_s=None, **cfg),
+        run,
+        mass=1.0,
+        on_event=on_event,
+    )
 
 
 def test_practically_equal_candidates_stop_within_the_indifference_zone():
@@ -161,15 +170,15 @@ def test_rollouts_go_where_they_can_settle_the_decision():
     # settles nothing. The risky one's wide upper bound is its own to narrow.
     leader = _drawn(0, 40, 1.0, 1.60, 0.05)
     rival = _drawn(1, 40, 1.0, 2.40, 0.05, seed=1)
-    assert [c.index for c in _to_sample([leader, rival], conf, cfg)] == [0]
+    assert [c.index for c in to_sample([leader, rival], conf, cfg)] == [0]
     risky = _drawn(2, 4, 1.0, 1.0, 0.05, seed=2)  # 2 in 4: it might yet be as safe
     risky.rollouts = risky.rollouts[:2] + [{**r, "outcome": "fell"} for r in risky.rollouts[2:]]
-    assert {c.index for c in _to_sample([leader, rival, risky], conf, cfg)} >= {0, 2}
+    assert {c.index for c in to_sample([leader, rival, risky], conf, cfg)} >= {0, 2}
     # A newcomer first gets its first round; with the zone off every candidate is driven.
     fresh = _drawn(2, 0, 1.0, 1.0, 0.05)
-    assert [c.index for c in _to_sample([leader, rival, fresh], conf, cfg)] == [2]
+    assert [c.index for c in to_sample([leader, rival, fresh], conf, cfg)] == [2]
     off = ChooseConfig(candidates=2, batch=4, indifference=(0.0, 0.0))
-    assert len(_to_sample([leader, rival], conf, off)) == 2
+    assert len(to_sample([leader, rival], conf, off)) == 2
 
     # A race spends its rollouts where they decide: it stops in the zone, the first-ranked
     # driven most; the costly and the risky ones, beaten early, several times less.
@@ -233,7 +242,7 @@ def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
     risky = _drawn(1, 40, 0.5, 1.0, 0.05, seed=1)
     costly = _drawn(2, 200, 1.0, 2.6, 0.05, seed=2)
     alive = [good, risky, costly]
-    _eliminate(alive, conf, None, 0.05)
+    eliminate(alive, conf, None, 0.05)
     assert not good.out
     assert risky.out.startswith("less likely to succeed"), risky.out
     assert costly.out.startswith("costs more energy than candidate 0"), costly.out
@@ -241,17 +250,123 @@ def test_a_clearly_worse_candidate_is_eliminated_and_the_better_is_chosen():
     # path that has not failed in its first 24 rollouts may still fail 6 times in 100.
     lucky = _drawn(3, 24, 1.0, 1.2, 0.05, seed=3)
     safe = _drawn(4, 200, 1.0, 1.8, 0.05, seed=4)
-    _eliminate([lucky, safe], conf, None, 0.05)
+    eliminate([lucky, safe], conf, None, 0.05)
     assert not safe.out and not lucky.out
     # One that left the race, however good its few rollouts look, ranks below those in it.
     early = _drawn(3, 8, 1.0, 1.7, 0.05, seed=3)
-    early.out = "costs more energy than candidate 0 (intervals apart)"
+    early.knocked_out = Knockout(reason="costs_more", by=0, own_bound=1.75, rival_bound=1.72)
+    assert early.out == "costs more energy than candidate 0 (intervals apart)"
     ordered = rank([early, _drawn(0, 200, 0.99, 1.8, 0.05)], 1 - 0.05 / 2, None)
     assert ordered[0].index == 0
     # The race drops both and stops separated with the good one.
     choice = _race([(1.0, 1.8, 0.05), (0.5, 1.0, 0.05), (1.0, 2.6, 0.05)], rollouts=600, seed=5)
     assert choice.chosen == 0 and choice.stopped == "separated at 95% confidence"
     assert {c.index for c in choice.candidates if c.out} == {1, 2}
+
+
+def _check_events(events: list, choice) -> dict[int, str | None]:
+    """Assert that a race's events came in order (CandidatesPlanned first if at all, then
+    each round's KnockedOut before its RoundDone, one Decided last), that each candidate's
+    fate is told once, as values the round's standings agree with, and that the Decided
+    agrees with the Choice returned. Returns each candidate's fate: its OutReason, or None
+    (still racing when the race stopped)."""
+    kinds = "".join(
+        {CandidatesPlanned: "P", KnockedOut: "K", RoundDone: "R", Decided: "D"}[type(e)]
+        for e in events
+    )
+    assert re.fullmatch(r"P?(K*R)*D", kinds), kinds
+    rounds = [e for e in events if isinstance(e, RoundDone)]
+    assert [r.round for r in rounds] == list(range(1, len(rounds) + 1))
+    assert all(a.rollouts < b.rollouts for a, b in itertools.pairwise(rounds))
+    k = len(choice.candidates)
+    fate: dict[int, str | None] = dict.fromkeys(range(k))
+    told: list[KnockedOut] = []
+    for e in events:
+        if isinstance(e, KnockedOut):
+            assert fate[e.candidate] is None, f"candidate {e.candidate} left the race twice"
+            fate[e.candidate] = e.why.reason
+            told.append(e)
+        elif isinstance(e, RoundDone):
+            assert [s.candidate for s in e.standings] == list(range(k))  # index order
+            assert all(s.knocked_out is None for s in e.standings if fate[s.candidate] is None)
+            assert all(told_.round == e.round for told_ in told)  # (its own round's)
+            for t in told:
+                s, why = e.standings[t.candidate], t.why
+                assert s.state == "out" and s.knocked_out == why
+                if why.reason == "less_likely":  # its P interval wholly below the leader's
+                    assert why.by is not None
+                    assert why.own_bound == s.p_high < why.rival_bound
+                    assert why.rival_bound == e.standings[why.by].p_low
+                elif why.reason == "costs_more":  # its energy interval wholly above a rival's
+                    assert why.by is not None
+                    assert why.own_bound == s.relative_energy_low > why.rival_bound
+                    assert why.rival_bound == e.standings[why.by].relative_energy_high
+                    assert e.standings[why.by].state == "racing"
+                else:
+                    assert why.by is None and why.own_bound == s.p_high < why.rival_bound
+            told = []
+    decided = events[-1]
+    assert decided.rollouts == (rounds[-1].rollouts if rounds else 0) == choice.rollouts
+    assert decided.rounds == len(rounds)
+    assert decided.chosen == choice.chosen and decided.stop == choice.stop
+    assert decided.stopped == choice.stopped and decided.cut_short == choice.cut_short
+    assert decided.confidence_reached == choice.confidence_reached
+    assert decided.standings == choice.standings
+    assert [s.to_json() for s in decided.standings] == choice.ranking
+    assert sorted(s.candidate for s in decided.standings) == list(range(k))
+    by_index = {s.candidate: s for s in decided.standings}
+    for c in choice.candidates:  # every fate told is the one the result holds
+        assert fate[c.index] == (c.knocked_out and c.knocked_out.reason)
+        assert by_index[c.index].state == ("racing" if fate[c.index] is None else "out")
+        assert by_index[c.index].to_json()["out"] == c.out
+    return fate
+
+
+def test_a_race_tells_its_rounds_and_every_candidate_s_fate_as_values():
+    events: list = []
+    truths = [(1.0, 1.8, 0.05), (0.5, 1.0, 0.05), (1.0, 2.6, 0.05)]
+    choice = _race(truths, on_event=events.append, rollouts=600, seed=5)
+    fate = _check_events(events, choice)
+    assert fate == {0: None, 1: "less_likely", 2: "costs_more"}
+    (costly,) = [e.why for e in events if isinstance(e, KnockedOut) and e.candidate == 2]
+    assert costly.by == 0
+    decided = events[-1]
+    assert decided.stop == "separated" and not decided.cut_short and decided.chosen == 0
+    assert decided.confidence_reached is None and decided.standings[0].candidate == 0
+    # The first round drives every candidate; the words of choice.json come from the values.
+    assert next(e for e in events if isinstance(e, RoundDone)).driven == (0, 1, 2)
+    assert {c.index: c.out for c in choice.candidates} == {
+        0: "",
+        1: "less likely to succeed than another (intervals apart)",
+        2: "costs more energy than candidate 0 (intervals apart)",
+    }
+    # The same seed, the same events (all but the wall time).
+    again: list = []
+    _race(truths, on_event=again.append, rollouts=600, seed=5)
+    assert _without_time(again) == _without_time(events)
+
+    # Cut short by the cap: told so, with the confidence it reached.
+    short: list = []
+    truths = [(1.0, 1.6, 0.05), (1.0, 2.4, 0.05), (0.995, 1.61, 0.05)]
+    cut = _race(truths, on_event=short.append, rollouts=120, max_per_candidate=400, seed=2)
+    _check_events(short, cut)
+    assert short[-1].stop == "rollout_cap" and short[-1].cut_short
+    assert short[-1].confidence_reached == cut.confidence_reached is not None
+    # With min_success: the ones that cannot clear it leave, by a value, not a sentence.
+    qualified: list = []
+    truths = [(0.3, 1.2, 0.05), (1.0, 2.0, 0.05)]
+    picked = _race(truths, on_event=qualified.append, min_success=0.9, max_per_candidate=60)
+    assert _check_events(qualified, picked)[0] == "below_min_success"
+    out = next(e.why for e in qualified if isinstance(e, KnockedOut))
+    assert out.rival_bound == 0.9 and picked.candidates[0].out == "P(success) upper bound below 0.9"
+
+
+def _without_time(events: list) -> list[str]:
+    """The events as text, wall times left out (nan == nan there, as it is not in a float)."""
+    return [
+        repr(dataclasses.replace(e, wall_time_s=0.0) if isinstance(e, Decided) else e)
+        for e in events
+    ]
 
 
 def test_the_chosen_is_never_wholly_below_another_with_or_without_the_zone():
@@ -372,6 +487,27 @@ def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, t
     proc = roachplan("choose", "--scene", str(two_bridges), "--out", str(tmp_path / "mine"))
     assert proc.returncode == 2 and "--out" in proc.stderr
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+def test_choose_tells_the_candidates_it_planned_then_its_race(two_bridges):
+    """choose() through the real planner and PyBullet: its events, in order, agree with the
+    choice it returns, from the candidates' paths to the decision."""
+    from roachplan.experiments import choose
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene(str(two_bridges)))
+    cfg = ChooseConfig(candidates=2, rollouts=8, budget_s=None, seed=1)
+    events: list = []
+    choice, _ = choose(world, cfg, workers=2, on_event=events.append)
+    _check_events(events, choice)
+    planned = events[0]
+    assert isinstance(planned, CandidatesPlanned) and len(planned.candidates) == 2
+    assert planned.message == "2 candidates planned; racing them"
+    for p, c in zip(planned.candidates, choice.candidates, strict=True):
+        assert (p.index, p.route, p.seed, p.spins) == (c.index, c.route, c.seed, c.spins)
+        assert np.array_equal(p.path_xyz, c.path_xyz) and p.length == c.length
+    assert {p.route for p in planned.candidates} == {"wide", "narrow"}
+    assert events[-1].rollouts == choice.rollouts <= 8
 
 
 # -- the uncertainty model from scene and spec YAML (`uncertainty:`) ------------------------------
@@ -538,6 +674,7 @@ def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, m
         text=True,
         env={**os.environ, "RAY_AUTH_MODE": "disabled"},
     )
+    assert holder.stdin is not None and holder.stdout is not None  # both PIPE
     try:
         address = holder.stdout.readline().strip()
         assert address.startswith("127.0.0.1:"), (

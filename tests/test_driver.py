@@ -41,7 +41,7 @@ def test_motor_speeds_follow_algorithm_2():
 
 
 def test_next_waypoint_follows_algorithm_1():
-    path = np.array([[0.0, 0.0], [0.0, 0.1], [0.0, 0.2], [0.0, 0.3]])
+    path = [(0.0, 0.0), (0.0, 0.1), (0.0, 0.2), (0.0, 0.3)]  # as the driver passes them
     assert next_waypoint(path, 1, np.array([0.0, 0.0]), 0.05, 0.02) == (1, False)
     assert next_waypoint(path, 1, np.array([0.0, 0.12]), 0.05, 0.02) == (2, False)
     assert next_waypoint(path, 2, np.array([0.0, 0.17]), 0.05, 0.02) == (3, False)

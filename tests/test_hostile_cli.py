@@ -566,7 +566,7 @@ def test_every_mesh_format_carries_the_mark_and_replaces_its_own_earlier_file(tm
         done = roachplan("scene", "build", "double_bridge", "-o", str(out), timeout=120)
         assert done.returncode == 0, done.stderr
     assert WRITTEN_BY.encode() in out.read_bytes()[:4096]
-    mesh = trimesh.load(out, force="mesh")
+    mesh = trimesh.load_mesh(out)
     # 40 triangles by backend auto's manifold (the binary cuts the same faces into 32).
     assert len(mesh.faces) == 40 and mesh.extents.round(3).tolist() == [2.0, 3.0, 0.2]
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]  # no temp file left

@@ -19,6 +19,7 @@ import resource
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -28,8 +29,8 @@ import yaml
 
 from conftest import ROOT
 from hostile import Case, run_case
-from roachplan.planning._isolated import IsolationError, child_memory_limit, run_isolated
-from roachplan.scenes._openscad import JAIL_OUT, _sandbox_available, confined
+from roachplan.processes import ChildError, call, child_memory_limit
+from roachplan.scenes._scad_sandbox import JAIL_OUT, confined, sandbox_available
 
 SECRET_HEIGHT = 7.0
 """Height of the secret height map and of the secret solids [m]; nothing a model may read
@@ -351,7 +352,7 @@ _NO_NAMESPACES = [
 
 
 @pytest.mark.skipif(
-    shutil.which("unshare") is None or not _sandbox_available(),
+    shutil.which("unshare") is None or not sandbox_available(),
     reason="needs unprivileged user namespaces to take them away",
 )
 @pytest.mark.parametrize("unsafe", [False, True], ids=["refused", "opted-out"])
@@ -385,7 +386,7 @@ def test_without_namespaces_a_render_is_refused_unless_opted_out(tmp_path, unsaf
 # -- the jail alone: models the scan would refuse, run in it directly -----------------------------
 
 needs_jail = pytest.mark.skipif(
-    not _sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
+    not sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
 )
 
 
@@ -484,7 +485,7 @@ def test_the_jail_writes_only_its_output_folder(tmp_path):
 
 @pytest.mark.parametrize("jail", [True, False], ids=["jail", "unconfined"])
 def test_the_limits_hold_in_and_out_of_the_jail(tmp_path, jail):
-    if jail and not _sandbox_available():
+    if jail and not sandbox_available():
         pytest.skip("no unprivileged user namespaces here")
     proc = _jailed_sh(
         tmp_path, "ulimit -v; ulimit -t; ulimit -f", memory=300 << 20, cpu=7.5, jail=jail
@@ -493,6 +494,54 @@ def test_the_limits_hold_in_and_out_of_the_jail(tmp_path, jail):
     assert int(memory_kib) == 300 << 10
     assert int(cpu_s) == 9  # the time limit rounded up, and a second for the start
     assert int(file_blocks) * 512 == 300 << 20
+
+
+_WAITS_FOR_A_RENDER = """
+import sys
+from pathlib import Path
+from roachplan.scenes._scad_sandbox import confined, run_confined
+folder, work, jail = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3] == "jail"
+cmd = confined(["sleep", "300"], folder, work, jail=jail)
+run_confined(cmd, model_dir=folder, timeout=300, what="m.scad")
+"""
+
+
+@pytest.mark.parametrize("jail", [True, False], ids=["jail", "unconfined"])
+def test_a_render_dies_with_the_process_that_waits_for_it(tmp_path, jail):
+    from roachplan.processes import descendants
+
+    if jail and not sandbox_available():
+        pytest.skip("no unprivileged user namespaces here")
+    (tmp_path / "model").mkdir()
+    (tmp_path / "work").mkdir()
+    args = [str(tmp_path / "model"), str(tmp_path / "work"), "jail" if jail else "open"]
+    waiting = subprocess.Popen([sys.executable, "-c", _WAITS_FOR_A_RENDER, *args])
+    try:
+        for _ in range(200):
+            program = [p for p in descendants(waiting.pid) if _sleeping(p)]
+            if program:
+                break
+            time.sleep(0.05)
+        assert program, "the program did not start"
+        waiting.kill()  # (SIGKILL: nothing of its own can end the program)
+        waiting.wait()
+        for _ in range(100):
+            if not _sleeping(program[0]):
+                break
+            time.sleep(0.05)
+        assert not _sleeping(program[0]), "the render outlived its parent"
+    finally:
+        waiting.kill()
+        waiting.wait()
+
+
+def _sleeping(pid: int) -> bool:
+    """pid runs `sleep` (and is not just a status left for its parent to read)."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    return os.path.basename(argv[0]) == b"sleep"
 
 
 # -- the planning child's memory limit ------------------------------------------------------------
@@ -514,13 +563,13 @@ def _small() -> float:
 def test_a_runaway_planning_child_is_stopped_at_its_memory_limit(monkeypatch, isolation):
     monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", "2G")
     before = resource.getrlimit(resource.RLIMIT_AS)
-    assert run_isolated(resource.getrlimit, resource.RLIMIT_AS, isolation=isolation) == (
+    assert call(resource.getrlimit, (resource.RLIMIT_AS,), start=isolation) == (
         2 << 30,
         2 << 30,
     )
-    with pytest.raises(IsolationError, match=r"ran out of memory.*2 GiB.*ROACHPLAN_CHILD_MEMORY"):
-        run_isolated(_hungry, isolation=isolation)
-    assert run_isolated(_small, isolation=isolation) == 45.0  # the parent is unharmed
+    with pytest.raises(ChildError, match=r"ran out of memory.*2 GiB.*ROACHPLAN_CHILD_MEMORY"):
+        call(_hungry, start=isolation, task="planning")
+    assert call(_small, start=isolation) == 45.0  # the parent is unharmed
     assert resource.getrlimit(resource.RLIMIT_AS) == before
 
 
@@ -536,5 +585,5 @@ def test_a_real_plan_runs_under_the_default_limit(world, monkeypatch):
 @pytest.mark.parametrize("value", ["lots", "-1G", "10M", "1e3"])
 def test_a_bad_child_memory_setting_is_named(monkeypatch, value):
     monkeypatch.setenv("ROACHPLAN_CHILD_MEMORY", value)
-    with pytest.raises(IsolationError, match=f"ROACHPLAN_CHILD_MEMORY='{value}': expected"):
-        run_isolated(_small, isolation="fork")
+    with pytest.raises(ChildError, match=f"ROACHPLAN_CHILD_MEMORY='{value}': expected"):
+        call(_small, start="fork")

@@ -5,6 +5,7 @@ never a hang, never an unbounded echo of the value. Scene files go through `plan
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ def _files(tmp: Path) -> None:
     (tmp / "plain.scad").write_text("cube([1, 1, 0.1]);\n")
 
 
-def scene(text: str | bytes, command: str = "plan") -> callable:
+def scene(text: str | bytes, command: str = "plan") -> Callable[[Path], list[str]]:
     """A case's make(): write scene.yaml (and the terrain files) and run `command` on it."""
 
     def make(tmp: Path) -> list[str]:
@@ -58,7 +59,7 @@ def scene(text: str | bytes, command: str = "plan") -> callable:
     return make
 
 
-def spec(text: str) -> callable:
+def spec(text: str) -> Callable[[Path], list[str]]:
     """A case's make(): write an experiment spec and run `experiment` on it."""
 
     def make(tmp: Path) -> list[str]:
@@ -69,7 +70,7 @@ def spec(text: str) -> callable:
     return make
 
 
-def calibration(text: str) -> callable:
+def calibration(text: str) -> Callable[[Path], list[str]]:
     """A case's make(): a real 16-bit depth PNG (Pillow) and a calibration YAML for `mesh`."""
 
     def make(tmp: Path) -> list[str]:

@@ -34,7 +34,9 @@ def test_depth_png_with_its_calibration_uploaded_first(app, artifacts):
         assert (app.world.scene.path.parent / "calib_154.yaml").is_file()
         # The floor is found 0.42 m under the camera (the calibration says 0.43 m above the base).
         shown = page.get_by_text(re.compile(r"Camera \d+\.\d\d m above the ground")).inner_text()
-        height = float(re.search(r"Camera (\d+\.\d\d) m", shown).group(1))
+        said = re.search(r"Camera (\d+\.\d\d) m", shown)
+        assert said is not None, shown
+        height = float(said.group(1))
         assert 0.35 < height < 0.5, shown
         # Start and goal as `roachplan trial --scene depth_154.png` picks them: over a metre apart.
         start, goal = app.world.scene.start, app.world.scene.goal
@@ -58,7 +60,9 @@ def test_a_depth_png_and_its_calibration_in_one_zip_load_together(app, artifacts
         page.screenshot(path=artifacts / "load-01b-rtabmap-zip-with-calibration.png")
         assert _scene_of(app)["terrain"][0]["perception"]["intrinsics"] == "calib_154.yaml"
         shown = page.get_by_text(re.compile(r"Camera \d+\.\d\d m above the ground")).inner_text()
-        assert 0.35 < float(re.search(r"Camera (\d+\.\d\d) m", shown).group(1)) < 0.5, shown
+        said = re.search(r"Camera (\d+\.\d\d) m", shown)
+        assert said is not None, shown
+        assert 0.35 < float(said.group(1)) < 0.5, shown
 
 
 def test_click_the_floor_to_relevel_then_plan_and_drive(app, artifacts):
@@ -81,7 +85,9 @@ def test_click_the_floor_to_relevel_then_plan_and_drive(app, artifacts):
         gp = raw["terrain"][0]["perception"]["ground_point"]
         assert len(gp) == 3 and gp[2] > 0.5  # a point in front of the camera, capture frame [m]
         shown = page.get_by_text(re.compile(r"Camera \d+\.\d\d m above the ground")).inner_text()
-        height = float(re.search(r"Camera (\d+\.\d\d) m", shown).group(1))
+        said = re.search(r"Camera (\d+\.\d\d) m", shown)
+        assert said is not None, shown
+        height = float(said.group(1))
         assert 0.75 < height < 0.85, shown  # the floor: 0.80 m under the Kinect
         assert app.load_panel.pick_ground.value is False  # one click, one re-level
         assert np.allclose(app.world.mesh.bounds[:, 2], before[:, 2], atol=0.05)

@@ -13,7 +13,8 @@ import trimesh
 import yaml
 
 from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
-from roachplan.scenes._openscad import _sandbox_available, confined, scad_variables
+from roachplan.scenes._scad_sandbox import confined, sandbox_available
+from roachplan.scenes._scad_source import scad_variables
 
 LIBRARY = Path(__file__).resolve().parent.parent / "scenes" / "library"
 
@@ -41,7 +42,9 @@ def peaks(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
 
 def test_rough_bridge_bumps_follow_appendix_c2():
     # The binary, the reference (test_scad_backend.py checks the default backend against it).
-    mesh = trimesh.load(render_scad(LIBRARY / "double_bridge.scad", rough_params(), backend="cgal"))
+    mesh = trimesh.load_mesh(
+        render_scad(LIBRARY / "double_bridge.scad", rough_params(), backend="cgal")
+    )
     assert mesh.is_watertight
     bumps = peaks(mesh)
     for side, max_height in (("left", 0.015), ("right", 0.010)):
@@ -64,7 +67,7 @@ def test_rough_bridge_renders_the_same_for_a_seed_and_differently_for_another(
     for run, seed in enumerate((0, 0, 7)):
         monkeypatch.setenv("ROACHPLAN_CACHE", str(tmp_path / f"cache{run}"))
         meshes.append(
-            trimesh.load(
+            trimesh.load_mesh(
                 render_scad(
                     LIBRARY / "double_bridge.scad", rough_params(bump_seed=seed), backend="cgal"
                 )
@@ -90,11 +93,11 @@ def test_the_cache_covers_files_the_model_reads(tmp_path, fresh_cache):
     dat.write_text(dat.read_text().replace("2.500", "9.000"))
     second = render_scad(tmp_path / "heightmap.scad")
     assert second != first
-    assert trimesh.load(second).bounds[1][2] > trimesh.load(first).bounds[1][2]
+    assert trimesh.load_mesh(second).bounds[1][2] > trimesh.load_mesh(first).bounds[1][2]
 
 
 def test_the_heightmap_scene_is_a_surface_height_map():
-    mesh = trimesh.load(render_scad(LIBRARY / "heightmap.scad"))
+    mesh = trimesh.load_mesh(render_scad(LIBRARY / "heightmap.scad"))
     # 81 rows x 61 columns 5 cm apart: 3 x 4 m, heights up to 14.5 cm, solid down to -1 cm.
     np.testing.assert_allclose(mesh.bounds[:, :2], [[-1.5, -2.0], [1.5, 2.0]], atol=1e-9)
     assert mesh.bounds[0][2] == pytest.approx(-0.01)
@@ -192,7 +195,7 @@ def test_a_render_past_its_time_limit_is_killed(tmp_path, fresh_cache):
     assert not list(fresh_cache.rglob("*.stl"))
 
 
-@pytest.mark.skipif(not _sandbox_available(), reason="no unprivileged user namespaces here")
+@pytest.mark.skipif(not sandbox_available(), reason="no unprivileged user namespaces here")
 def test_the_sandbox_shows_the_model_folder_and_hides_the_rest():
     # Belt and braces behind the static check: inside, only the model's folder is readable.
     with (
@@ -289,7 +292,7 @@ def test_module_and_call_arguments_are_not_parameters(tmp_path, fresh_cache):
         ):
             render_scad(scad, {name: 1})
     # The one real parameter does what it says: the post is 5 x 2 x 7.
-    mesh = trimesh.load(render_scad(scad, {"height": 7}))
+    mesh = trimesh.load_mesh(render_scad(scad, {"height": 7}))
     np.testing.assert_allclose(mesh.extents, [5, 2, 7])
     with pytest.raises(SceneError, match=r"terrain\[0\]\.params\.width: 'width' is not a var"):
         load_scene(scad_scene(tmp_path, {"scad": "post.scad", "params": {"width": 9}}))

@@ -31,6 +31,7 @@ _SKIP = shutil.ignore_patterns(
     "*.egg-info",
     "build",
     "docs",
+    "site",
     "benchmarks",
 )
 

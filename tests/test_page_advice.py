@@ -41,7 +41,7 @@ INSTRUCTION = re.compile(
 
 def _scene_keys() -> set[str]:
     """Every key a scene file may hold: the scene's, a terrain object's, a capture's."""
-    from roachplan.perception._pipeline import SETTING_KEYS
+    from roachplan.perception import SETTING_KEYS
     from roachplan.scenes import Scene
     from roachplan.scenes._scene import TerrainObject
 
@@ -56,16 +56,21 @@ def _scene_keys() -> set[str]:
     }
 
 
-def _render(node: ast.AST, constants: dict[str, str]) -> str:
+def _render(node: ast.Constant | ast.JoinedStr, constants: dict[str, str]) -> str:
     """A string literal as a message it makes: an f-string's fields filled with a number (a
     module's own string constant with its text)."""
     if isinstance(node, ast.Constant):
+        assert isinstance(node.value, str)  # a string literal, not another constant
         return node.value
     out = []
     for part in node.values:
         if isinstance(part, ast.Constant):
             out.append(str(part.value))
-        elif isinstance(part.value, ast.Name) and part.value.id in constants:
+        elif (
+            isinstance(part, ast.FormattedValue)  # an f-string's {field}
+            and isinstance(part.value, ast.Name)
+            and part.value.id in constants
+        ):
             out.append(constants[part.value.id])
         else:
             out.append("12")
@@ -98,11 +103,10 @@ def advice_in_the_code() -> list[tuple[str, str]]:
                 if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant):
                     skip.add(id(n.value))  # docstrings
             for n in ast.walk(tree):
-                literal = isinstance(n, ast.JoinedStr) or (
-                    isinstance(n, ast.Constant) and isinstance(n.value, str)
-                )
-                if not literal or id(n) in skip:
+                if not isinstance(n, ast.JoinedStr | ast.Constant) or id(n) in skip:
                     continue
+                if isinstance(n, ast.Constant) and not isinstance(n.value, str):
+                    continue  # a number, bytes, None, ...: no message
                 text = _render(n, constants)
                 if len(text.split()) >= 3 and any(
                     p.search(text) for p in (FLAG, SCENE_SYNTAX, INSTRUCTION)
@@ -276,7 +280,7 @@ def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_are
         page.screenshot(path=artifacts / "advice-03-model-raised.png")
 
     # Planning area (set as a browser would, through the panel's boxes and its command).
-    from roachplan.app._load_panel import PanelCmd
+    from roachplan.app._commands import PanelCmd
 
     before = app.world
     app.load_panel.area_min.value, app.load_panel.area_max.value = (-1.2, -0.6), (0.3, 0.9)

@@ -36,7 +36,7 @@ def _race_processes(app) -> set[int]:
     (the fork server itself, and the world's host under it, stay for the next job)."""
     import os
 
-    host = {app._host._proc.pid} if app._host is not None else set()
+    host = {app.core.host._proc.pid} if app.core.host is not None else set()
     return {
         pid
         for server in _descendants(os.getpid())
@@ -55,14 +55,9 @@ def _running(pid: int) -> bool:
 
 
 def _descendants(pid: int) -> set[int]:
-    from roachplan.app._jobs import _children
+    from roachplan.processes import descendants
 
-    children, out, todo = _children(), set(), [pid]
-    while todo:
-        kids = children.get(todo.pop(), [])
-        out.update(kids)
-        todo += kids
-    return out
+    return descendants(pid)
 
 
 def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
@@ -89,7 +84,9 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
 
             done = page.get_by_text(re.compile(r"^Chosen: path \d+ \(")).first
             done.wait_for(timeout=150_000)
-            chosen = int(re.search(r"Chosen: path (\d+)", done.inner_text()).group(1))
+            said = re.search(r"Chosen: path (\d+)", done.inner_text())
+            assert said is not None
+            chosen = int(said.group(1))
             rows = _ranking_rows(page)
             assert len(rows) == k, rows
             assert re.fullmatch(rf"{chosen} \w+ chosen", rows[0][0])  # best first
@@ -173,3 +170,63 @@ def test_colours_run_from_red_through_yellow_to_green_and_grey_before_rollouts()
     red, green = zip(*(p_colour(p)[:2] for p in ps), strict=True)
     assert all(np.diff(red) <= 0) and all(np.diff(green) >= 0)  # redder to greener
     assert p_colour(0.5) == (220, 180, 40)  # yellow halfway
+
+
+def test_the_folder_shows_a_race_from_its_events_as_values():
+    """What the Choose folder shows (RaceView, the ranking's rows) is built from the race's
+    events alone: each row says why a candidate left the race from the Knockout's reason,
+    never from the words of a sentence."""
+    import dataclasses
+
+    from roachplan.app._choose_panel import (
+        Failed,
+        RaceView,
+        follow_race,
+        ranking_markdown,
+        ranking_row,
+    )
+    from roachplan.experiments import CandidatesPlanned, Decided, Knockout, RoundDone
+    from test_choose import _race
+
+    events: list = []
+    truths = [(1.0, 1.8, 0.05), (0.5, 1.0, 0.05), (1.0, 2.6, 0.05)]
+    choice = _race(truths, on_event=events.append, rollouts=600, seed=5)
+    planned = CandidatesPlanned(candidates=tuple(c.plan for c in choice.candidates))
+    view = follow_race(RaceView(message="planning 3 candidate paths (seed 5)"), planned)
+    assert view.message == "3 candidates planned; racing them"
+    assert view.paths is planned.candidates and view.standings == () and view.decided is None
+    words = {None: None, "less_likely": "out: less likely", "costs_more": "out: costs more"}
+    for event in events:
+        view = follow_race(view, event)
+        if isinstance(event, RoundDone):
+            assert view.standings is event.standings
+            assert view.message == (
+                f"{event.rollouts} rollouts, {event.racing} of 3 candidates in the race"
+            )
+            for s in view.standings:  # index order while racing
+                row = ranking_row(s, None)
+                assert row.startswith(f"| **{s.candidate + 1}** r |")
+                assert f"({s.rollouts}) |" in row and "chosen" not in row
+                why = words[s.knocked_out and s.knocked_out.reason]
+                assert row.endswith(f"{why} |") if why else "out:" not in row
+    decided = events[-1]
+    assert isinstance(decided, Decided) and view.decided is decided and view.failed is None
+    assert view.standings is decided.standings  # best first once decided
+    table = ranking_markdown(view.standings, decided.chosen, 0.95)
+    rows = [line for line in table.splitlines() if line.startswith("| **")]
+    assert rows[0].startswith("| **1** r **chosen** |")
+    assert sum("chosen" in r for r in rows) == 1
+    path = {int(r.split("**")[1]): r for r in rows}
+    assert path[2].endswith("out: less likely |") and path[3].endswith("out: costs more |")
+
+    # The words come from the value: a Knockout makes the row, whatever the race said.
+    racing = decided.standings[0]
+    beaten = Knockout(reason="costs_more", by=2, own_bound=2.1, rival_bound=1.9)
+    assert ranking_row(dataclasses.replace(racing, knocked_out=beaten), None).endswith(
+        "out: costs more |"
+    )
+    below = Knockout(reason="below_min_success", by=None, own_bound=0.7, rival_bound=0.9)
+    assert ranking_row(dataclasses.replace(racing, knocked_out=below), None).endswith(
+        "out: P(success) upper bound below 0.9 |"
+    )
+    assert follow_race(view, Failed(error="no path")).failed == "no path"

@@ -71,7 +71,9 @@ def test_the_page_picks_start_and_goal_as_the_command_line_does(tmp_path):
     page = prepare_upload_scene(path)
     assert page.scene.start == pytest.approx(cli.scene.start, abs=1e-3)
     assert page.scene.goal == pytest.approx(cli.scene.goal, abs=1e-3)
-    distance = np.hypot(*(np.subtract(page.scene.goal[:2], page.scene.start[:2])))
+    start, goal = page.scene.start, page.scene.goal
+    assert start is not None and goal is not None  # picked when the world was built
+    distance = np.hypot(*(np.subtract(goal[:2], start[:2])))
     assert distance >= 1.0, page.notes
 
 

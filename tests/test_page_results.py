@@ -27,7 +27,9 @@ def _plan_and_drive(page, trial: int) -> int:
     page.get_by_role("button", name="Plan").click()
     found = page.get_by_text(re.compile(r"Path found in .*\(seed \d+\)"))
     found.wait_for(timeout=60_000)
-    seed = int(re.search(r"\(seed (\d+)\)", found.inner_text()).group(1))
+    said = re.search(r"\(seed (\d+)\)", found.inner_text())
+    assert said is not None
+    seed = int(said.group(1))
     page.get_by_role("button", name="Drive").click()
     page.get_by_text(re.compile(rf"Trial {trial}: ")).wait_for(timeout=180_000)
     return seed

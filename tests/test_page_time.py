@@ -61,7 +61,9 @@ def _seconds(page, pattern: str, timeout: float) -> float:
     """The first number of the page text matching pattern (its group 1), once it shows."""
     node = page.get_by_text(re.compile(pattern))
     node.wait_for(timeout=timeout * 1000)
-    return float(re.search(pattern, node.inner_text()).group(1))
+    said = re.search(pattern, node.inner_text())
+    assert said is not None
+    return float(said.group(1))
 
 
 def test_cancel_a_long_plan_then_a_budgeted_plan_ends_on_time(moat, artifacts):
@@ -83,7 +85,7 @@ def test_cancel_a_long_plan_then_a_budgeted_plan_ends_on_time(moat, artifacts):
         page.get_by_text(re.compile(r"Plan cancelled after")).scroll_into_view_if_needed()
         page.screenshot(path=artifacts / "time-02-plan-cancelled.png")
         assert cancelled < 60, "the plan stopped long before its 300 s budget"
-        assert moat.running is None and not moat.waiting
+        assert moat.running is None and not moat.loop.waiting
         page.get_by_text("Reset not run").wait_for(timeout=10_000)  # dropped, and said so
         page.get_by_role("button", name="Reset").click()  # control is back: a click works
         page.get_by_text("Robot back at the start.").wait_for(timeout=10_000)
@@ -224,6 +226,7 @@ def test_serve_a_capture_file_from_outside_the_library(artifacts):
         text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
+    assert proc.stdout is not None  # stdout=PIPE
     try:
         lines = []
         for line in proc.stdout:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ def _table(page) -> list[list[str]]:
     return [rows.nth(k).locator("td").all_inner_texts() for k in range(rows.count())]
 
 
-def _check_rows(rows: list[list[str]], sizes: list[float]) -> list[tuple[int, int, float]]:
+def _check_rows(rows: list[list[str]], sizes: Sequence[float]) -> list[tuple[int, int, float]]:
     """Every row is (size, points, kept, error) with numbers; kept <= points; the voxel sizes
     in order after the raw points' N/A row. Returns (points, kept, error) per row."""
     assert [r[0].strip() for r in rows] == ["N/A", *(f"{s:g}" for s in sizes)], rows

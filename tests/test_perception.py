@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 import pytest
@@ -54,7 +55,13 @@ FRAME_XML = REAL / "frame_20121214T142255.814212.xml"
 FLOOR_PCD = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
 WATERCAN_BAG = REAL / "jsk_watercan.bag"
 
-BOX = dict(size=(0.30, 0.20, 0.15), centre=(0.20, 0.10))  # [m], on the floor at z = 0
+
+class _Box(TypedDict):
+    size: tuple[float, float, float]
+    centre: tuple[float, float]
+
+
+BOX: _Box = {"size": (0.30, 0.20, 0.15), "centre": (0.20, 0.10)}  # [m], on the floor at z = 0
 EYE, TARGET = (-1.5, -1.0, 1.4), (0.0, 0.0, 0.0)
 
 
@@ -64,7 +71,7 @@ def box_scene() -> trimesh.Trimesh:
     sx, sy, sz = BOX["size"]
     box = trimesh.creation.box((sx, sy, sz))
     box.apply_translation((*BOX["centre"], sz / 2))
-    return trimesh.util.concatenate([floor, box])
+    return floor + box  # concatenated (Trimesh.__add__, typed where util.concatenate is not)
 
 
 @pytest.fixture(scope="module")
@@ -90,13 +97,14 @@ def test_real_binary_compressed_pcd_is_read_organized():
 
 def test_depth_png_with_pcl_xml_intrinsics_reproduces_the_real_cloud():
     png, pcd = load_capture(FRAME_PNG), load_capture(FRAME_PCD)  # the .xml is found beside it
+    assert png.intrinsics is not None
     assert png.intrinsics.fx == 525 and png.intrinsics.cx == 320
     assert np.array_equal(png.valid, pcd.valid)
     assert np.max(np.abs(png.points[png.valid] - pcd.points[pcd.valid])) < 1e-6
 
 
 def test_pcd_written_ascii_and_binary_reads_back(tmp_path):
-    from pypcd4 import Encoding, PointCloud
+    from pypcd4.pypcd4 import Encoding, PointCloud  # the package re-exports them implicitly
 
     src = load_capture(FLOOR_PCD)
     pts = src.points.astype(np.float32)
@@ -130,10 +138,6 @@ def test_ros2_bag_written_here_with_an_organized_pointcloud2(tmp_path, storage, 
     h, w = 4, 5
     pts = np.random.default_rng(1).uniform(0.5, 2.0, (h * w, 3)).astype(np.float32)
     pts[7] = np.nan
-    fields = [
-        T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
-        for i, n in enumerate("xyz")
-    ]
     header = T["std_msgs/msg/Header"](
         stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="kinect"
     )
@@ -144,7 +148,10 @@ def test_ros2_bag_written_here_with_an_organized_pointcloud2(tmp_path, storage, 
         header=header,
         height=h,
         width=w,
-        fields=fields,
+        fields=[
+            T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+            for i, n in enumerate("xyz")
+        ],
         is_bigendian=False,
         point_step=16,
         row_step=16 * w,
@@ -326,7 +333,7 @@ def test_every_facet_faces_the_camera(box_capture, method):
     """Section 3.2: <x_i, n_i> <= 0 in camera coordinates, for every facet; and (a height
     field) every facet faces up in the world."""
     path, _ = box_capture
-    rec = reconstruct(load_capture(path), MeshingConfig(method=method, voxel=(0.02,) * 3))
+    rec = reconstruct(load_capture(path), MeshingConfig(method=method, voxel=(0.02, 0.02, 0.02)))
     m = rec.mesh
     cam_from_world = np.linalg.inv(rec.world_from_camera)
     centres = m.triangles_center @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
@@ -408,7 +415,7 @@ def test_mesh_cli_on_the_real_depth_png(tmp_path):
     out = tmp_path / "desk.stl"
     done = roachplan("mesh", str(FRAME_PNG), "-o", str(out), "--voxel", "0.02")
     assert done.returncode == 0, done.stderr
-    mesh = trimesh.load(out)
+    mesh = trimesh.load_mesh(out)
     assert len(mesh.faces) > 1000
     rec = mesh_capture(FRAME_PNG, capture_settings({"voxel": 0.02}))
     camera = rec.world_from_camera[:3, 3]  # every facet faces it (section 3.2)

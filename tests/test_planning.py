@@ -237,23 +237,37 @@ def test_plan_cli_json_single_and_many():
 def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(world, monkeypatch):
     """Forking a process with other threads is unsafe (Ray workers, the web server): there, a
     plan runs in a child of the clean fork server, and gives the very path a fork gives."""
+    import functools
     import threading
 
-    from roachplan.planning import _isolated, plan_path
+    from roachplan.planning import plan_path
+    from roachplan.processes import _child
 
     sc = world.scene
-    kw = dict(bounds=sc.bounds, cfg=sc.planner, seed=5, regions=world.regions)
-    forked = plan_path(
-        world.heightfield, world.footprint, sc.start, sc.goal, isolation="fork", **kw
+    plan_with = functools.partial(
+        plan_path,
+        world.heightfield,
+        world.footprint,
+        sc.start,
+        sc.goal,
+        bounds=sc.bounds,
+        cfg=sc.planner,
+        seed=5,
+        regions=world.regions,
     )
-    served = plan_path(
-        world.heightfield, world.footprint, sc.start, sc.goal, isolation="forkserver", **kw
-    )
+    forked = plan_with(isolation="fork")
+    served = plan_with(isolation="forkserver")
     assert forked.found and np.array_equal(forked.path_xyz, served.path_xyz)
 
     used = []
-    real = _isolated._via_forkserver
-    monkeypatch.setattr(_isolated, "_via_forkserver", lambda *a: used.append(1) or real(*a))
+
+    class Recorded(_child.Child):  # (records how each child started)
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            if self.how == "forkserver":
+                used.append(1)
+
+    monkeypatch.setattr(_child, "Child", Recorded)
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()

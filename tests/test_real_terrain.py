@@ -190,8 +190,10 @@ def test_a_scene_file_may_omit_start_goal_and_bounds(tmp_path):
     (tmp_path / "slab.scad").write_text("translate([-1.5, -0.4, -0.02]) cube([3, 0.8, 0.02]);")
     a, b = build_world(load_scene(scene)), build_world(load_scene(scene))
     assert a.scene.start == b.scene.start and a.scene.goal == b.scene.goal
-    assert pose_problem(a, a.scene.start) == "" and pose_problem(a, a.scene.goal) == ""
-    assert math.dist(a.scene.start[:2], a.scene.goal[:2]) >= 2.0  # along the 3 m slab
+    start, goal = a.scene.start, a.scene.goal
+    assert start is not None and goal is not None  # picked when the world was built
+    assert pose_problem(a, start) == "" and pose_problem(a, goal) == ""
+    assert math.dist(start[:2], goal[:2]) >= 2.0  # along the 3 m slab
     assert any("picked automatically" in n for n in a.notes)
 
 
@@ -241,15 +243,14 @@ def _tilted_room_bag(path, with_imu: bool) -> np.ndarray:
     header = T["std_msgs/msg/Header"](
         stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="sensor"
     )
-    fields = [
-        T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
-        for i, n in enumerate("xyz")
-    ]
     cloud = T["sensor_msgs/msg/PointCloud2"](
         header=header,
         height=1,
         width=len(pts),
-        fields=fields,
+        fields=[
+            T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+            for i, n in enumerate("xyz")
+        ],
         is_bigendian=False,
         point_step=12,
         row_step=12 * len(pts),

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import cast
 
 import numpy as np
 import pytest
@@ -56,6 +57,7 @@ def test_a_floor_of_one_per_cent_of_the_points_is_found():
     up, height = np.array([-0.01, -1.00, -0.07]), 0.85
     up /= np.linalg.norm(up)
     cap = load_capture(REAL / "tutorials_pairwise_capture0002.pcd")
+    assert cap.shape is not None  # an organized cloud
     h, w = cap.shape
     pts = cap.points.reshape(h, w, 3)
     floor = np.abs(pts @ up + height) < 0.05
@@ -66,6 +68,7 @@ def test_a_floor_of_one_per_cent_of_the_points_is_found():
     share = (floor & ~drop).sum() / np.isfinite(cut_cap.points).all(axis=1).sum()
     assert share < 0.015
     rec = reconstruct(cut_cap)
+    assert rec.ground is not None
     assert _angle(rec.ground.normal, up) <= 5.0
     assert abs(rec.report()["camera_height_m"] - height) <= 0.03
 
@@ -76,6 +79,7 @@ def test_a_lidar_patch_is_a_world_frame_with_its_slope_kept():
     5 deg (the frame keeps the slope: gravity is z)."""
     rec = mesh_capture(REAL / "rough_ground_ouster_4x4m.pcd")
     assert rec.frame == "world"
+    assert rec.ground is not None
     assert _angle(rec.ground.normal, (-0.22, -0.04, 0.98)) <= 5.0
 
 
@@ -104,7 +108,8 @@ def test_a_floor_seen_from_a_low_camera_is_a_surface_not_holes():
     for world in (sensor, grid):
         from scipy import ndimage
 
-        labels, n = ndimage.label(world.regions.standable)
+        # scipy.ndimage.label is unannotated: pyright infers the int it returns given `output`
+        labels, n = cast("tuple[np.ndarray, int]", ndimage.label(world.regions.standable))
         sizes = ndimage.sum(np.ones_like(labels), labels, np.arange(1, n + 1))
         areas.append(float(sizes.max()) * world.regions.cell**2)
     assert areas[0] >= 2.0 * areas[1] and areas[0] >= 3.0, areas
@@ -163,9 +168,7 @@ def step_scene(tmp_path_factory):
     box = trimesh.creation.box((0.6, 0.6, 0.04))
     box.apply_translation((0.0, 2.0, 0.02))
     intr, pose = PRESETS["kinect2-qhd"], look_at((0.0, 0.0, 0.8), (0.0, 2.0, 0.0))
-    depth = render_depth(
-        trimesh.util.concatenate([floor, box]), intr, pose, NoiseModel(), np.random.default_rng(2)
-    )
+    depth = render_depth(floor + box, intr, pose, NoiseModel(), np.random.default_rng(2))
     save_depth(out / "step.png", depth, intr)
     world = _capture_world(out / "step.png")
     rec = mesh_capture(out / "step.png")
@@ -232,12 +235,14 @@ def test_a_model_on_the_ground_is_crossed_from_the_ground(tmp_path):
         steps.append(b)
     trimesh.util.concatenate(steps).export(tmp_path / "stairs.stl")
     world = build_world(load_scene(tmp_path / "stairs.stl"))
-    (xa, ya), (xb, yb) = world.scene.bounds
+    bounds, start, goal = world.scene.bounds, world.scene.start, world.scene.goal
+    assert bounds is not None and start is not None and goal is not None  # picked by build_world
+    (xa, ya), (xb, yb) = bounds
     assert xa <= -0.9 and xb >= 0.9 and ya <= -0.5 and yb >= 0.5
-    for pose in (world.scene.start, world.scene.goal):
+    for pose in (start, goal):
         assert abs(pose[1]) < 0.25 and abs(pose[0]) >= 0.7  # beyond the ends, on the ground
         assert world.heightfield.sample(np.array(pose[:2])) == pytest.approx(0.0, abs=1e-6)
-    assert world.scene.start[0] * world.scene.goal[0] < 0  # on either side
+    assert start[0] * goal[0] < 0  # on either side
     assert any("either end of the model" in n for n in world.notes)
 
 
@@ -257,9 +262,9 @@ def test_the_floor_seen_under_a_table_is_the_ground_there(tmp_path):
             leg.apply_translation((dx, 2.0 + dy, 0.35))
             parts.append(leg)
     intr, pose = PRESETS["kinect2-qhd"], look_at((0.0, 0.0, 0.4), (0.0, 2.0, 0.2))
-    depth = render_depth(
-        trimesh.util.concatenate(parts), intr, pose, NoiseModel(), np.random.default_rng(4)
-    )
+    # trimesh types concatenate() as any Geometry; of Trimesh parts it is a Trimesh
+    table = cast(trimesh.Trimesh, trimesh.util.concatenate(parts))
+    depth = render_depth(table, intr, pose, NoiseModel(), np.random.default_rng(4))
     save_depth(tmp_path / "table.png", depth, intr)
     world = _capture_world(tmp_path / "table.png")
     rec = mesh_capture(tmp_path / "table.png")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import re
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -16,6 +17,9 @@ import pytest
 from conftest import roachplan
 from roachplan.app._replay import END_HOLD, HTML_MARK
 from test_app import ARGS, CHROMIUM
+
+if TYPE_CHECKING:
+    from playwright.sync_api import FloatRect
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
 
@@ -49,7 +53,7 @@ def _pixels(page) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB")).astype(int)
 
 
-def _check_pixels(a: np.ndarray, b: np.ndarray, box: dict) -> None:
+def _check_pixels(a: np.ndarray, b: np.ndarray, box: FloatRect) -> None:
     """Two shots of the 3D view (the numbers box `box` masked out): only the robot moved, and
     the planned path (black) and the trajectory (blue) are drawn."""
     h, w, _ = a.shape
@@ -148,6 +152,7 @@ def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifa
         a, b = shots
         page.screenshot(path=artifacts / "replay-trial.png")
         box = page.locator("#roachplan-replay").bounding_box()
+        assert box is not None  # the numbers box is shown
         browser.close()
     assert not errors, f"page errors: {errors}"
     assert requested == [], f"the replay asked the network for {requested}"

@@ -195,7 +195,8 @@ def test_calibrate_turning_measures_the_spins_on_the_spot_the_driver_and_the_pla
     assert (tmp_path / "spin.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The driver spins at the calibrated speed; plans leave room for its wander.
     assert DriverConfig().spin_speed == CALIBRATED_SPIN.omega
-    assert CALIBRATED_SPIN.wander < PlannerConfig().spin_margin < CALIBRATED_SPIN.wander + 0.015
+    margin = PlannerConfig().spin_margin
+    assert margin is not None and CALIBRATED_SPIN.wander < margin < CALIBRATED_SPIN.wander + 0.015
 
 
 def test_a_right_spin_mirrors_a_left_one():

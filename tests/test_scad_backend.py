@@ -40,14 +40,8 @@ from roachplan.scenes import (
 )
 from roachplan.scenes._manifold_main import openscad_quad_diagonal, openscad_rands
 from roachplan.scenes._mesh import clean_terrain_mesh, disagreement, surface_distances
-from roachplan.scenes._openscad import (
-    JAIL_OUT,
-    TEXT_DEVIATION,
-    _manifold_argv,
-    _sandbox_available,
-    confined,
-    manifold_version,
-)
+from roachplan.scenes._scad_manifold import TEXT_DEVIATION, manifold_argv, manifold_version
+from roachplan.scenes._scad_sandbox import JAIL_OUT, confined, sandbox_available
 
 AGREE = 1e-4
 """Largest surface distance between the two meshes [fraction of the bounding-box diagonal]."""
@@ -89,7 +83,7 @@ SECRET_HEIGHT = 7.0
 """Height of the secret solid outside a model's folder [model units]."""
 
 needs_jail = pytest.mark.skipif(
-    not _sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
+    not sandbox_available(), reason="no unprivileged user namespaces here (renders refuse)"
 )
 
 
@@ -119,9 +113,9 @@ CASES = {
 @pytest.mark.parametrize("name", CASES)
 def test_manifold_agrees_with_the_binary(name, tmp_path):
     model, params = CASES[name](tmp_path)
-    reference = trimesh.load(render_scad(model, params, backend="cgal"))
+    reference = trimesh.load_mesh(render_scad(model, params, backend="cgal"))
     fast_path = render_scad(model, params, backend="manifold")
-    fast = trimesh.load(fast_path)
+    fast = trimesh.load_mesh(fast_path)
     assert fast.is_watertight and fast.volume > 0
     err = disagreement(reference, fast)
     assert err["bounds"] <= AGREE_BOUNDS, err
@@ -166,8 +160,8 @@ def test_every_library_model_renders_by_default_as_the_binary_renders_it(name):
     assert obj.backend == "auto"  # the library's scenes say nothing: the default
     auto = render_scad_result(obj.source, dict(obj.params), backend=obj.backend)
     assert auto.backend == LIBRARY_BACKENDS[name], auto.note()
-    reference = trimesh.load(render_scad(obj.source, dict(obj.params), backend="cgal"))
-    err = disagreement(reference, trimesh.load(auto.path))
+    reference = trimesh.load_mesh(render_scad(obj.source, dict(obj.params), backend="cgal"))
+    err = disagreement(reference, trimesh.load_mesh(auto.path))
     assert err["bounds"] <= AGREE_BOUNDS and err["hausdorff"] <= AGREE, err
 
 
@@ -198,8 +192,8 @@ def test_a_public_style_tile_loads_with_manifold_by_default_and_says_what_it_may
     np.testing.assert_allclose(terrain.mesh.bounds[:, :2], [[0, 0], [1.6, 1.2]], atol=1e-6)
     assert 0.02 * 3 < terrain.mesh.bounds[1][2] <= 0.02 * 9
     # The binary's render of the same tile, the reference: the same terrain.
-    binary = trimesh.load(render_scad(tmp_path / "tile" / "tile.scad", backend="cgal"))
-    fast = trimesh.load(render_scad(tmp_path / "tile" / "tile.scad"))
+    binary = trimesh.load_mesh(render_scad(tmp_path / "tile" / "tile.scad", backend="cgal"))
+    fast = trimesh.load_mesh(render_scad(tmp_path / "tile" / "tile.scad"))
     assert fast.is_watertight and fast.volume > 0  # the inward height field made a solid
     d = np.concatenate([surface_distances(binary, fast), surface_distances(fast, binary)])
     assert d.max() <= TEXT_DEVIATION * 6  # the labels' bound; the rest agrees closer still
@@ -209,8 +203,8 @@ def test_a_public_style_tile_loads_with_manifold_by_default_and_says_what_it_may
 @needs_jail
 def test_the_tolerance_catches_a_real_difference():
     """Control: the same rough bridge with another seed (bumps moved) is not 'agreeing'."""
-    a = trimesh.load(render_scad(LIBRARY / "double_bridge.scad", ROUGH, backend="cgal"))
-    b = trimesh.load(
+    a = trimesh.load_mesh(render_scad(LIBRARY / "double_bridge.scad", ROUGH, backend="cgal"))
+    b = trimesh.load_mesh(
         render_scad(LIBRARY / "double_bridge.scad", {**ROUGH, "bump_seed": 1}, backend="manifold")
     )
     assert disagreement(a, b)["hausdorff"] > AGREE
@@ -227,7 +221,9 @@ def test_seeded_rands_draws_what_openscad_draws(seed, tmp_path):
         timeout=60,
         check=True,
     )
-    echoed = re.search(r"ECHO: \[(.*)\]", proc.stderr).group(1)
+    echo = re.search(r"ECHO: \[(.*)\]", proc.stderr)
+    assert echo is not None, proc.stderr
+    echoed = echo.group(1)
     reference = [float(v) for v in echoed.split(",")]
     assert openscad_rands(-2, 5, 6, seed) == pytest.approx(reference, abs=1e-5)  # 6 digits
 
@@ -255,11 +251,13 @@ font this system lacks (fontconfig's fallback, DejaVu Sans Bold), alignments, $f
 @pytest.mark.parametrize("name", TEXTS)
 def test_text_renders_within_the_stated_deviation_of_the_binary(name, tmp_path):
     src = _model(tmp_path, f"cube([1, 1, 1]);\nlinear_extrude(2) {TEXTS[name]}\n")
-    reference = trimesh.load(render_scad(src, backend="cgal"))
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
     fast = render_scad_result(src, backend="manifold")
-    size = float(re.search(r"size = (\d+)", TEXTS[name]).group(1))
+    size_arg = re.search(r"size = (\d+)", TEXTS[name])
+    assert size_arg is not None  # every TEXTS call has a size
+    size = float(size_arg.group(1))
     assert fast.backend == "manifold" and fast.text_size == pytest.approx(size)
-    mesh = trimesh.load(fast.path)
+    mesh = trimesh.load_mesh(fast.path)
     d = np.concatenate([surface_distances(reference, mesh), surface_distances(mesh, reference)])
     assert d.max() <= TEXT_DEVIATION * size, (d.max(), TEXT_DEVIATION * size)
     assert len(mesh.faces) == pytest.approx(len(reference.faces), rel=0.02)  # same curve cuts
@@ -273,8 +271,8 @@ def test_the_text_bound_catches_glyphs_moved_by_more(tmp_path):
     src = _model(tmp_path, code.format(dx=0))
     moved = tmp_path / "moved.scad"
     moved.write_text(code.format(dx=2 * TEXT_DEVIATION * 6))
-    a = trimesh.load(render_scad(moved, backend="cgal"))
-    b = trimesh.load(render_scad(src, backend="manifold"))
+    a = trimesh.load_mesh(render_scad(moved, backend="cgal"))
+    b = trimesh.load_mesh(render_scad(src, backend="manifold"))
     assert surface_distances(a, b).max() > TEXT_DEVIATION * 6
 
 
@@ -294,7 +292,7 @@ def test_text_is_rendered_by_manifold_with_its_deviation_in_metres_of_terrain(tm
         r"at scale 0\.02",
         proc.stderr,
     ), proc.stderr
-    assert trimesh.load(out).extents[0] == pytest.approx(1.2, abs=1e-6)
+    assert trimesh.load_mesh(out).extents[0] == pytest.approx(1.2, abs=1e-6)
 
 
 def test_surface_is_refused_from_a_scene_file(tmp_path):
@@ -320,8 +318,8 @@ def test_a_polyhedron_wound_the_other_way_is_made_a_solid_as_the_binary_makes_it
     src = _model(
         tmp_path, INWARD_CUBE + "union() { inward(); translate([5, 5, 4]) cube([2, 2, 3]); }\n"
     )
-    reference = trimesh.load(render_scad(src, backend="cgal"))
-    fast = trimesh.load(render_scad(src, backend="manifold"))
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
+    fast = trimesh.load_mesh(render_scad(src, backend="manifold"))
     assert reference.volume == pytest.approx(508.0)
     assert fast.is_watertight and fast.is_winding_consistent
     assert fast.volume == pytest.approx(508.0)
@@ -334,8 +332,8 @@ def test_a_lone_inward_polyhedron_is_the_same_terrain_as_the_binarys(tmp_path):
     """Alone the binary exports it as given, inside out; roachplan's cleaning turns that
     outward. The evaluator's is outward already: the same cleaned mesh."""
     src = _model(tmp_path, INWARD_CUBE + "inward();\n")
-    reference = trimesh.load(render_scad(src, backend="cgal"))
-    fast = trimesh.load(render_scad(src, backend="manifold"))
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
+    fast = trimesh.load_mesh(render_scad(src, backend="manifold"))
     assert reference.volume == pytest.approx(-500.0)  # the binary's, as given
     assert fast.volume == pytest.approx(500.0)
     a, b = (clean_terrain_mesh(m, "cube") for m in (reference, fast))
@@ -394,8 +392,8 @@ def test_a_height_fields_quadrilaterals_are_cut_as_the_binary_cuts_them(inward, 
         + _height_field(seed=5, inward=inward)
         + "translate([-5, -5, 0]) cube([10, 10, 3]);\n}\n",
     )
-    reference = trimesh.load(render_scad(src, backend="cgal"))
-    fast = trimesh.load(render_scad(src, backend="manifold"))
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
+    fast = trimesh.load_mesh(render_scad(src, backend="manifold"))
     assert fast.is_watertight and fast.volume > 0
     err = disagreement(reference, fast)
     assert err["hausdorff"] <= AGREE, err
@@ -474,8 +472,8 @@ def test_auto_renders_a_plain_model_with_manifold_and_says_so(tmp_path):
         r"manifold3d 3\.5\.4\) in \d+\.\d s",
         auto.note(),
     ), auto.note()
-    reference = trimesh.load(render_scad(src, backend="cgal"))
-    assert disagreement(reference, trimesh.load(auto.path))["hausdorff"] <= AGREE
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
+    assert disagreement(reference, trimesh.load_mesh(auto.path))["hausdorff"] <= AGREE
     again = render_scad_result(src)
     assert again.cached and again.path == auto.path
     assert again.note().endswith(" s (cached)")
@@ -577,7 +575,7 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
         (work / "out").mkdir(parents=True)
         model = "/model/m.scad" if jail else str(src)
         target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
-        argv, layout = _manifold_argv(model, target)
+        argv, layout = manifold_argv(model, target)
         cmd = confined(argv, src.parent, work, jail=jail, layout=layout)
         proc = subprocess.run(
             cmd, cwd=src.parent, capture_output=True, text=True, timeout=120, check=False
@@ -585,9 +583,9 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
         mesh = work / "out" / "mesh.stl"
         if not jail:
             assert proc.returncode == 0, proc.stderr
-            assert trimesh.load(mesh).bounds[1][2] >= SECRET_HEIGHT - 1e-6
+            assert trimesh.load_mesh(mesh).bounds[1][2] >= SECRET_HEIGHT - 1e-6
         else:
-            assert not mesh.exists() or trimesh.load(mesh).bounds[1][2] < SECRET_HEIGHT / 2, (
+            assert not mesh.exists() or trimesh.load_mesh(mesh).bounds[1][2] < SECRET_HEIGHT / 2, (
                 proc.stderr
             )
 
@@ -596,7 +594,7 @@ def test_the_jail_alone_keeps_the_secret_from_the_evaluator(name, tmp_path):
 def test_the_jail_shows_the_evaluator_only_its_own_packages(tmp_path):
     (tmp_path / "model").mkdir()
     (tmp_path / "work").mkdir()
-    argv, layout = _manifold_argv("/model/m.scad", f"{JAIL_OUT}/mesh.stl")
+    argv, layout = manifold_argv("/model/m.scad", f"{JAIL_OUT}/mesh.stl")
     python, paths = argv[0], argv[5]
     probe = (
         "import sys, json, os; sys.path[:0] = json.loads(sys.argv[1])\n"
@@ -666,7 +664,7 @@ def test_scene_build_with_the_manifold_backend(tmp_path):
         "scene", "build", "double_bridge", "-o", str(out), "--scad-backend", "manifold"
     )
     assert proc.returncode == 0, proc.stderr
-    built = trimesh.load(out)
+    built = trimesh.load_mesh(out)
     assert np.allclose(built.bounds[1][2], 0.2, atol=1e-6)
     cached = list((tmp_path / "cache" / "openscad").glob("double_bridge-manifold-*.stl"))
     assert len(cached) == 1
@@ -753,8 +751,8 @@ def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, art
         rendered = render_scad_result(label)
         assert rendered.backend == "manifold" and rendered.text_size == pytest.approx(0.5)
         # The page's terrain is that render, within the text bound of the binary's.
-        reference = trimesh.load(render_scad(label, backend="cgal"))
-        fast = trimesh.load(rendered.path)
+        reference = trimesh.load_mesh(render_scad(label, backend="cgal"))
+        fast = trimesh.load_mesh(rendered.path)
         d = np.concatenate([surface_distances(reference, fast), surface_distances(fast, reference)])
         assert d.max() <= TEXT_DEVIATION * 0.5
         assert np.allclose(app.world.mesh.bounds[1][2], reference.bounds[1][2], atol=1e-4)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from roachplan.scenes import (
 def test_library_scene_loads_settles_and_walks_one_second(name):
     world = build_world(load_scene(name))
     scene = world.scene
+    assert scene.start is not None  # build_world picks it when the scene gives none
     x, y, yaw = scene.start
     with world.simulation() as sim:
         sim.reset(x, y, yaw)
@@ -83,7 +85,7 @@ def edited(**changes) -> dict:
     data = copy.deepcopy(VALID)
     for dotted, value in changes.items():
         *parents, last = dotted.split("__")
-        node = data
+        node: Any = data  # the scene's YAML: dicts and lists within each other
         for k in parents:
             node = node[int(k)] if isinstance(node, list) else node[k]
         if value is KeyError:
@@ -232,7 +234,7 @@ def test_scene_check_reports_each_file_and_fails_on_a_bad_one(tmp_path, box_stl)
 def test_scene_build_exports_the_assembled_terrain(tmp_path):
     out = roachplan("scene", "build", "double_bridge", "-o", str(tmp_path / "bridge.obj"))
     assert out.returncode == 0, out.stderr
-    mesh = trimesh.load(tmp_path / "bridge.obj", force="mesh")
+    mesh = trimesh.load_mesh(tmp_path / "bridge.obj")
     np.testing.assert_allclose(mesh.bounds, [[-1.0, -1.5, 0.0], [1.0, 1.5, 0.2]], atol=1e-6)
     assert mesh.is_watertight
 
@@ -243,9 +245,9 @@ def test_trial_takes_a_scene_file_path(tmp_path, box_stl):
     assert '"scene": "scene"' in out.stdout and '"outcome": "success"' in out.stdout
 
 
-def test_the_readme_example_is_a_valid_scene(tmp_path):
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    example = readme.split("## Scene files", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+def test_the_documented_example_is_a_valid_scene(tmp_path):
+    page = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
+    example = page.split("## A complete example", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
     (tmp_path / "example.yaml").write_text(example)
     shutil.copy(LIBRARY / "double_bridge.scad", tmp_path)
     (tmp_path / "meshes").mkdir()
@@ -284,7 +286,7 @@ def test_a_mesh_in_millimetres_loads_with_scale(tmp_path, millimetre_stl):
         r"most likely a model in millimetres: add `scale: 0\.001` to this terrain object",
     ):
         build_world(load_scene(write_scene(tmp_path, VALID)))
-    assert looks_like_millimetres(trimesh.load(millimetre_stl))
+    assert looks_like_millimetres(trimesh.load_mesh(millimetre_stl))
     world = build_world(load_scene(write_scene(tmp_path, edited(terrain__0__scale=0.001))))
     np.testing.assert_allclose(world.mesh.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 0.1]], atol=1e-9)
     assert not looks_like_millimetres(world.mesh)
@@ -342,7 +344,7 @@ def test_scene_build_takes_scale_and_scad_timeout(tmp_path, millimetre_stl):
         "900",
     )
     assert out.returncode == 0, out.stderr
-    mesh = trimesh.load(tmp_path / "m.stl", force="mesh")
+    mesh = trimesh.load_mesh(tmp_path / "m.stl")
     np.testing.assert_allclose(mesh.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 0.1]], atol=1e-6)
     for flag, value, expected in (
         ("--scale", "-1", "--scale: expected a positive number"),

@@ -97,7 +97,9 @@ def test_a_zip_of_a_depth_image_with_its_calibration_loads_them_together(tmp_pat
     world = prepare_upload_scene(path)
     # The calibration's fx = fy = 525 and its camera pose: the floor 0.42 m under the camera
     # (the data's README); a Kinect v2 preset would put it elsewhere.
-    camera_z = capture_view(world.scene).report["camera_height_m"]
+    view = capture_view(world.scene)
+    assert view is not None  # the scene is the one capture
+    camera_z = view.report["camera_height_m"]
     assert 0.35 < camera_z < 0.5
 
 
@@ -145,8 +147,9 @@ def test_the_announcement_says_what_is_really_done_with_each_upload(tmp_path):
         path = scene_from_upload(name, data, tmp_path, {}, scad_timeout=120.0)
         assert load_announcement(f"upload: {name}", path) == said
     import trimesh
+    from trimesh.exchange.stl import export_stl
 
-    mesh = trimesh.creation.box((1.0, 1.0, 0.1)).export(file_type="stl")
+    mesh = export_stl(trimesh.creation.box((1.0, 1.0, 0.1)))
     path = scene_from_upload("step.stl", mesh, tmp_path, {}, scad_backend="manifold")
     assert load_announcement("upload: step.stl", path) == "Reading the mesh step.stl"
     path = scene_from_upload("m.scad", b"cube(1);", tmp_path, {}, scad_backend="manifold")
@@ -158,7 +161,7 @@ def test_the_page_announces_a_capture_zip_as_meshing_while_it_loads(app, tmp_pat
     while the load runs."""
     import time
 
-    from roachplan.app._jobs import UploadCmd
+    from roachplan.app._commands import UploadCmd
 
     rtab = REAL / "rtabmap"
     data = _zip(

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+from trimesh.exchange.ply import export_ply
+from trimesh.exchange.stl import export_stl
 
 from conftest import ROOT
 from roachplan.app._uploads import prepare_upload_scene, safe_name, scene_from_upload
@@ -37,17 +39,17 @@ def test_a_depth_capture_becomes_a_capture_scene_with_valid_poses(tmp_path):
     assert raw["terrain"][0]["capture"] == "kinect_bridge_depth.png" and raw["ground"] is None
     from roachplan.scenes import pose_problem
 
-    assert (
-        pose_problem(world, world.scene.start) == "" and pose_problem(world, world.scene.goal) == ""
-    )
+    start, goal = world.scene.start, world.scene.goal
+    assert start is not None and goal is not None  # picked when the world was built
+    assert pose_problem(world, start) == "" and pose_problem(world, goal) == ""
     # The two poses lie along the bridge (the capture's longer side), well apart.
-    assert abs(world.scene.goal[0] - world.scene.start[0]) > 1.0
+    assert abs(goal[0] - start[0]) > 1.0
 
 
 def test_a_mesh_upload_stands_on_a_ground_plane(tmp_path):
     box = trimesh.creation.box((1.0, 0.6, 0.1))
     box.apply_translation((0, 0, 0.05))
-    path = scene_from_upload("step.stl", box.export(file_type="stl"), tmp_path, CAPTURE)
+    path = scene_from_upload("step.stl", export_stl(box), tmp_path, CAPTURE)
     world = prepare_upload_scene(path)
     assert world.scene.ground == 0.0 and len(world.mesh.faces) == 12
     assert np.isclose(world.heightfield.sample(np.array([[0.0, 0.0]]))[0], 0.1, atol=0.01)
@@ -55,9 +57,9 @@ def test_a_mesh_upload_stands_on_a_ground_plane(tmp_path):
 
 def test_a_ply_with_faces_is_a_mesh_and_without_a_cloud(tmp_path):
     box = trimesh.creation.box((1.0, 1.0, 0.1))
-    mesh_path = scene_from_upload("t.ply", box.export(file_type="ply"), tmp_path, CAPTURE)
+    mesh_path = scene_from_upload("t.ply", export_ply(box), tmp_path, CAPTURE)
     cloud = trimesh.PointCloud(np.random.default_rng(0).uniform(0, 1, (50, 3)))
-    cloud_path = scene_from_upload("c.ply", cloud.export(file_type="ply"), tmp_path, CAPTURE)
+    cloud_path = scene_from_upload("c.ply", export_ply(cloud), tmp_path, CAPTURE)
     assert "mesh" in yaml.safe_load(mesh_path.read_text())["terrain"][0]
     assert "capture" in yaml.safe_load(cloud_path.read_text())["terrain"][0]
 

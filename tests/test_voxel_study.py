@@ -127,9 +127,10 @@ def test_regions_and_the_warning_judgement():
 
     assert planarity_warning(row(995, 5.0), 2.0) is None
     assert planarity_warning(row(1000, 30.0), 2.0) is None  # 1.5 % of 2 m: a stereo camera
-    assert "30 mm" in planarity_warning(row(1000, 30.0), 1.0)  # 3 % of 1 m: not noise
+    warning = planarity_warning(row(1000, 30.0), 1.0)
+    assert warning is not None and "30 mm" in warning  # 3 % of 1 m: not noise
     kept_low = planarity_warning(row(int(MIN_KEPT * 1000) - 100, 5.0), 2.0, hint="use the wall")
-    assert "70%" in kept_low and kept_low.endswith("; use the wall")
+    assert kept_low is not None and "70%" in kept_low and kept_low.endswith("; use the wall")
 
 
 @pytest.mark.parametrize(

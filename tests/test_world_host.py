@@ -12,17 +12,17 @@ import time
 import numpy as np
 import pytest
 
-from roachplan.app._jobs import Job, WorldHost, _plan_job
+from roachplan.app._jobs import Job, WorldHost, _plan_job, failure
 
 
 def _paths(job: Job, timeout: float = 120) -> list[np.ndarray]:
     """The paths a plan job sent, once it has finished."""
     out, end = [], time.monotonic() + timeout
     while not job.done and time.monotonic() < end:
-        for kind, payload in job.poll(timeout=0.5):
-            assert kind != "error", payload
-            if kind == "attempt" and payload[1] is not None:
-                out.append(np.asarray(payload[1].plan.path_xyz))
+        for attempt in job.poll(timeout=0.5):
+            if attempt.plan is not None:
+                out.append(np.asarray(attempt.plan.plan.path_xyz))
+        assert failure(job) is None, failure(job)
     assert job.done, "the plan job did not finish"
     return out
 
@@ -75,21 +75,23 @@ def test_the_app_plans_without_its_host_once_it_has_died(world):
     app = RoachApp(world, host="127.0.0.1", port=free_port())
     try:
         for _ in range(200):
-            if app._host is not None:
+            if app.core.host is not None:
                 break
             time.sleep(0.05)
-        assert app._host is not None and app._host.world is app.world
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
-        assert job._host is app._host
+        assert app.core.host is not None and app.core.host.world is app.world
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app.core.host
         hosted = _paths(job)
-        os.kill(app._host._proc.pid, signal.SIGKILL)
-        app._host._proc.join(timeout=5)
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        os.kill(app.core.host._proc.pid, signal.SIGKILL)
+        app.core.host._proc.join(timeout=5)
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
         assert job._host is None, "a plain child, sent the world"
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
-        assert app._host is not None and app._host.alive, "and a new host for the next click"
-        job = app.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
-        assert job._host is app._host
+        assert app.core.host is not None and app.core.host.alive, (
+            "and a new host for the next click"
+        )
+        job = app.core.world_job(_plan_job, 1, _request(world, 1), time.monotonic() + 60)
+        assert job._host is app.core.host
         np.testing.assert_array_equal(_paths(job)[0], hosted[0])
     finally:
         app.stop()

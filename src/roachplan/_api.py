@@ -19,8 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the heavy modules load on first use, not on `import roachplan`
-    from roachplan.experiments import ExperimentReport, TrialResult
-    from roachplan.experiments._choose import Choice
+    from roachplan.experiments import Choice, ExperimentReport, TrialResult
     from roachplan.perception import Reconstruction
     from roachplan.planning import PlannerConfig, PlanResult
     from roachplan.scenes import World
@@ -114,8 +113,8 @@ def choose(
     scene's uncertainty model (`roachplan choose`). `choice.ranking` (best first: P(success)
     with its interval, energy, drive time, failures), `choice.chosen` (an index into
     `choice.candidates`, None when nothing succeeded), `choice.stopped` (why the race ended)."""
-    from roachplan.experiments._choose import ChooseConfig
-    from roachplan.experiments._choose import choose as race_candidates
+    from roachplan.experiments import ChooseConfig
+    from roachplan.experiments import choose as race_candidates
 
     cfg = ChooseConfig(
         candidates=candidates,
@@ -125,7 +124,7 @@ def choose(
         min_success=min_success,
         seed=seed,
     )
-    choice, _ = race_candidates(world.scene, cfg, workers=workers)
+    choice, _ = race_candidates(world, cfg, workers=workers)
     return choice
 
 
@@ -165,18 +164,15 @@ def mesh(capture: str | os.PathLike, **settings) -> Reconstruction:
 
 def _planner(world: World, planner, time_limit: float | None):
     """The scene's planner config, with another planner's name or a whole config, and a time
-    limit [s]."""
-    from roachplan.planning import PLANNER_NAMES, PlannerConfig, PlanningError
+    limit [s] (the budget of the plan, every try included); the config checks them
+    (SettingError naming the setting and what it accepts)."""
+    from roachplan.planning import PlannerConfig
 
     cfg = world.scene.planner
     if isinstance(planner, PlannerConfig):
         cfg = planner
     elif planner is not None:
-        if planner not in PLANNER_NAMES:
-            raise PlanningError(f"planner {planner!r}: choose from {', '.join(PLANNER_NAMES)}")
         cfg = dataclasses.replace(cfg, name=planner)
     if time_limit is not None:
-        if not time_limit > 0:
-            raise PlanningError(f"time_limit {time_limit!r}: must be > 0 seconds")
         cfg = dataclasses.replace(cfg, time_limit=time_limit)
     return cfg

@@ -9,7 +9,8 @@ import importlib
 
 def lazy_exports(package: str, where: dict[str, str]):
     """(__getattr__, __dir__, __all__) for a package whose public names live in its private
-    modules: where maps each name to the module (relative, e.g. "._scene") that defines it."""
+    modules: where maps each name to the module that defines it (relative, "._scene", or the
+    package top's, "roachplan._settings")."""
 
     def __getattr__(name: str):
         if name not in where:

@@ -14,6 +14,9 @@ from dataclasses import dataclass, field
 from roachplan.experiments import ExperimentSpec
 from roachplan.experiments._workers import LocalPool
 
+from ._app import App
+from ._commands import CancelBatchCmd, RunTrialsCmd
+
 
 @dataclass(eq=False)
 class Batch:
@@ -80,8 +83,6 @@ class BatchPanel:
     line."""
 
     def __init__(self, gui, put) -> None:
-        from ._jobs import CancelCmd, RunTrialsCmd
-
         self.batch: Batch | None = None
         with gui.add_folder("Batch of trials"):
             self.n = gui.add_number("Trials (N)", 20, min=1, max=1000, step=1)
@@ -91,7 +92,7 @@ class BatchPanel:
             self.progress = gui.add_progress_bar(0.0)
             self.status = gui.add_markdown("")
         self.run_button.on_click(lambda ev: put(RunTrialsCmd(ev.client_id)))
-        self.cancel_button.on_click(lambda ev: put(CancelCmd(ev.client_id, "batch")))
+        self.cancel_button.on_click(lambda ev: put(CancelBatchCmd(ev.client_id)))
 
     def start(self, spec: ExperimentSpec, start, goal) -> None:
         """spec.trials_per_route trials from spec.seed on, between these poses."""
@@ -138,3 +139,30 @@ class BatchPanel:
             f"Batch {how}: {b.done}/{b.total} trials, {b.successes} successes, {b.elapsed:.1f} s."
         )
         self.run_button.disabled, self.cancel_button.disabled = False, True
+
+
+def do_run_trials(app: App, cmd: RunTrialsCmd) -> None:
+    """N trials between the markers, from the next seeds, with the page's planner settings."""
+    panel = app.page.batch_panel
+    if panel.batch is not None:
+        app.page.notify(cmd.client_id, "Busy", "A batch is already running.", error=True)
+        return
+    start, goal = app.page.markers.valid_poses(app.world)
+    scene, n = app.world.scene, int(panel.n.value)
+    spec = ExperimentSpec(
+        name="app",
+        path=scene.path,
+        scene=scene.path,
+        planner=app.planner(app.page.plan_settings()),
+        sim=scene.sim,
+        driver=scene.driver,
+        trials_per_route=n,
+        seed=app.next_seed,
+    )
+    app.next_seed += n
+    panel.start(spec, start, goal)
+
+
+def do_cancel_batch(app: App, cmd: CancelBatchCmd) -> None:
+    """Stop the batch now (its workers are killed)."""
+    app.page.batch_panel.cancel()

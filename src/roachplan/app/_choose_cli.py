@@ -10,6 +10,8 @@ import io
 import json
 import math
 
+from ._flags import as_reference, refused, setting_flag
+
 
 def add_choose_parser(sub, terrain_help: str) -> None:
     p = sub.add_parser(
@@ -94,49 +96,41 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         help="results folder: new, empty, or one an earlier choose wrote",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=cmd_choose)
+    p.set_defaults(run="roachplan.app._choose_cli:cmd_choose")
 
 
-def _check(args: argparse.Namespace) -> None:
-    from roachplan.experiments._choose import ChooseError
+def _settings(args: argparse.Namespace):
+    """The race's settings from the flags, before any work: each flag checked as ChooseConfig
+    checks its setting (check_flags has checked them one by one; here together, and the
+    indifference zone from its text); the seed is the scene's until the scene is read."""
+    from roachplan import SettingError
+    from roachplan.experiments import ChooseConfig
 
-    def bad(flag: str, value, accepted: str) -> ChooseError:
-        return ChooseError(f"{flag} {value}: {accepted}")
-
-    if not 1 <= args.candidates <= 64:
-        raise bad("--candidates", args.candidates, "give 1 to 64 candidate paths")
-    if args.rollouts is not None and args.rollouts < args.candidates:
-        raise bad(
-            "--rollouts", args.rollouts, f"give at least one per candidate ({args.candidates})"
-        )
-    if args.budget_s is not None and not (math.isfinite(args.budget_s) and args.budget_s > 0):
-        raise bad("--budget-s", args.budget_s, "give a positive number of seconds")
-    if not 0.5 <= args.confidence < 1:
-        raise bad("--confidence", args.confidence, "give a confidence in [0.5, 1), e.g. 0.95")
-    if args.min_success is not None and not 0 < args.min_success < 1:
-        raise bad("--min-success", args.min_success, "give a probability in (0, 1), e.g. 0.9")
-    args.indifference = _indifference(args.indifference, bad)
-    if args.seed is not None and not 0 <= args.seed < 2**32:
-        raise bad("--seed", args.seed, f"give a seed in [0, {2**32 - 1}]")
-    if args.workers is not None and args.workers < 1:
-        raise bad("--workers", args.workers, "give 1 or more workers")
-    if args.validate < 0:
-        raise bad("--validate", args.validate, "give 0 or more repeats")
     if args.address is not None and args.backend != "ray":
-        raise bad("--address", args.address, "a Ray cluster address is for --backend ray")
-
-
-def _indifference(text, bad) -> tuple[float, float]:
-    """--indifference "DP,DE" as (DP, DE), each in [0, 1); already parsed: as given."""
-    if isinstance(text, tuple):
-        return text
-    accepted = "give DP,DE: two numbers in [0, 1), e.g. 0.05,0.05 (0,0: no indifference zone)"
+        raise refused("--address", args.address, "a Ray cluster address is for --backend ray")
     try:
-        dp, de = (float(v) for v in str(text).split(","))
+        return ChooseConfig(
+            candidates=args.candidates,
+            rollouts=args.rollouts,
+            budget_s=args.budget_s
+            if args.budget_s is not None
+            else (None if args.rollouts else 60.0),
+            confidence=args.confidence,
+            min_success=args.min_success,
+            indifference=_indifference(args.indifference),
+            seed=0 if args.seed is None else args.seed,
+        )
+    except SettingError as exc:
+        raise setting_flag(exc, {"indifference": ("--indifference", args.indifference)}) from None
+
+
+def _indifference(text: str) -> tuple[float, float] | str:
+    """--indifference "DP,DE" as (DP, DE); the text itself when it is not two numbers (for
+    ChooseConfig's validator to refuse, in its words)."""
+    try:
+        dp, de = (float(v) for v in text.split(","))
     except ValueError:
-        raise bad("--indifference", text, accepted) from None
-    if not (0 <= dp < 1 and 0 <= de < 1):
-        raise bad("--indifference", text, accepted)
+        return text
     return dp, de
 
 
@@ -197,12 +191,11 @@ def cmd_choose(args: argparse.Namespace) -> int:
     import dataclasses
     import os
 
-    from roachplan.experiments import atomic_write, prepare_output_folder
-    from roachplan.experiments._choose import ChooseConfig, choose
-    from roachplan.experiments._spec import reference_settings
-    from roachplan.scenes import load_scene
+    cfg = _settings(args)  # (before anything is loaded)
 
-    _check(args)
+    from roachplan.experiments import RoundDone, atomic_write, choose, prepare_output_folder
+    from roachplan.scenes import build_world, load_scene
+
     out = None
     if args.out is not None:  # refused before the work, not after it
         out = prepare_output_folder(
@@ -213,16 +206,9 @@ def cmd_choose(args: argparse.Namespace) -> int:
         )
     scene = load_scene(args.scene)
     if args.reference:
-        planner, driver = reference_settings(scene.planner, scene.driver)
-        scene = dataclasses.replace(scene, planner=planner, driver=driver)
-    budget = args.budget_s if args.budget_s is not None else (None if args.rollouts else 60.0)
-    cfg = ChooseConfig(
-        candidates=args.candidates,
-        rollouts=args.rollouts,
-        budget_s=budget,
-        confidence=args.confidence,
-        min_success=args.min_success,
-        indifference=args.indifference,
+        scene = as_reference(scene)
+    cfg = dataclasses.replace(
+        cfg,
         seed=scene.seed if args.seed is None else args.seed,
         uncertainty=scene.uncertainty,
     )
@@ -233,21 +219,24 @@ def cmd_choose(args: argparse.Namespace) -> int:
         100, "choose", unit="%", bar_format="{desc}: {percentage:3.0f}% |{bar}| {elapsed} {postfix}"
     )
 
-    def progress(message: str, fraction: float) -> None:
-        shown.n = round(100 * min(max(fraction, 0.0), 1.0))
-        shown.set_postfix_str(message)
+    shown.set_postfix_str(f"planning {cfg.candidates} candidate paths")
+
+    def progress(event) -> None:  # (a round moves the bar; it says who is still in the race)
+        if isinstance(event, RoundDone):
+            shown.n = round(100 * min(max(event.fraction, 0.0), 1.0))
+            shown.set_postfix_str(event.message)
 
     # Ray with a cluster address: one worker per CPU of the cluster unless told (as `experiment`).
     cluster = args.backend == "ray" and args.address is not None
     workers = args.workers or (None if cluster else os.cpu_count() or 1)
     choice, checked = choose(
-        scene,
+        build_world(scene),
         cfg,
         workers=workers,
         backend=args.backend,
         address=args.address,
         validate_repeats=args.validate,
-        progress=progress,
+        on_event=progress,
     )
     shown.close()
     result = _jsonable(

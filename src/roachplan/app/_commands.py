@@ -1,210 +1,146 @@
-"""The long commands of the Plan and drive folder, run on the app's loop thread: Plan (up to K
-distinct paths within one time budget for every try, each drawn as it is found), Drive and Best
-path (a drive in a child, played back as its frames come), and the trial records they leave.
-Each is followed by `app._follow`: progress and elapsed time on the page, Cancel at once.
+"""What the page's callbacks put on the command loop's queue: one frozen dataclass per command.
+
+Each is listed once, with its handler, its name on the page and what a click on it does while
+another command runs, in app/_registry.py; the loop (app/_loop.py) runs them one at a time.
 """
 
 from __future__ import annotations
 
-import time
-
-import numpy as np
-
-from roachplan.experiments import TrialResult
-from roachplan.planning import PlanResult
-
-from ._draw import BLACK, BLUE, path_fraction
-from ._jobs import Cmd, _drive_job, _plan_job
-
-PLAN_GRACE = 0.8
-"""How long past its budget a plan's child may run before it is killed [s]: it stops by itself
-at the budget; this bounds what the wrap-up of its last attempt may add."""
+from dataclasses import dataclass
+from typing import Literal
 
 
-def do_plan(app, cmd: Cmd) -> None:
-    """Up to K distinct paths within one time budget for all tries (plan_many), each drawn
-    as it is found; Cancel keeps those found so far."""
-    start, goal = app.markers.valid_poses(app.world)
-    count, seed, planner = int(app.count.value), app._next_seed, app._planner()
-    budget = planner.time_limit
-    app._show_robot_at_start()
-    # Only what this plan finds is shown: no earlier paths, roadmap or trajectories.
-    app.set_plans([])
-    app.view.clear("/trajectories")
-    tried, plans, errors = [], [], []
-    deadline = time.monotonic() + budget
-    request = dict(seed=seed, start=start, goal=goal, planner=planner)
-    job = app.world_job(_plan_job, count, request, deadline)
-
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            if kind == "attempt":
-                tried.append(payload[0])
-                if payload[1] is not None:
-                    plans.append(payload[1])
-                    app.view.add_path(payload[1].plan.path_xyz)
-            elif kind == "error":
-                errors.append(str(payload))
-        t = job.elapsed
-        app._progress(
-            t / budget,
-            f"Planning with {planner.name}: {len(plans)} of {count} "
-            f"path(s), {len(tried)} tried (seeds from {seed}); {t:.1f} s of the "
-            f"{budget:g} s budget",
-        )
-        return job.done
-
-    end = app._follow(job, "Plan", step, hard_stop=deadline + PLAN_GRACE)
-    elapsed = job.elapsed
-    app._next_seed = seed + len(tried) + (end != "done")
-    if errors:
-        app.view.hide_paths()  # (Drive stays off: no half-plan is left drawn as current)
-        app.status.content = f"Planning failed: {errors[0]}"
-        app._notify(cmd.client_id, "Planning failed", errors[0], error=True)
-        return
-    app.plan_endpoints = (start, goal)
-    app.set_plans(plans, drawn=True)  # (drawn as they were found)
-    seeds = f"seeds {seed}-{seed + len(tried) - 1}" if len(tried) > 1 else f"seed {seed}"
-    tries = f"{len(tried)} {'try' if len(tried) == 1 else 'tries'}"
-    routes = ", ".join(lp.route for lp in plans)
-    spent = end == "stopped" or (
-        end == "done" and len(plans) < count and len(tried) < 3 * count + 10
-    )
-    if end == "cancelled":
-        kept = f"; {len(plans)} path(s) kept" if plans else ""
-        text = f"Plan cancelled after {elapsed:.1f} s{kept}."
-    elif not plans:
-        why = f": the {budget:g} s budget is spent" if spent else ""
-        text = f"No path found in {elapsed:.1f} s{why} ({planner.name}, {tries}, {seeds})."
-    elif spent:
-        text = (
-            f"{len(plans)} of {count} paths found in {elapsed:.1f} s: the {budget:g} s "
-            f"budget is spent ({seeds}; routes {routes}). **Drive** drives the marked one "
-            f"(choose it in *Drive path*)."
-        )
-    elif count == 1:
-        first = plans[0].plan
-        text = f"Path found in {first.plan_time:.2f} s (seed {first.seed}). Press **Drive**."
-        if len(tried) > 1:
-            text += f" ({tries}, {elapsed:.1f} s in all)"
-    else:
-        text = (
-            f"{len(plans)} paths found in {elapsed:.1f} s (seeds "
-            f"{', '.join(str(lp.plan.seed) for lp in plans)}; routes {routes}). "
-            f"**Drive** drives the marked one "
-            f"(choose it in *Drive path*)."
-        )
-    app.status.content = text
+@dataclass(frozen=True)
+class Cmd:
+    client_id: int | None
+    """The browser that sent it (its notifications go there); None: none (a test, a script)."""
 
 
-def do_drive(app, cmd: Cmd) -> None:
-    if not app.plans:
-        app._notify(cmd.client_id, "Nothing to drive", "Plan a path first.", error=True)
-        return
-    start, goal = app.plan_endpoints
-    if not app.view.path_nodes:  # (hidden by Best path or Show trial: show what is driven)
-        app.show_plans()
-    result = drive(app, app.plans[app.drive_path].plan, start, goal, cmd)
-    if result is not None:
-        record(app, result.to_json(), "")
+# -- Plan and drive, Results ---------------------------------------------------------------------
 
 
-def drive(app, planned, start, goal, cmd: Cmd, *, name: str = "Drive") -> TrialResult | None:
-    """Drive in a child and play its frames back at `speed` x real time as they come
-    (every frame the browser can take: at most 60 per second)."""
-    app.view.clear("/trajectories")
-    job = app.world_job(_drive_job, planned, start, goal)
-    frames, results, errors = [], [], []
-    path_xy = np.asarray(planned.path_xyz)[:, :2]
-    play = {"t": 0.0, "wall": time.monotonic(), "k": -1, "drawn": 0.0}
-
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            if kind == "frame":
-                frames.append(payload)
-            else:
-                (results if kind == "result" else errors).append(payload)
-        now = time.monotonic()
-        play["t"] += (now - play["wall"]) * max(float(app.speed.value), 1.0)
-        play["wall"] = now
-        k = play["k"]
-        while k + 1 < len(frames) and frames[k + 1].t <= play["t"]:
-            k += 1
-        if k > play["k"]:
-            play["k"], f = k, frames[k]
-            app._show_frame(f)
-            if now - play["drawn"] > 0.2:  # (the line and the words 5 times a second)
-                app._draw("/trajectories/current", [g.p_world_body for g in frames[: k + 1]], BLUE)
-                play["drawn"] = now
-                done = path_fraction(path_xy, f.p_world_body)
-                app._progress(
-                    done,
-                    f"{name}: {100 * done:.0f} % of the path, {f.t:.1f} s "
-                    f"simulated, {job.elapsed:.1f} s",
-                )
-        return job.done and (bool(errors) or play["k"] >= len(frames) - 1)
-
-    end = app._follow(job, name, step)
-    app._draw("/trajectories/current", [g.p_world_body for g in frames[: play["k"] + 1]], BLUE)
-    if end != "done":
-        app.status.content = f"{name} cancelled after {job.elapsed:.1f} s; no trial recorded."
-        return None
-    if errors or not results:
-        why = errors[0] if errors else "the driving process ended without a result"
-        app.status.content = f"{name} failed: {why}"
-        app._notify(cmd.client_id, f"{name} failed", why, error=True)
-        return None
-    return results[0]
+@dataclass(frozen=True)
+class PlanCmd(Cmd):
+    """Plan: up to K paths between the markers within the time budget."""
 
 
-def record(app, trial: dict, label: str) -> None:
-    trial = {**trial, "label": label}
-    app.scene_trials.append(trial)
-    app._refresh_results()
-    k = len(app.scene_trials)
-    app.status.content = (
-        f"Trial {k}: **{trial['outcome']}** ({trial['reason']}), {trial['drive_time']:.1f} s, "
-        f"{trial['energy']:.3f} J ({trial['relative_energy']:.2f} x a straight walk on the floor)."
-    )
+@dataclass(frozen=True)
+class DriveCmd(Cmd):
+    """Drive: walk the marked path in the simulation, played back as it comes."""
 
 
-def do_best_path(app, cmd: Cmd) -> None:
-    """The report's best_path: drive the lowest-energy successful path again."""
-    ok = [(k, t) for k, t in enumerate(app.scene_trials) if t["outcome"] == "success" and t["path"]]
-    if not ok:
-        app._notify(
-            cmd.client_id, "No best path yet", "Drive or run trials until one succeeds.", error=True
-        )
-        return
-    k, best = min(ok, key=lambda kt: kt[1]["relative_energy"])
-    planned = stub_plan(best)
-    app.view.hide_paths()  # (the plan's paths and roadmap: Drive shows them again)
-    app._draw("/plans/best", np.asarray(best["path"]) + [0, 0, 0.005], BLACK)
-    result = drive(app, planned, tuple(best["start"]), tuple(best["goal"]), cmd, name="Best path")
-    if result is not None:
-        record(app, result.to_json(), f"best (trial {k + 1})")
+@dataclass(frozen=True)
+class ResetCmd(Cmd):
+    """Reset: the roach back at the start marker."""
 
 
-def stub_plan(trial: dict):
-    """The PlanResult of a stored trial's path (to drive it again)."""
-    return PlanResult(
-        found=True,
-        planner=trial["planner"],
-        seed=trial["seed"],
-        states=np.zeros((0, 3)),
-        path_xyz=np.asarray(trial["path"]),
-        plan_time=0.0,
-        message="stored path",
-        spins=tuple(tuple(s) for s in trial.get("spins") or ()),
-    )
+@dataclass(frozen=True)
+class BestPathCmd(Cmd):
+    """Best path: drive the lowest-energy successful path of the scene's trials again."""
 
 
-def show_trial(app) -> None:
-    if app.show_trial.value == "-":
-        return
-    t = app.scene_trials[int(app.show_trial.value) - 1]
-    app.view.hide_paths()
-    app.view.clear("/trajectories")
-    app._draw("/plans/shown", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
-    app._draw("/trajectories/shown", [p[1:] for p in t["trajectory"]], BLUE)
-    app.status.content = f"Trial {app.show_trial.value}: {t['outcome']} ({t['reason']})."
+@dataclass(frozen=True)
+class ChooseCmd(Cmd):
+    """Choose path: race K candidate paths by simulation; Drive then takes the chosen one."""
+
+
+@dataclass(frozen=True)
+class RunTrialsCmd(Cmd):
+    """Run trials: a batch of N trials on worker processes."""
+
+
+@dataclass(frozen=True)
+class ShowTrialCmd(Cmd):
+    """The Show trial picker changed: draw that trial's path and trajectory."""
+
+
+@dataclass(frozen=True)
+class ExportCmd(Cmd):
+    """Export CSV: the scene's trials, as a download to the browser that clicked."""
+
+
+@dataclass(frozen=True)
+class ShareCmd(Cmd):
+    """Share: the shown trial (else the last) as a replay page, a download."""
+
+
+# -- Start and goal, View -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PlaceCmd(Cmd):
+    """A click on the terrain, as viser gives it: a ray (world frame [m])."""
+
+    ray_origin: tuple[float, float, float]
+    ray_direction: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class MarkersCmd(Cmd):
+    """A marker was dragged or a yaw slider moved: re-check start and goal."""
+
+
+@dataclass(frozen=True)
+class ViewCmd(Cmd):
+    """A change of what is seen: "roadmap", "paths", "trajectories", "standable" (the
+    toggles), "drive_path" (the Drive path picker), "follow", "zoom" (the clicking browser's
+    camera)."""
+
+    what: Literal["roadmap", "paths", "trajectories", "standable", "drive_path", "follow", "zoom"]
+
+
+# -- Scene, loading --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LoadSceneCmd(Cmd):
+    """The scene picker changed: load the scene it names."""
+
+    name: str
+    """The picker's label: a library scene's name, or a loaded file's label."""
+
+
+@dataclass(frozen=True)
+class UploadCmd(Cmd):
+    """Load file: a file uploaded from the page."""
+
+    name: str
+    """The file's name as uploaded."""
+    data: bytes
+
+
+@dataclass(frozen=True)
+class PanelCmd(Cmd):
+    """A load-panel action: "scale" (reload in millimetres), "repose" (re-mesh with the typed
+    camera pose), "remesh" (re-mesh with the meshing boxes), "up" (re-mesh with the Up
+    direction), "place" (reload the model with its position and ground plane), "area" (reload
+    the scene with the planning area), "forget" (drop the pending calibration)."""
+
+    action: Literal["scale", "repose", "remesh", "up", "place", "area", "forget"]
+
+
+@dataclass(frozen=True)
+class VoxelCmd(Cmd):
+    """A Voxel study action: "run" (the study on the chosen region) or "csv" (download the
+    last table)."""
+
+    action: Literal["run", "csv"]
+
+
+# -- stopping --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CancelCmd(Cmd):
+    """Cancel (at the top, and Cancel choose): the running command, at once, and what is
+    queued behind it."""
+
+
+@dataclass(frozen=True)
+class CancelLoadCmd(Cmd):
+    """Cancel load: the scene being loaded."""
+
+
+@dataclass(frozen=True)
+class CancelBatchCmd(Cmd):
+    """Cancel batch: the batch of trials."""

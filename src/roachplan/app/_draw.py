@@ -185,16 +185,20 @@ class SceneView:
             for node, q in zip(self.hip_nodes, leg_angles, strict=True):
                 node.wxyz = (math.cos(q / 2), 0.0, math.sin(q / 2), 0.0)
 
-    def draw(self, name: str, points, colour) -> None:
-        """A polyline ((N, 3) [m]) as one node of line segments."""
+    def draw(self, name: str, points, colour, *, thickness: float = 3.0) -> None:
+        """A polyline ((N, 3) [m]) as one node of line segments, thickness [px]."""
         if len(points) >= 2:
             self.scene.add_line_segments(
                 name,
                 segments(np.asarray(points)),
                 colors=colour,
-                thickness=3.0,
+                thickness=thickness,
                 thickness_units="screen",
             )
+
+    def remove(self, name: str) -> None:
+        """Remove a node drawn by name, and what is under it."""
+        self.scene.remove_by_name(name)
 
     def draw_roadmap(self, world: World, graph: np.ndarray) -> None:
         """The planner's roadmap or tree ((E, 2, 2) xy segments [m]), grey, on the surface."""

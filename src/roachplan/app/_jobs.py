@@ -1,7 +1,8 @@
-"""What the page's callbacks enqueue (one frozen dataclass per command), and the work that runs
-outside the server's process: each plan, drive and scene load in a fresh child process (OMPL
-holds the GIL while it solves, and a fresh process is where its seed takes effect), which the
-loop follows without blocking and can kill at once (Cancel).
+"""The work that runs outside the server's process: each plan, drive and scene load in a fresh
+child process (OMPL holds the GIL while it solves, and a fresh process is where its seed takes
+effect), which the command loop follows without blocking and can kill at once (Cancel). The
+processes are roachplan.processes' Child and Host; a job's progress is typed events (Attempt,
+sim.Frame), its end an outcome (Returned, Raised, Died).
 
 A scene load is a child of the fork server. A plan or a drive is a fork of the current world's
 host (WorldHost): a child of the fork server that received the world once, when it was loaded,
@@ -11,379 +12,152 @@ and forks on request. Handing the world (0.7 MB pickled) to a new child on every
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import signal
-import sys
-import threading
 import time
-import traceback
 from contextlib import contextmanager
 from dataclasses import dataclass
-from multiprocessing import reduction
-from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
-from roachplan.experiments import finish_trial, plan_many
+from roachplan.experiments import LabelledPlan, TrialResult, finish_trial, plan_many
 from roachplan.perception import mesh_capture
-from roachplan.planning._isolated import limit_child_memory
+from roachplan.processes import (
+    CHANNEL,
+    Channel,
+    Child,
+    Died,
+    Host,
+    Raised,
+    Returned,
+    preload,
+)
 from roachplan.scenes import World, build_world, load_scene
 
 from ._relevel import CaptureView
 
-# -- commands (what callbacks enqueue) ----------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Cmd:
-    client_id: int | None
-
-
-@dataclass(frozen=True)
-class PlanCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class DriveCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ResetCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class BestPathCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class LoadSceneCmd(Cmd):
-    name: str
-
-
-@dataclass(frozen=True)
-class UploadCmd(Cmd):
-    name: str
-    data: bytes
-
-
-@dataclass(frozen=True)
-class PlaceCmd(Cmd):
-    ray_origin: tuple[float, float, float]
-    ray_direction: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class MarkersCmd(Cmd):
-    """A marker was dragged or a yaw slider moved: re-check start and goal."""
-
-
-@dataclass(frozen=True)
-class RunTrialsCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ShowTrialCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class ExportCmd(Cmd):
-    pass
-
-
-@dataclass(frozen=True)
-class CancelCmd(Cmd):
-    """Cancel: "job" (the running plan, drive or best path, and what is queued behind it),
-    "load" (the scene being loaded) or "batch"."""
-
-    what: str
-
-
-@dataclass(frozen=True)
-class ViewCmd(Cmd):
-    """A change of what is seen, handled at once even while a command runs: "roadmap",
-    "standable" (the toggles), "drive_path" (the Drive path picker), "follow", "zoom" (the
-    clicking client's camera)."""
-
-    what: str
-
-
-NAMES = {
-    PlanCmd: "Plan",
-    DriveCmd: "Drive",
-    ResetCmd: "Reset",
-    BestPathCmd: "Best path",
-    PlaceCmd: "Click",
-    MarkersCmd: "Marker check",
-    RunTrialsCmd: "Run trials",
-    ShowTrialCmd: "Show trial",
-}
-"""How the page names a queued command."""
-
-
 # -- work in child processes --------------------------------------------------------------------
 
-_CTX = mp.get_context("forkserver")
-_CTX.set_forkserver_preload(["roachplan.experiments._trial"])
+preload("roachplan.experiments._trial")
 
 
-def _plan_job(conn, world: World, count: int, request: dict, deadline: float) -> None:
-    """request: plan_many's keyword arguments (seed, start, goal, planner); deadline: the end of
-    the whole plan's budget on time.monotonic() (CLOCK_MONOTONIC is one clock for every process
-    on Linux, so the budget counts from the click, not from this child's start)."""
-    limit_child_memory()  # a runaway plan ends in a notification, not by taking the machine
-    try:
-        plan_many(
-            world,
-            count,
-            **request,
-            budget=max(0.0, deadline - time.monotonic()),
-            on_attempt=lambda seed, lp: conn.send(("attempt", (seed, lp))),
+@dataclass(frozen=True, kw_only=True)
+class Attempt:
+    """A plan job's event: one try of plan_many done."""
+
+    seed: int
+    """The seed it planned with."""
+    plan: LabelledPlan | None
+    """The new distinct path it found, None if it found none (or one too like another)."""
+
+
+def _plan_job(events: Channel, world: World, count: int, request: dict, deadline: float) -> None:
+    """Plan up to count distinct paths, an Attempt event per try. request: plan_many's keyword
+    arguments (seed, start, goal, planner); deadline: the end of the whole plan's budget on
+    time.monotonic() (CLOCK_MONOTONIC is one clock for every process on Linux, so the budget
+    counts from the click, not from this child's start)."""
+    plan_many(
+        world,
+        count,
+        **request,
+        budget=max(0.0, deadline - time.monotonic()),
+        on_attempt=lambda seed, lp: events.send(Attempt(seed=seed, plan=lp)),
+    )
+
+
+def _drive_job(events: Channel, world: World, planned, start, goal) -> TrialResult:
+    """Drive the plan, each sim.Frame an event as it is simulated; the trial's result."""
+    return finish_trial(world, planned, start=start, goal=goal, on_frame=events.send)
+
+
+def _load_job(events: Channel, ref: str, from_upload: bool) -> tuple[World, CaptureView | None]:
+    """load_world in a child (under only a soft memory limit, _JOBS: the OpenSCAD it may start
+    sets its own, possibly higher, limit, which an inherited hard limit would forbid)."""
+    return load_world(ref, from_upload=from_upload)
+
+
+def _warm_job(events: Channel) -> None:
+    pass
+
+
+def load_outcome(job: Job) -> tuple[tuple | None, str | None]:
+    """(the (World, CaptureView | None) a finished load job returned, why it failed): one of
+    them is None. A capture that needs more memory than a load may have ends in what to change
+    in the page, not by taking the machine (issue 15)."""
+    outcome = job.outcome
+    if isinstance(outcome, Returned):
+        return outcome.value, None
+    if isinstance(outcome, Died) and outcome.cause == "memory":
+        return None, (
+            f"loading this file needed more memory than the server allows a "
+            f"load ({job.memory / 2**30:.1f} GiB): set a larger Meshing "
+            f"(captures) → Voxel [m], or tick Meshing (captures) → Crop and "
+            f"set its box, and load it again"
         )
-        conn.send(("done", None))
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(("error", f"{exc}"))
-    conn.close()
+    return None, failure(job) or "the loading process ended without a result"
 
 
-def _drive_job(conn, world: World, planned, start, goal) -> None:
-    limit_child_memory()
-    try:
-        result = finish_trial(
-            world, planned, start=start, goal=goal, on_frame=lambda f: conn.send(("frame", f))
-        )
-        conn.send(("result", result))
-    except Exception as exc:
-        conn.send(("error", f"{exc}"))
-    conn.close()
+def failure(job: Child) -> str | None:
+    """Why a finished job failed: its error's message, or how its process died; None when it
+    returned (or has not ended, or was cancelled: what cancelled it says so)."""
+    outcome = job.outcome
+    if isinstance(outcome, Raised):
+        return outcome.message
+    if isinstance(outcome, Died) and outcome.cause != "cancelled":
+        return outcome.why
+    return None
 
 
-def _load_job(conn, ref: str, from_upload: bool) -> None:
-    # Only the soft limit: the OpenSCAD it may start sets its own, possibly higher, limit,
-    # which an inherited hard limit would forbid. A capture that needs more than this process
-    # may have ends in a notification, not by taking the machine (issue 15).
-    limit = limit_child_memory(hard=False)
-    try:
-        conn.send(("world", load_world(ref, from_upload=from_upload)))
-    except MemoryError:
-        conn.send(
-            (
-                "error",
-                f"loading this file needed more memory than the server allows a "
-                f"load ({limit / 2**30:.1f} GiB): set a larger Meshing "
-                f"(captures) → Voxel [m], or tick Meshing (captures) → Crop and "
-                f"set its box, and load it again",
-            )
-        )
-    except Exception as exc:
-        conn.send(("error", f"{exc}"))
-    conn.close()
+_JOBS = {
+    _plan_job: ("planning", True),
+    _drive_job: ("driving", True),
+    _load_job: ("loading", False),
+}
+"""Job target -> (what its process is called in messages: "the planning process ran out of
+memory ...", whether its memory limit is also the hard limit). Other targets: ("job", True)."""
 
 
-def _warm_job(conn) -> None:
-    conn.close()
-
-
-class Job:
-    """target(conn, *args) in a fresh child process: what it has sent so far, without blocking;
-    `cancel` kills it (and whatever it started) at once. With host, target(conn, host's world,
-    *args) in a fork of that WorldHost instead."""
+class Job(Child):
+    """target(events, *args) in a fresh child of the fork server (roachplan.processes.Child),
+    under the child memory limit; with host, target(events, host's world, *args) in a fork of
+    that WorldHost instead. events: the child's Channel (send(event)); what target sends
+    arrives in order (poll), then its outcome (`outcome`; `failure`). `cancel` kills it and
+    whatever it started, at once."""
 
     def __init__(self, target, *args, host: WorldHost | None = None) -> None:
-        self.started = time.monotonic()
-        self._conn, child = _CTX.Pipe(duplex=False)
-        self._host, self._proc, self._born = host, None, None
-        try:
-            if host is None:
-                self._proc = _CTX.Process(target=target, args=(child, *args), daemon=True)
-                self._proc.start()
-                self.pid = self._proc.pid
-            else:
-                self.pid = host.fork(target, args, child)
-                self._born = _start_time(self.pid)
-        finally:
-            child.close()  # (the child holds the only writer: its exit is this end's EOF)
-        self.done = False
-        """The child has closed its end (finished, failed or killed)."""
-
-    @property
-    def elapsed(self) -> float:
-        """Wall time since the job started [s]."""
-        return time.monotonic() - self.started
-
-    def poll(self, timeout: float = 0.0) -> list[tuple[str, object]]:
-        """The messages sent since the last poll, waiting up to timeout [s] for the first."""
-        out: list[tuple[str, object]] = []
-        if self.done:
-            time.sleep(timeout)  # (the caller's pace, as when waiting for a message)
-            return out
-        if not wait([self._conn], timeout):
-            return out
-        while not self.done and self._conn.poll():
-            try:
-                out.append(self._conn.recv())
-            except (EOFError, OSError):
-                self.done = True
-                if self._proc is not None:
-                    self._proc.join(timeout=5)
-        return out
-
-    def _running(self) -> bool:
-        """The child has not exited (an exited child's pid may soon belong to another)."""
-        if self._proc is not None:
-            return self._proc.exitcode is None
-        # A fork of a host: the same pid and start time (it outlives a host closed meanwhile,
-        # a new scene loaded while it ran, and is then a child of init's).
-        return self._born is not None and _start_time(self.pid) == self._born
-
-    def cancel(self) -> None:
-        """Kill the child and every process under it, now."""
-        if self.done:
-            return
-        if self._running():
-            kill_tree(self.pid)
-        self.done = True
-        self._conn.close()
-        if self._proc is not None:
-            self._proc.join(timeout=5)
+        task, hard_memory = _JOBS.get(target, ("job", True))
+        if host is None:
+            super().__init__(
+                target, (CHANNEL, *args), start="forkserver", hard_memory=hard_memory, task=task
+            )
+        else:
+            super().__init__(
+                _in_world, (target, args), start=host, hard_memory=hard_memory, task=task
+            )
+        self._host = host
 
 
-def _host_main(conn, world: World) -> None:
-    """A WorldHost's process: for each (target, args) and writable end received, fork a child
-    that runs target(end, world, *args), and answer its pid. It never plans or draws a random
-    number itself, so each child starts from OMPL's clean state (planning/_isolated.py), and
-    it has one thread, so a bare fork is safe."""
-    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # (the kernel reaps the children)
-    while True:
-        try:
-            target, args = conn.recv()
-            fd = reduction.recv_handle(conn)
-        except (EOFError, OSError):  # the server closed its end or died: so does the host
-            return
-        pid = os.fork()
-        if pid == 0:  # the child: never returns into the loop
-            status = 1
-            try:
-                signal.signal(signal.SIGCHLD, signal.SIG_DFL)  # (it waits for its own children)
-                conn.close()
-                target(Connection(fd, readable=False), world, *args)
-                status = 0
-            except BaseException:  # (as a Process would show it: the server's log)
-                traceback.print_exc()
-            finally:
-                sys.stdout.flush()  # (os._exit flushes nothing)
-                sys.stderr.flush()
-                os._exit(status)
-        os.close(fd)
-        conn.send(pid)
+def _in_world(world: World, target, args: tuple):
+    """A fork of a WorldHost: target(events, the host's world, *args)."""
+    return target(CHANNEL, world, *args)
 
 
-class WorldHost:
+class WorldHost(Host):
     """A long-lived child of the fork server holding one world, which forks a fresh child of
     itself for each job on that world (Job(..., host=)): a job starts in a few milliseconds, where a
-    child of the fork server first has to receive the world."""
+    child of the fork server first has to receive the world (roachplan.processes.Host)."""
 
     def __init__(self, world: World) -> None:
-        self.world = world
-        self._conn, child = _CTX.Pipe(duplex=True)  # (a socket pair: it can carry an fd)
-        self._proc = _CTX.Process(
-            target=_host_main, args=(child, world), daemon=True, name="roachplan-world-host"
-        )
-        self._proc.start()
-        child.close()
-        self._lock = threading.Lock()
+        super().__init__(world, name="roachplan-world-host")
 
     @property
-    def alive(self) -> bool:
-        return self._proc.exitcode is None and not self._conn.closed
-
-    def fork(self, target, args: tuple, end) -> int:
-        """Start target(end, world, *args) in a fork of the host; its pid."""
-        with self._lock:
-            self._conn.send((target, args))
-            reduction.send_handle(self._conn, end.fileno(), self._proc.pid)
-            return self._conn.recv()
-
-    def is_parent_of(self, pid: int) -> bool:
-        try:
-            return _parent(Path(f"/proc/{pid}/stat").read_text()) == self._proc.pid
-        except OSError:
-            return False
-
-    def close(self) -> None:
-        """End the host (the jobs it started run on until they finish or are cancelled)."""
-        if not self._lock.acquire(timeout=2):  # (a fork request stuck mid-way: end it hard)
-            self._proc.kill()
-            self._lock.acquire()
-        try:
-            if not self._conn.closed:
-                self._conn.close()  # (its recv ends: it returns)
-        finally:
-            self._lock.release()
-        self._proc.join(timeout=1)
-        if self._proc.exitcode is None:
-            self._proc.kill()
-            self._proc.join(timeout=5)
+    def world(self) -> World:
+        return self.value
 
 
-def run_to_end(target, *args) -> list[tuple[str, object]]:
-    """Every message of a job, once it has finished (for quick jobs)."""
+def run_to_end(target, *args) -> list[object]:
+    """Every event of a job, once it has finished (for quick jobs)."""
     job, out = Job(target, *args), []
     while not job.done:
         out += job.poll(timeout=1.0)
     return out
-
-
-def _start_time(pid: int) -> int | None:
-    """When the process started (clock ticks since boot), None if there is no such process:
-    with the pid, it names one process even after the pid is reused."""
-    try:
-        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19])
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def _parent(stat: str) -> int:
-    """The parent pid in the text of /proc/PID/stat."""
-    return int(stat.rsplit(")", 1)[1].split()[1])  # (the name may hold spaces)
-
-
-def _children() -> dict[int, list[int]]:
-    """Parent pid -> child pids of every process visible in /proc."""
-    out: dict[int, list[int]] = {}
-    for entry in os.scandir("/proc"):
-        if entry.name.isdigit():
-            try:
-                stat = Path(entry.path, "stat").read_text()
-            except OSError:
-                continue
-            out.setdefault(_parent(stat), []).append(int(entry.name))
-    return out
-
-
-def kill_tree(pid: int) -> None:
-    """SIGKILL a process and all its descendants. Not a process group: OpenSCAD runs in a
-    session of its own (so its time limit can kill it whole), which a group kill would miss.
-    The root is stopped first so that it starts nothing new while the tree is read."""
-    try:
-        os.kill(pid, signal.SIGSTOP)
-    except ProcessLookupError:
-        return
-    children, tree, todo = _children(), [], [pid]
-    while todo:
-        kids = children.get(todo.pop(), [])
-        tree += kids
-        todo += kids
-    for p in (pid, *tree):
-        try:
-            os.kill(p, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
 
 
 # -- loading a scene ------------------------------------------------------------------------------

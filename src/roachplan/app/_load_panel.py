@@ -5,19 +5,19 @@ or re-levelling it (click its ground, type the camera's height, pitch and roll, 
 direction) without uploading it again, placing a loaded model again (position, ground plane),
 the planning area of the loaded scene, the OpenSCAD time limit and backend, and reloading a
 model in millimetres scaled by 0.001. Callbacks only put a PanelCmd on the app's queue; the
-app's loop calls `handle` (and `upload`, `relevel_at_click`), which start a load in the
-background (`app._load`).
+command loop runs `do_panel` and `do_upload` (and `relevel_at_click` for a click on the terrain,
+app/_markers.py), which start a load in the background (`App.start_load`).
 """
 
 from __future__ import annotations
 
 import shutil
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
+from roachplan import setting_problem
 from roachplan.perception import (
     DEPTH_UNITS,
     METHODS,
@@ -29,6 +29,8 @@ from roachplan.perception import (
 )
 from roachplan.scenes import BACKENDS, DEFAULT_BACKEND, DEFAULT_TIMEOUT, MAX_TIMEOUT
 
+from ._app import App
+from ._commands import PanelCmd, UploadCmd
 from ._placement import (
     ModelView,
     adopt_scene,
@@ -76,17 +78,6 @@ UP_AXES = {
 z forward, so a level camera's up is -y; a lidar's or map's: z up)."""
 AUTO = "auto"
 """The dropdowns' entry for the pipeline's own choice (the setting left out)."""
-
-
-@dataclass(frozen=True)
-class PanelCmd:
-    """A load-panel action: "scale" (reload in millimetres), "repose" (re-mesh with the typed
-    camera pose), "remesh" (re-mesh with the meshing boxes), "up" (re-mesh with the Up
-    direction), "place" (reload the model with its position and ground plane), "area" (reload
-    the scene with the planning area), "forget" (drop the pending calibration)."""
-
-    client_id: int | None
-    action: str
 
 
 def is_calibration_upload(name: str, data: bytes) -> bool:
@@ -306,18 +297,17 @@ class LoadPanel:
         the pipeline's default is None (left out), the others plain data."""
         voxel, cell = round(float(self.voxel.value), 6), round(float(self.cell.value), 6)
         near, far = float(self.near.value), float(self.far.value)
-        if (near, far) != DEFAULT_RANGE and not 0 <= near < far:
-            raise CaptureError(f"depth range: near ({near:g} m) must be below far ({far:g} m)")
+        # The pipeline's own validators: what a scene file and `roachplan mesh` accept.
+        problem = setting_problem(MeshingConfig, "depth_range", (near, far))
+        if (near, far) != DEFAULT_RANGE and problem:
+            raise CaptureError(f"Depth near {near:g} m, far {far:g} m: {problem}")
         crop = None
         if self.crop.value:
             lo, hi = (
                 tuple(round(float(v), 4) for v in b.value) for b in (self.crop_min, self.crop_max)
             )
-            if not all(a < b for a, b in zip(lo, hi, strict=True)):
-                raise CaptureError(
-                    f"crop box: min {list(lo)} must be below max {list(hi)} in "
-                    f"x, y and z (metres, as drawn)"
-                )
+            if problem := setting_problem(MeshingConfig, "crop", (lo, hi)):
+                raise CaptureError(f"Crop box min {list(lo)}, max {list(hi)}: {problem} (as drawn)")
             crop = [list(lo), list(hi)]
         return {
             "method": None if self.mesh_method.value == DEFAULTS.method else self.mesh_method.value,
@@ -356,7 +346,7 @@ class LoadPanel:
                 out["depth_scale"] = float(self.depth_scale.value)
         return out
 
-    def keep_calibration(self, app, client_id, name: str, data: bytes) -> None:
+    def keep_calibration(self, app: App, client_id, name: str, data: bytes) -> None:
         """Keep an uploaded calibration file for the next depth image(s), once it reads."""
         if len(data) > MAX_UPLOAD_BYTES:
             raise CaptureError(f"{name}: too large for a calibration file")
@@ -376,7 +366,7 @@ class LoadPanel:
             f"{scale}); used for the depth images loaded next, instead of the camera above."
         )
         self.forget_button.visible = True
-        app._notify(
+        app.page.notify(
             client_id, "Calibration kept", f"{name}: now load its depth image (.png, .pgm)."
         )
 
@@ -499,7 +489,7 @@ class LoadPanel:
 
     # actions (loop thread) --------------------------------------------------------------------
 
-    def upload(self, app, cmd) -> None:
+    def upload(self, app: App, cmd: UploadCmd) -> None:
         """An uploaded file: a calibration is kept for the next depth image; anything else
         becomes a scene in its own folder and is loaded."""
         if is_calibration_upload(cmd.name, cmd.data):
@@ -514,20 +504,20 @@ class LoadPanel:
             scad_timeout=float(self.scad_timeout.value),
             scad_backend=self.scad_backend.value,
         )
-        app._load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
+        app.start_load(cmd, str(path), from_upload=True, label=f"upload: {cmd.name}")
 
-    def _reload_with(self, app, cmd, changes: dict) -> None:
+    def _reload_with(self, app: App, cmd, changes: dict) -> None:
         """Change the loaded capture's settings and load it again, in the background. Its scene
         file is rewritten when the app wrote it; a library or command-line scene is never
         rewritten: a copy is (adopt_capture_scene), and joins the scene picker."""
-        path, label = self.view.scene_path, app._picker_label()
+        path, label = self.view.scene_path, app.picker_label()
         if not path.resolve().is_relative_to(Path(app.upload_dir).resolve()):
             folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
             path, label = adopt_capture_scene(path, folder), f"edited: {path.stem}"
         rewrite_capture_settings(path, changes)
-        app._load(cmd, str(path), from_upload=True, label=label)
+        app.start_load(cmd, str(path), from_upload=True, label=label)
 
-    def _own(self, app, scene_path) -> tuple[Path, str]:
+    def _own(self, app: App, scene_path) -> tuple[Path, str]:
         """A scene file the app may rewrite for scene_path, and its picker label: the file
         itself when the app wrote it; else a copy (the original is never rewritten), which
         joins the scene picker."""
@@ -541,10 +531,10 @@ class LoadPanel:
         folder = Path(tempfile.mkdtemp(prefix="edited-", dir=app.upload_dir))
         return adopt_scene(path, folder), f"edited: {path.stem}"
 
-    def _place(self, app, cmd) -> None:
+    def _place(self, app: App, cmd) -> None:
         """Load the model again at the typed position, on the typed ground plane (or none)."""
         if self.model is None:
-            app._notify(
+            app.page.notify(
                 cmd.client_id,
                 "No model loaded",
                 "Position and ground plane place a model (a mesh or .scad) loaded from a file.",
@@ -556,7 +546,7 @@ class LoadPanel:
         rewrite_placement(
             path, position=tuple(float(v) for v in self.position.value), ground=ground
         )
-        app._load(cmd, str(path), from_upload=True, label=label)
+        app.start_load(cmd, str(path), from_upload=True, label=label)
 
     @staticmethod
     def _capture_object(view: CaptureView) -> dict:
@@ -572,11 +562,11 @@ class LoadPanel:
         """The loaded capture's file name (its suffix says whether Cloud units apply)."""
         return str(self._capture_object(self.view)["capture"])
 
-    def relevel_at_click(self, app, cmd, p_world) -> None:
+    def relevel_at_click(self, app: App, cmd, p_world) -> None:
         """Re-mesh the loaded capture with its ground through the clicked world point."""
         self.pick_ground.value = False
         if self.view is None:
-            app._notify(
+            app.page.notify(
                 cmd.client_id,
                 "No capture loaded",
                 "Pick ground re-levels a capture loaded from a file.",
@@ -585,7 +575,7 @@ class LoadPanel:
             return
         self._reload_with(app, cmd, relevel_at(self.view, p_world))
 
-    def handle(self, app, cmd: PanelCmd) -> None:
+    def handle(self, app: App, cmd: PanelCmd) -> None:
         if cmd.action == "forget":
             self.pending = None
             self.forget_button.visible = False
@@ -599,7 +589,7 @@ class LoadPanel:
             for k in ("robot", "goal", "bounds"):
                 raw.pop(k, None)
             path.write_text(yaml.safe_dump(raw, sort_keys=False))
-            app._load(cmd, str(path), from_upload=True, label=label)
+            app.start_load(cmd, str(path), from_upload=True, label=label)
         elif cmd.action == "repose" and self.view is not None and self.view.has_camera:
             changes = repose(
                 self.view, float(self.height.value), float(self.pitch.value), float(self.roll.value)
@@ -607,7 +597,7 @@ class LoadPanel:
             self._reload_with(app, cmd, changes)
         elif cmd.action in ("remesh", "up"):
             if self.view is None:
-                app._notify(
+                app.page.notify(
                     cmd.client_id,
                     "No capture loaded",
                     "Re-mesh works on a capture loaded from a file.",
@@ -627,4 +617,14 @@ class LoadPanel:
             bounds = planning_area(self.area_min.value, self.area_max.value)
             path, label = self._own(app, app.world.scene.path)
             rewrite_placement(path, bounds=bounds)
-            app._load(cmd, str(path), from_upload=True, label=label)
+            app.start_load(cmd, str(path), from_upload=True, label=label)
+
+
+def do_upload(app: App, cmd: UploadCmd) -> None:
+    """Load file: a calibration kept, anything else loaded in the background."""
+    app.page.load_panel.upload(app, cmd)
+
+
+def do_panel(app: App, cmd: PanelCmd) -> None:
+    """A button of the load panel."""
+    app.page.load_panel.handle(app, cmd)

@@ -1,7 +1,8 @@
 """Scene loading in the background: a load (meshing a capture, rendering OpenSCAD, picking start
 and goal) runs in a child while the current scene stays in use; its world replaces the current
 one when it is ready and nothing else is running. One load at a time: a new one replaces it.
-The Scene folder shows what is loading and for how long, with Cancel load.
+The Scene folder shows what is loading and for how long, with Cancel load. `follow_load` runs
+on the command loop between commands (and while one runs), the handlers when their command runs.
 """
 
 from __future__ import annotations
@@ -10,9 +11,11 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from roachplan.scenes import list_scenes
+from roachplan.scenes import World, list_scenes
 
-from ._jobs import Cmd, Job, _load_job
+from ._app import App
+from ._commands import CancelLoadCmd, Cmd, LoadSceneCmd
+from ._jobs import Job, _load_job, load_outcome
 from ._load_panel import needs_millimetre_scale
 from ._placement import model_view
 from ._uploads import public_message
@@ -42,12 +45,10 @@ class BackgroundLoad:
     """The load lane: its status line and Cancel load button in the Scene folder."""
 
     def __init__(self, gui, put) -> None:
-        from ._jobs import CancelCmd
-
         self.current: Loading | None = None
         self.status = gui.add_markdown("")
         self.cancel_button = gui.add_button("Cancel load", visible=False, color="red")
-        self.cancel_button.on_click(lambda ev: put(CancelCmd(ev.client_id, "load")))
+        self.cancel_button.on_click(lambda ev: put(CancelLoadCmd(ev.client_id)))
 
     def start(
         self, cmd: Cmd, ref: str, *, from_upload: bool, label: str, what: str
@@ -79,13 +80,9 @@ class BackgroundLoad:
         ld = self.current
         if ld is None or ld.result is not None or ld.error is not None:
             return ld
-        for kind, payload in ld.job.poll():
-            if kind == "error":
-                ld.error = str(payload)
-            else:
-                ld.result = payload
-        if ld.result is None and ld.error is None and ld.job.done:
-            ld.error = "the loading process ended without a result (out of memory?)"
+        ld.job.poll()  # (its events: an OpenSCAD render's Running; the status counts seconds)
+        if ld.job.done:
+            ld.result, ld.error = load_outcome(ld.job)
         if ld.result is None and ld.error is None:
             self.show()
         return ld if (ld.result is not None or ld.error is not None) else None
@@ -104,29 +101,64 @@ class BackgroundLoad:
             self.status.content = text
 
 
-def report_failure(app, ld: Loading) -> None:
+def do_load_scene(app: App, cmd: LoadSceneCmd) -> None:
+    """Load the scene the picker names, in the background."""
+    if cmd.name != app.picker_label():  # (setting the picker also calls back)
+        ref, owned = app.files.get(cmd.name, (cmd.name, False))
+        app.start_load(cmd, ref, from_upload=owned, label=cmd.name)
+
+
+def do_cancel_load(app: App, cmd: CancelLoadCmd) -> None:
+    """Stop the load running (its child, and an OpenSCAD it started, killed); the scene stays."""
+    ld = app.page.loading.stop()
+    if ld is not None:
+        app.page.loading.show(
+            f"Loading {ld.label} cancelled after {ld.job.elapsed:.1f} s; "
+            f"the scene `{app.world.scene.name}` stays."
+        )
+        app.page.set_scene_picker(app.picker_label())
+
+
+def follow_load(app: App, *, idle: bool) -> None:
+    """Follow the load: a failure is said at once; a loaded world replaces the current one
+    only when idle (no command running or queued: those were clicked on the current scene) and
+    no batch runs."""
+    ld = app.page.loading.poll()
+    if ld is None:
+        return
+    batch = app.page.batch_panel.batch
+    if ld.error is not None:
+        report_failure(app, app.page.loading.take())
+    elif idle and app.loop.running is None and batch is None:
+        swap_in(app, app.page.loading.take())
+    else:
+        after = "the batch of trials" if batch is not None else "the running command"
+        app.page.loading.show(f"{ld.label} is ready: it replaces this scene when {after} ends.")
+
+
+def report_failure(app: App, ld: Loading) -> None:
     """A load failed: the current scene stays; say why (a model in millimetres is offered
     Scale x0.001)."""
-    message = public_message(ld.error, app.upload_dir)
+    message = public_message(ld.error or "", app.upload_dir)
     uploaded = ld.label.removeprefix("upload: ")
     if ld.label.startswith("upload: ") and Path(uploaded).suffix.lower() not in (".yaml", ".yml"):
         # The scene file around an uploaded model is the app's: the message names the file.
         message = re.sub(r"^[\w.-]+\.ya?ml: terrain\[\d+\](?:\.\w+)?: ", f"{uploaded}: ", message)
-    app.loading.show("")
-    app.status.content = f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays."
-    app.scene_picker.value = app._picker_label()
-    mm = ld.from_upload and needs_millimetre_scale(ld.error)  # (the advice as scenes words it)
-    app.load_panel.offer_scale((Path(ld.ref), ld.label) if mm else None)
+    app.page.loading.show("")
+    app.page.set_status(f"Could not load {ld.label}; the scene `{app.world.scene.name}` stays.")
+    app.page.set_scene_picker(app.picker_label())
+    mm = ld.from_upload and needs_millimetre_scale(ld.error or "")  # (as scenes words it)
+    app.page.load_panel.offer_scale((Path(ld.ref), ld.label) if mm else None)
     # A model that did not load (under the ground plane, ...) can be placed again from here.
     failed = model_view(ld.ref, loaded=False)
     if failed is not None:
-        app.load_panel.show_model(failed)
+        app.page.load_panel.show_model(failed)
     if mm and "Scale x0.001" not in message:  # (public_message words it so, as a rule)
         message += " Press Scale x0.001 (Scene folder) to load it in metres."
-    app._notify(ld.client_id, f"Could not load {ld.label}", message, error=True)
+    app.page.notify(ld.client_id, f"Could not load {ld.label}", message, error=True)
 
 
-def next_seed(app, world) -> int:
+def next_seed(app: App, world: World) -> int:
     """The seed the next plan or batch on world's scene starts from: where that scene's seeds
     stopped when it was switched away from (its plans' tries included), and past every seed
     recorded in its trials, so that switching back never repeats a trial; the scene file's own
@@ -136,39 +168,43 @@ def next_seed(app, world) -> int:
     return max(app.next_seeds.get(key, world.scene.seed), *recorded, world.scene.seed)
 
 
-def swap_in(app, ld: Loading) -> None:
+def swap_in(app: App, ld: Loading) -> None:
     """The loaded world replaces the current one."""
+    assert ld.result is not None
     world, view = ld.result
-    app.load_panel.offer_scale(None)
-    app.next_seeds[str(app.world.scene.path)] = app._next_seed
+    app.page.load_panel.offer_scale(None)
+    app.next_seeds[str(app.world.scene.path)] = app.next_seed
     app.world = world
     app.host_world()
+    labels = None
     if ld.from_upload or ld.label in app.files:
         app.files[ld.label] = (ld.ref, ld.from_upload)
-        app.scene_picker.options = (*list_scenes(), *app.files)
-    app.scene_picker.value = app._picker_label()
-    app._next_seed = next_seed(app, world)
-    app._show_world()
-    app.load_panel.show_loaded(world, view)
+        labels = (*list_scenes(), *app.files)
+    app.page.set_scene_picker(app.picker_label(), labels)
+    app.next_seed = next_seed(app, world)
+    app.show_world()
+    app.page.load_panel.show_loaded(world, view)
     took = ld.job.elapsed
-    app.loading.show("")
+    app.page.loading.show("")
     # Who rendered an OpenSCAD terrain stays in the status; the notification closes itself.
     renders = "".join(  # markdown: a file name's underscores are no emphasis
         "\n\n" + public_message(r, app.upload_dir).replace("_", "\\_") for r in world.renders
     )
-    app.status.content = (
+    status = (
         f"Loaded `{world.scene.name}` ({len(world.mesh.faces)} triangles) in {took:.1f} s.{renders}"
     )
-    failure = app.markers.failure
+    failure = app.page.markers.failure
     if failure is not None:  # (the markers are red, on one point: say why and what to do)
-        app.status.content += " Start and goal were not picked: see Start and goal."
+        app.page.set_status(f"{status} Start and goal were not picked: see Start and goal.")
         others = public_message(" ".join(world.notes[:-1]), app.upload_dir)
-        app._notify(
+        app.page.notify(
             ld.client_id,
             f"Loaded {ld.label}: start and goal not picked",
             f"{failure} {others}".strip(),
             error=True,
         )
-    elif world.notes:
+        return
+    app.page.set_status(status)
+    if world.notes:
         notes = " ".join(n if n.endswith(".") else f"{n}." for n in world.notes)
-        app._notify(ld.client_id, f"Loaded {ld.label}", public_message(notes, app.upload_dir))
+        app.page.notify(ld.client_id, f"Loaded {ld.label}", public_message(notes, app.upload_dir))

@@ -1,5 +1,6 @@
 """The Start and goal folder: what a click on the terrain places, the two markers' yaws, and why
-a marker is invalid (which validity condition, which leg), shown in red on the marker itself.
+a marker is invalid (which validity condition, which leg), shown in red on the marker itself;
+and the handlers of a click on the terrain and of a marker moved.
 """
 
 from __future__ import annotations
@@ -11,8 +12,11 @@ import numpy as np
 from roachplan.planning import PlanningError
 from roachplan.scenes import World, pose_problem
 
+from ._app import App
+from ._commands import MarkersCmd, PlaceCmd
 from ._draw import INVALID, MARKER_COLOURS, SceneView, yaw_wxyz
-from ._jobs import MarkersCmd
+from ._loop import WhileBusy
+from ._picking import ray_hit_heightfield
 from ._uploads import PLACE_THEM
 
 
@@ -97,3 +101,37 @@ class StartGoal:
         if not self.check(world):
             raise PlanningError(self.validity.content.replace("**", ""))
         return self.pose("start"), self.pose("goal")
+
+
+def do_place(app: App, cmd: PlaceCmd) -> None:
+    """A click on the terrain: the voxel study's square centred there, the capture's ground
+    picked there, or a marker placed there (Page.click_target)."""
+    target = app.page.click_target()
+    if target == "nothing":
+        return
+    hit = ray_hit_heightfield(app.world.heightfield, cmd.ray_origin, cmd.ray_direction)
+    if hit is None:
+        app.page.notify(cmd.client_id, "Missed", "That click does not hit the terrain.")
+        return
+    if target == "square":
+        app.page.voxel_panel.set_centre(app, cmd, hit)
+    elif target == "ground":  # the load panel's "Pick ground": re-level the capture there
+        app.page.load_panel.relevel_at_click(app, cmd, hit)
+    else:
+        app.page.place_marker(target, tuple(float(v) for v in hit))
+        app.page.check_markers()
+        app.page.show_robot_at_start()
+        app.page.set_status(f"{target.capitalize()} placed at ({hit[0]:.2f}, {hit[1]:.2f}).")
+
+
+def click_while_busy(app: App, cmd: PlaceCmd) -> WhileBusy:
+    """A click that picks the capture's ground or the square starts or changes background work
+    (a load, the study's region): at once. One that places a marker waits its turn (the running
+    command was clicked with the markers where they are)."""
+    return "run" if app.page.click_target() in ("ground", "square") else "queue"
+
+
+def do_check_markers(app: App, cmd: MarkersCmd) -> None:
+    """A marker moved: re-check both, and stand the robot at the start."""
+    app.page.check_markers()
+    app.page.show_robot_at_start()

@@ -37,32 +37,34 @@ def bar(total: float | None, what: str, *, unit: str, enabled: bool | None = Non
 
 @contextmanager
 def render_progress(enabled: bool | None = None) -> Iterator[None]:
-    """While inside, every OpenSCAD render shows a bar: seconds elapsed of its time limit."""
-    from roachplan.scenes._openscad import RENDER_PROGRESS
-
+    """While inside, every OpenSCAD render shows a bar: seconds elapsed of its time limit (the
+    Running events of roachplan.processes, from this process or a child it waits for)."""
     if not (wanted() if enabled is None else enabled):
         yield
         return
+    from roachplan.processes import Running, listening
+
     bars: dict[str, object] = {}
 
-    def hear(name: str, elapsed: float, limit: float) -> None:
-        b = bars.get(name)
+    def hear(event: object) -> None:
+        if not isinstance(event, Running):
+            return
+        b = bars.get(event.what)
         if b is None:
-            b = bars[name] = bar(
-                round(limit),
-                f"OpenSCAD {name}",
+            b = bars[event.what] = bar(
+                round(event.limit),
+                f"OpenSCAD {event.what}",
                 unit="s",
                 enabled=True,
                 bar_format="{desc}: {n:.0f} of {total} s limit |{bar}| {elapsed}",
             )
-        b.n = min(elapsed, limit)
+        b.n = min(event.elapsed, event.limit)
         b.refresh()
 
-    token = RENDER_PROGRESS.set(hear)
     try:
-        yield
+        with listening(hear):
+            yield
     finally:
-        RENDER_PROGRESS.reset(token)
         for b in bars.values():
             b.close()
 

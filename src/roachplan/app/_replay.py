@@ -23,6 +23,7 @@ import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,8 +31,11 @@ from roachplan.experiments import ExperimentError, drive, read_manifest, referen
 from roachplan.scenes import World
 from roachplan.sim import Frame
 
+from ._commands import ShareCmd
 from ._draw import BLACK, BLUE, MARKER_COLOURS, SceneView, on_surface, wxyz_from_xyzw, yaw_wxyz
-from ._jobs import NAMES, Cmd
+
+if TYPE_CHECKING:
+    from ._app import App
 
 SUFFIXES = (".html", ".viser")
 """What `replay -o` writes: a standalone page, or viser's recording."""
@@ -61,14 +65,6 @@ class Replay:
     """The shown trial's robot per frame (empty: it stays at its start)."""
     note: str = ""
     """Anything the viewer should know (a re-drive that differs from the store)."""
-
-
-@dataclass(frozen=True)
-class ShareCmd(Cmd):
-    """The page's Share button: export the shown trial as a replay page for download."""
-
-
-NAMES[ShareCmd] = "Share"  # (how the page names it when it waits its turn)
 
 
 # -- building a replay from a results folder -----------------------------------------------------
@@ -414,52 +410,45 @@ def replay_inputs(folder: str | Path) -> list[Path]:
 # -- the page's Share button ----------------------------------------------------------------------
 
 
-def _share_job(conn, world: World, record: dict, title: str) -> None:
+def _share_job(events, world: World, record: dict, title: str) -> bytes:
     """In a child (a re-drive holds the GIL for seconds): the replay page of one trial."""
-    try:
-        frames, note = redrive(world, record)
-        replay = Replay(
-            title=title, world=world, trials=(record,), shown=0, frames=frames, note=note
-        )
-        conn.send(("html", replay_html(replay).encode()))
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(("error", f"{exc}"))
-    conn.close()
+    frames, note = redrive(world, record)
+    replay = Replay(title=title, world=world, trials=(record,), shown=0, frames=frames, note=note)
+    return replay_html(replay).encode()
 
 
-def share_trial(app, cmd: ShareCmd) -> None:
+def share_trial(app: App, cmd: ShareCmd) -> None:
     """Export the trial chosen in *Show trial* (else the last one) as a replay page, sent to the
     browser that clicked as a download. Followed like a drive: progress, Cancel."""
-    from ._jobs import Job
+    from roachplan.processes import Returned
+
+    from ._jobs import Job, failure
 
     trials = app.scene_trials
     if not trials:
-        app._notify(cmd.client_id, "Nothing to share", "Drive or run trials first.", error=True)
+        app.page.notify(cmd.client_id, "Nothing to share", "Drive or run trials first.", error=True)
         return
-    k = len(trials) if app.show_trial.value == "-" else int(app.show_trial.value)
+    k = app.page.shown_trial() or len(trials)
     record = dict(trials[k - 1], label=f"trial {k} ({trials[k - 1].get('label') or 'drive'})")
     name = app.world.scene.name
-    job, out, errors = Job(_share_job, app.world, record, f"{name}: trial {k}"), [], []
+    job = Job(_share_job, app.world, record, f"{name}: trial {k}")
 
-    def step(messages) -> bool:
-        for kind, payload in messages:
-            (out if kind == "html" else errors).append(payload)
+    def step(events: list) -> bool:  # (it sends none: its progress is its time)
         t, total = job.elapsed, max(record.get("drive_wall_time") or 1.0, 1.0) + 2.0
-        app._progress(
+        app.loop.progress(
             min(t / total, 0.99), f"Share: re-driving trial {k} and recording it, {t:.1f} s"
         )
         return job.done
 
-    end = app._follow(job, "Share", step)
-    if errors or not out:
-        why = errors[0] if errors else f"the export was {end}"
-        app._notify(cmd.client_id, "Share failed", why, error=True)
-        app.status.content = f"Share failed: {why}"
+    end = app.loop.follow(job, "Share", step)
+    if not isinstance(job.outcome, Returned):
+        why = failure(job) or f"the export was {end}"
+        app.page.notify(cmd.client_id, "Share failed", why, error=True)
+        app.page.set_status(f"Share failed: {why}")
         return
-    client = app.server.get_clients().get(cmd.client_id)
-    if client is not None:
-        client.send_file_download(f"{name}-trial-{k}.html", out[0], save_immediately=True)
-    app.status.content = (
-        f"Trial {k} exported as {name}-trial-{k}.html ({len(out[0]) / 1e6:.1f} "
+    html = job.outcome.value
+    app.page.send_file(cmd.client_id, f"{name}-trial-{k}.html", html)
+    app.page.set_status(
+        f"Trial {k} exported as {name}-trial-{k}.html ({len(html) / 1e6:.1f} "
         f"MB): it opens offline in any browser."
     )

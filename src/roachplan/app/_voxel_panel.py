@@ -4,10 +4,11 @@ The user picks the region: a square of the terrain (side [m], centred on the nex
 world x and y as drawn), or the ground plane the load found. The study itself is
 perception's `voxel_study` (the 5-sigma rejection loop, so "points kept" is real) and
 `planarity_warning` (a region that is plainly not one flat surface is said so, in the panel and
-as a notification); it runs in a child process (`Job`), followed by `app._follow` with progress
-and Cancel. The table can be downloaded as CSV (`study_csv`, the CLI's format).
+as a notification); it runs in a child process (`Job`), followed by `app.loop.follow` with
+progress and Cancel. The table can be downloaded as CSV (`study_csv`, the CLI's format).
 
-Callbacks only put a VoxelCmd on the app's queue; the loop calls `handle` and `set_centre`.
+Callbacks only put a VoxelCmd on the app's queue; the command loop runs `do_voxel` (and
+`set_centre` for a click on the terrain, app/_markers.py).
 """
 
 from __future__ import annotations
@@ -27,9 +28,11 @@ from roachplan.perception._voxel_study import (
     study_csv,
     voxel_study,
 )
+from roachplan.processes import Channel, Died, Returned
 
-from ._draw import segments
-from ._jobs import NAMES, Cmd, Job
+from ._app import App
+from ._commands import VoxelCmd
+from ._jobs import Job, failure
 
 MODES = ("Square", "Ground plane")
 """The region choices of the folder's dropdown."""
@@ -48,17 +51,6 @@ SQUARE_COLOUR = (255, 140, 0)
 """The studied square's outline (orange: apart from the green start and blue goal)."""
 SQUARE_LIFT = 0.01
 """The outline is drawn this far above the terrain [m] so that the surface does not hide it."""
-
-
-@dataclass(frozen=True)
-class VoxelCmd(Cmd):
-    """A Voxel study action: "run" (the study on the chosen region) or "csv" (download the
-    last table)."""
-
-    action: str
-
-
-NAMES[VoxelCmd] = "Voxel study"  # (how the page names it when it waits its turn)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,23 +168,24 @@ def run_study(req: StudyRequest, on_stage=lambda name: None) -> StudyResult:
     )
 
 
-def _study_job(conn, req: StudyRequest) -> None:
-    from roachplan.planning._isolated import limit_child_memory
+@dataclass(frozen=True, kw_only=True)
+class StudyStage:
+    """A study job's event: one of run_study's stages ("read", "region") is done."""
 
-    limit_child_memory()  # a study of a huge cloud ends in a notification, not the machine's
-    try:
-        result = run_study(req, on_stage=lambda name: conn.send(("stage", name)))
-        conn.send(("result", result))
-    except MemoryError:
-        conn.send(
-            (
-                "error",
-                "the study needed more memory than the server allows a job: pick a smaller square",
-            )
-        )
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(("error", f"{exc}"))
-    conn.close()
+    name: str
+
+
+def _study_job(events: Channel, req: StudyRequest) -> StudyResult:
+    """run_study in a child (under the child memory limit: a study of a huge cloud ends in a
+    notification, not by taking the machine), a StudyStage event per stage."""
+    return run_study(req, on_stage=lambda name: events.send(StudyStage(name=name)))
+
+
+def _study_failure(job: Job) -> str:
+    outcome = job.outcome
+    if isinstance(outcome, Died) and outcome.cause == "memory":
+        return "the study needed more memory than the server allows a job: pick a smaller square"
+    return failure(job) or "the study's process ended without a result"
 
 
 def table_markdown(result: StudyResult) -> str:
@@ -261,26 +254,20 @@ class VoxelPanel:
         self.run_button.on_click(lambda ev: put(VoxelCmd(ev.client_id, "run")))
         self.csv_button.on_click(lambda ev: put(VoxelCmd(ev.client_id, "csv")))
 
-    def clear(self, app) -> None:
+    def clear(self) -> None:
         """A new world: its square and study are gone (the /markers root is redrawn)."""
         self.centre, self.result = None, None
         self.pick_centre.value = False
         self.csv_button.disabled = True
         self.info.content = "Load a capture, pick a region, then **Run voxel study**."
 
-    def _draw_square(self, app) -> None:
+    def _draw_square(self, app: App) -> None:
         if self.centre is None:
             return
         pts = square_outline(app.world.heightfield, self.centre, float(self.side.value))
-        app.server.scene.add_line_segments(
-            "/markers/voxel_square",
-            segments(pts),
-            colors=SQUARE_COLOUR,
-            thickness=4.0,
-            thickness_units="screen",
-        )
+        app.page.view.draw("/markers/voxel_square", pts, SQUARE_COLOUR, thickness=4.0)
 
-    def set_centre(self, app, cmd, hit) -> None:
+    def set_centre(self, app: App, cmd, hit) -> None:
         """The square's centre at a clicked terrain point (world [m]); one click, one centre."""
         self.pick_centre.value = False
         self.centre = (float(hit[0]), float(hit[1]))
@@ -290,22 +277,21 @@ class VoxelPanel:
             f"{hit[1]:.2f}): press **Run voxel study**."
         )
 
-    def handle(self, app, cmd: VoxelCmd) -> None:
+    def handle(self, app: App, cmd: VoxelCmd) -> None:
         if cmd.action == "csv":
-            client = app.server.get_clients().get(cmd.client_id)
-            if client is not None and self.result is not None:
-                client.send_file_download(
+            if self.result is not None:
+                app.page.send_file(
+                    cmd.client_id,
                     f"{self.scene_name}-voxel-study.csv",
                     study_csv(list(self.result.rows)).encode(),
-                    save_immediately=True,
                 )
         elif cmd.action == "run":
             self._run(app, cmd)
 
-    def _run(self, app, cmd: VoxelCmd) -> None:
-        view = app.load_panel.view
+    def _run(self, app: App, cmd: VoxelCmd) -> None:
+        view = app.page.load_panel.view
         if view is None:
-            app._notify(
+            app.page.notify(
                 cmd.client_id,
                 "No capture loaded",
                 "The voxel study works on a capture loaded from a file.",
@@ -315,7 +301,7 @@ class VoxelPanel:
         sizes = parse_sizes(self.sizes.value)
         mode, side = self.mode.value, float(self.side.value)
         if mode == "Square" and self.centre is None:
-            app._notify(
+            app.page.notify(
                 cmd.client_id,
                 "No square yet",
                 "Tick Pick square centre, then click the terrain where the square goes.",
@@ -327,7 +313,7 @@ class VoxelPanel:
         if mode == "Square":
             self._draw_square(app)  # (the side may have changed since the click)
         else:
-            app.server.scene.remove_by_name("/markers/voxel_square")
+            app.page.view.remove("/markers/voxel_square")
         req = StudyRequest(
             scene_path=view.scene_path,
             world_from_camera=view.world_from_camera,
@@ -337,39 +323,40 @@ class VoxelPanel:
             side=side,
             seed=app.world.scene.seed,
         )
-        job, results, errors, stages = Job(_study_job, req), [], [], []
+        job, stages = Job(_study_job, req), []
         steps = {
             "read": (0.3, "capture read; finding the region"),
             "region": (0.5, f"fitting planes at {len(sizes) + 1} voxel sizes"),
         }
 
-        def step(messages) -> bool:
-            for kind, payload in messages:
-                if kind == "stage":
-                    stages.append(payload)
-                else:
-                    (results if kind == "result" else errors).append(payload)
+        def step(events: list[StudyStage]) -> bool:
+            stages.extend(event.name for event in events)
             done, what = (
                 steps.get(stages[-1], (0.5, "")) if stages else (0.05, "reading the capture")
             )
-            app._progress(done, f"Voxel study: {what}, {job.elapsed:.1f} s")
-            return job.done or bool(results or errors)
+            app.loop.progress(done, f"Voxel study: {what}, {job.elapsed:.1f} s")
+            return job.done
 
-        end = app._follow(job, "Voxel study", step)
+        end = app.loop.follow(job, "Voxel study", step)
         if end != "done":
-            app.status.content = f"Voxel study cancelled after {job.elapsed:.1f} s."
+            app.page.set_status(f"Voxel study cancelled after {job.elapsed:.1f} s.")
             return
-        if errors or not results:
-            why = errors[0] if errors else "the study's process ended without a result"
-            app.status.content = f"Voxel study failed: {why}"
-            app._notify(cmd.client_id, "Voxel study failed", why, error=True)
+        if not isinstance(job.outcome, Returned):
+            why = _study_failure(job)
+            app.page.set_status(f"Voxel study failed: {why}")
+            app.page.notify(cmd.client_id, "Voxel study failed", why, error=True)
             return
-        self.result, self.scene_name = results[0], app.world.scene.name
+        self.result, self.scene_name = job.outcome.value, app.world.scene.name
         self.info.content = table_markdown(self.result)
         self.csv_button.disabled = False
-        app.status.content = (
+        app.page.set_status(
             f"Voxel study of {self.result.where}: {self.result.points} points, "
             f"in {job.elapsed:.1f} s (table in the Voxel study folder)."
         )
         if self.result.warning is not None:
-            app._notify(cmd.client_id, "Region not planar", self.result.warning)
+            app.page.notify(cmd.client_id, "Region not planar", self.result.warning)
+
+
+def do_voxel(app: App, cmd: VoxelCmd) -> None:
+    """A button of the Voxel study folder."""
+    app.page.voxel_panel.handle(app, cmd)

@@ -10,9 +10,25 @@ __getattr__, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "BenchmarkResult": "._benchmark",
+        "benchmark_bar": "._benchmark",
         "benchmark_log": "._benchmark",
+        "is_benchmark_db": "._benchmark",
         "run_benchmark": "._benchmark",
         "write_benchmark_db": "._benchmark",
+        "CandidatePlan": "._choose_candidate",
+        "Knockout": "._choose_candidate",
+        "OutReason": "._choose_candidate",
+        "Standing": "._choose_candidate",
+        "ChooseConfig": "._choose_config",
+        "CandidatesPlanned": "._choose_events",
+        "ChooseEvent": "._choose_events",
+        "Decided": "._choose_events",
+        "KnockedOut": "._choose_events",
+        "RoundDone": "._choose_events",
+        "StopReason": "._choose_events",
+        "Choice": "._choose_race",
+        "choose": "._choose",
+        "ChooseError": "._errors",
         "ExperimentError": "._errors",
         "OutputError": "._errors",
         "read_manifest": "._manifest",
@@ -49,9 +65,25 @@ __getattr__, __dir__, __all__ = lazy_exports(
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._benchmark import BenchmarkResult as BenchmarkResult
+    from ._benchmark import benchmark_bar as benchmark_bar
     from ._benchmark import benchmark_log as benchmark_log
+    from ._benchmark import is_benchmark_db as is_benchmark_db
     from ._benchmark import run_benchmark as run_benchmark
     from ._benchmark import write_benchmark_db as write_benchmark_db
+    from ._choose import choose as choose
+    from ._choose_candidate import CandidatePlan as CandidatePlan
+    from ._choose_candidate import Knockout as Knockout
+    from ._choose_candidate import OutReason as OutReason
+    from ._choose_candidate import Standing as Standing
+    from ._choose_config import ChooseConfig as ChooseConfig
+    from ._choose_events import CandidatesPlanned as CandidatesPlanned
+    from ._choose_events import ChooseEvent as ChooseEvent
+    from ._choose_events import Decided as Decided
+    from ._choose_events import KnockedOut as KnockedOut
+    from ._choose_events import RoundDone as RoundDone
+    from ._choose_events import StopReason as StopReason
+    from ._choose_race import Choice as Choice
+    from ._errors import ChooseError as ChooseError
     from ._errors import ExperimentError as ExperimentError
     from ._errors import OutputError as OutputError
     from ._library import list_experiments as list_experiments

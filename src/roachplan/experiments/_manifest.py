@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from roachplan import SettingError
 from roachplan.perception import short_repr
 from roachplan.planning import PlannerConfig
 from roachplan.scenes import World
@@ -148,6 +149,13 @@ def read_manifest(out: Path) -> dict:
 def spec_from_manifest(manifest: dict, where: Path) -> ExperimentSpec:
     """The spec exactly as recorded (settings as they were, even if the spec file changed)."""
     d = dict(manifest["spec"])
+    try:
+        return _spec(d, where)
+    except SettingError as exc:
+        raise ExperimentError(f"{where}: spec.{exc}") from None
+
+
+def _spec(d: dict, where: Path) -> ExperimentSpec:
     return ExperimentSpec(
         name=d["name"],
         path=Path(d["path"]),

@@ -13,6 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from roachplan._settings import SettingError, as_written, check_settings, integer
+from roachplan._settings import seed as seed_number
+from roachplan._settings import setting as s
 from roachplan.perception import short_repr
 from roachplan.planning import PlannerConfig
 from roachplan.scenes import (
@@ -28,6 +31,19 @@ from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig
 
 from ._errors import ExperimentError
 from ._library import LIBRARY
+
+
+def _jitter(v: Any) -> str | None:
+    """[metres, degrees], each finite and 0 or more."""
+    ok = isinstance(v, tuple | list) and len(v) == 2
+    if ok and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
+        if all(0 <= x < math.inf for x in v):
+            return None
+    return "expected [metres, degrees], two finite numbers >= 0"
+
+
+SPEC_KEYS = {"best_path_repeats": "best_path.repeats", "best_path_jitter": "best_path.jitter"}
+"""The spec file's key of each ExperimentSpec field it names otherwise."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,16 +67,19 @@ class ExperimentSpec:
     routes: tuple[str, ...] = ()
     """Routes to fill with trials_per_route paths each (the report: 20 over each bridge);
     () takes every planned path in seed order, whatever its route."""
-    trials_per_route: int = 20
-    seed: int = 0
+    trials_per_route: int = s(20, integer(1))
+    seed: int = s(0, seed_number())
     """First planning seed; the candidate paths are planned with seeds seed, seed + 1, ..."""
-    max_plans: int = 1000
+    max_plans: int = s(1000, integer(1))
     """Give up filling the routes after this many plans."""
-    best_path_repeats: int = 10
+    best_path_repeats: int = s(10, integer(0, None))
     """Re-drives of the lowest-energy successful path (the report's best_path service)."""
-    best_path_jitter: tuple[float, float] = (0.01, 3.0)
+    best_path_jitter: tuple[float, float] = s((0.01, 3.0), _jitter)
     """Each re-drive drops the robot up to this far [m] and this many degrees of yaw away from
     the start: PyBullet is deterministic, so an exact repeat would only confirm itself."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     @property
     def default_trials(self) -> int:
@@ -149,8 +168,6 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
         raise f.fail("routes", f"a route is listed twice: {short_repr(routes)}")
     best = f.mapping(data.get("best_path") or {}, "best_path", ("repeats", "jitter"))
     jitter = f.vector(best.get("jitter", [0.01, 3.0]), "best_path.jitter", 2)
-    if min(jitter) < 0:
-        raise f.fail("best_path.jitter", f"expected [metres, degrees] >= 0, got {list(jitter)}")
     description = data.get("description", "")
     if not isinstance(description, str):
         raise f.fail("description", f"expected a string, got {short_repr(description)}")
@@ -161,26 +178,31 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
         raise f.fail("reference", f"expected true or false, got {short_repr(reference)}")
     if reference:
         planner, driver = reference_settings(planner, driver)
-    return ExperimentSpec(
-        name=path.stem,
-        path=path,
-        description=description,
-        scene=scene.path,
-        planner=planner,
-        sim=_override(f, scene.sim, data.get("sim"), "sim"),
-        driver=driver,
-        uncertainty=f.uncertainty(
-            {} if data.get("uncertainty") is None else data["uncertainty"],
-            "uncertainty",
-            base=scene.uncertainty,
-        ),
-        routes=tuple(routes),
-        trials_per_route=_count(f, data.get("trials_per_route", 20), "trials_per_route", 1),
-        seed=f.seed(data.get("seed", scene.seed), "seed"),
-        max_plans=_count(f, data.get("max_plans", 1000), "max_plans", 1),
-        best_path_repeats=_count(f, best.get("repeats", 10), "best_path.repeats", 0),
-        best_path_jitter=jitter,  # type: ignore[arg-type]
-    )
+    try:
+        return ExperimentSpec(
+            name=path.stem,
+            path=path,
+            description=description,
+            scene=scene.path,
+            planner=planner,
+            sim=_override(f, scene.sim, data.get("sim"), "sim"),
+            driver=driver,
+            uncertainty=f.uncertainty(
+                {} if data.get("uncertainty") is None else data["uncertainty"],
+                "uncertainty",
+                base=scene.uncertainty,
+            ),
+            routes=tuple(routes),
+            trials_per_route=as_written(int, data.get("trials_per_route", 20)),
+            seed=as_written(int, data.get("seed", scene.seed)),
+            max_plans=as_written(int, data.get("max_plans", 1000)),
+            best_path_repeats=as_written(int, best.get("repeats", 10)),
+            best_path_jitter=jitter,  # type: ignore[arg-type]
+        )
+    except SettingError as exc:
+        raise f.refused(
+            SettingError(SPEC_KEYS.get(exc.key, exc.key), exc.value, exc.expected)
+        ) from None
 
 
 def reference_settings(planner: PlannerConfig, driver: DriverConfig):
@@ -192,24 +214,10 @@ def reference_settings(planner: PlannerConfig, driver: DriverConfig):
     )
 
 
-def _count(f: YamlFields, value: Any, key: str, minimum: int) -> int:
-    return f.integer(value, key, minimum)
-
-
 def _override(f: YamlFields, base: Any, changes: Any, key: str) -> Any:
     """base (a config dataclass) with the fields in `changes` replaced, validated as the scene
     loader validates them; nested configs merge field by field too."""
-    merged = _merge(dataclasses.asdict(base), changes or {})
-    return f.config(type(base), merged, key)
-
-
-def _merge(base: dict, changes: Any) -> Any:
-    if not isinstance(changes, dict):
-        return changes
-    out = dict(base)
-    for k, v in changes.items():
-        out[k] = _merge(base[k], v) if isinstance(base.get(k), dict) else v
-    return out
+    return f.config(type(base), {} if changes is None else changes, key, base=base)
 
 
 def config_from_json(cls: type, data: dict, where: str) -> Any:

@@ -13,18 +13,14 @@ Both backends take calls (method name, arguments) and yield each result as soon 
 
 from __future__ import annotations
 
-import ctypes
-import multiprocessing
 import os
-import signal
 import sys
 from collections.abc import Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
 import numpy as np
 
 from roachplan.planning import PlanResult
-from roachplan.planning._isolated import limit_child_memory
+from roachplan.processes import Pool
 from roachplan.scenes import build_world
 from roachplan.sim import Simulation
 
@@ -139,26 +135,10 @@ class TrialWorker:
 
 # -- local processes ----------------------------------------------------------------------------
 
-_worker: TrialWorker | None = None
 
-
-def _die_with_parent() -> None:
-    """Ask Linux to kill this worker when its parent dies: a SIGKILLed experiment leaves no
-    orphans running trials whose results nobody will store."""
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):  # not Linux: orphans finish their trial and exit
-        pass
-
-
-def _init_local(spec: ExperimentSpec) -> None:
-    global _worker  # noqa: PLW0603 - a pool initializer's result lives in its process
-    _die_with_parent()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
-    # A runaway trial stops with MemoryError in its worker (a clear failed run), not by
-    # taking the machine (ROACHPLAN_CHILD_MEMORY sets the limit, 0 none).
-    limit_child_memory()
-    _worker = TrialWorker(spec)
+def _call_local(worker: TrialWorker, call: Call):
+    name, args, kwargs = _unpack(call)
+    return getattr(worker, name)(*args, **kwargs)
 
 
 def _unpack(call: Call) -> tuple[str, tuple, dict]:
@@ -166,57 +146,31 @@ def _unpack(call: Call) -> tuple[str, tuple, dict]:
     return name, args, kwargs[0] if kwargs else {}
 
 
-def _call_local(call: Call):
-    name, args, kwargs = _unpack(call)
-    return getattr(_worker, name)(*args, **kwargs)
-
-
 class LocalPool:
-    """`workers` processes on this machine.
-
-    Spawned (fresh interpreters, children of this process): forking a process that may hold
-    threads is unsafe, and as direct children they can ask to die with this process.
+    """`workers` processes on this machine (roachplan.processes.Pool): spawned, each builds the
+    experiment's world once (TrialWorker) and runs calls under the child memory limit (a
+    runaway trial ends in MemoryError, a clear failed run, not by taking the machine), ignoring
+    Ctrl-C (the main process's to handle) and dying with the process that made the pool (a
+    SIGKILLed experiment leaves no orphans running trials whose results nobody will store).
     """
 
     def __init__(self, spec: ExperimentSpec, workers: int) -> None:
-        ctx = multiprocessing.get_context("spawn")
         self.workers = workers
-        self._pool = ProcessPoolExecutor(
-            workers, mp_context=ctx, initializer=_init_local, initargs=(spec,)
-        )
+        self._pool = Pool(workers, TrialWorker, (spec,), handle=_call_local, task="trial worker")
 
     def run(self, calls: Iterable[Call]) -> Iterator:
         """Each call's result as it finishes (in any order). At most 2 calls per worker are
         queued, so an interrupted run leaves little in flight."""
-        todo = iter(calls)
-        running: set[Future] = set()
-        try:
-            while True:
-                for call in todo:
-                    running.add(self._pool.submit(_call_local, call))
-                    if len(running) >= 2 * self.workers:
-                        break
-                if not running:
-                    return
-                done, running = wait(running, return_when=FIRST_COMPLETED)
-                for f in done:
-                    yield f.result()
-        finally:
-            for f in running:
-                f.cancel()
+        return self._pool.run(calls)
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool.close()
 
     def terminate(self) -> None:
-        """Stop at once: the queued calls are dropped and the workers killed (the calls in
-        flight are lost). Safe from another thread than the one iterating `run`, which then
-        ends with BrokenProcessPool."""
-        # The executor can only wait for its workers; its private process table is the one
-        # handle on them.
-        for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
-            proc.kill()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop at once: the workers are killed (the calls in flight are lost). Safe from
+        another thread than the one iterating `run`, which then ends with WorkerDied (a
+        BrokenProcessPool)."""
+        self._pool.terminate()
 
 
 # -- Ray --------------------------------------------------------------------------------------

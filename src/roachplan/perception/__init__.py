@@ -12,7 +12,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "PRESETS": "._camera",
         "Calibration": "._camera",
         "Intrinsics": "._camera",
-        "PinholeNumbers": "._camera",
+        "PinholeNumbers": "._settings",
         "load_calibration": "._camera",
         "load_intrinsics": "._camera",
         "CAPTURE_SUFFIXES": "._capture",
@@ -27,10 +27,12 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "DEPTH_UNITS": "._choices",
         "FRAMES": "._choices",
         "METHODS": "._choices",
-        "CaptureSettings": "._pipeline",
-        "MeshingConfig": "._pipeline",
+        "CaptureSettings": "._settings",
+        "MeshingConfig": "._settings",
+        "SETTING_KEYS": "._settings",
         "Reconstruction": "._pipeline",
-        "capture_settings": "._pipeline",
+        "capture_settings": "._settings",
+        "STAGES": "._pipeline",
         "mesh_capture": "._pipeline",
         "reconstruct": "._pipeline",
         "voxel_downsample": "._pipeline",
@@ -39,6 +41,14 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "look_at": "._synthetic",
         "render_depth": "._synthetic",
         "save_depth": "._synthetic",
+        "format_study": "._voxel_study",
+        "planarity_warning": "._voxel_study",
+        "plane_region": "._voxel_study",
+        "rect_region": "._voxel_study",
+        "square_region": "._voxel_study",
+        "study_csv": "._voxel_study",
+        "study_json": "._voxel_study",
+        "voxel_study": "._voxel_study",
         "MAX_YAML_BYTES": "._yaml",
         "load_yaml": "._yaml",
         "load_yaml_documents": "._yaml",
@@ -51,7 +61,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._camera import PRESETS as PRESETS
     from ._camera import Calibration as Calibration
     from ._camera import Intrinsics as Intrinsics
-    from ._camera import PinholeNumbers as PinholeNumbers
     from ._camera import load_calibration as load_calibration
     from ._camera import load_intrinsics as load_intrinsics
     from ._capture import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
@@ -66,18 +75,29 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._ground import GroundChoice as GroundChoice
     from ._ground import GroundConfig as GroundConfig
     from ._ground import choose_ground as choose_ground
-    from ._pipeline import CaptureSettings as CaptureSettings
-    from ._pipeline import MeshingConfig as MeshingConfig
+    from ._pipeline import STAGES as STAGES
     from ._pipeline import Reconstruction as Reconstruction
-    from ._pipeline import capture_settings as capture_settings
     from ._pipeline import mesh_capture as mesh_capture
     from ._pipeline import reconstruct as reconstruct
     from ._pipeline import voxel_downsample as voxel_downsample
+    from ._settings import SETTING_KEYS as SETTING_KEYS
+    from ._settings import CaptureSettings as CaptureSettings
+    from ._settings import MeshingConfig as MeshingConfig
+    from ._settings import PinholeNumbers as PinholeNumbers
+    from ._settings import capture_settings as capture_settings
     from ._synthetic import NO_NOISE as NO_NOISE
     from ._synthetic import NoiseModel as NoiseModel
     from ._synthetic import look_at as look_at
     from ._synthetic import render_depth as render_depth
     from ._synthetic import save_depth as save_depth
+    from ._voxel_study import format_study as format_study
+    from ._voxel_study import planarity_warning as planarity_warning
+    from ._voxel_study import plane_region as plane_region
+    from ._voxel_study import rect_region as rect_region
+    from ._voxel_study import square_region as square_region
+    from ._voxel_study import study_csv as study_csv
+    from ._voxel_study import study_json as study_json
+    from ._voxel_study import voxel_study as voxel_study
     from ._yaml import MAX_YAML_BYTES as MAX_YAML_BYTES
     from ._yaml import load_yaml as load_yaml
     from ._yaml import load_yaml_documents as load_yaml_documents

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._errors import CaptureError
+from ._settings import PinholeNumbers
 from ._yaml import load_yaml_documents, short_repr
 
 
@@ -122,22 +123,6 @@ MAX_CALIBRATION_BYTES = 1024**2
 few kilobytes."""
 MAX_IMAGE_SIDE = 100_000
 """Widest or tallest image any intrinsics may describe [px]: no depth camera comes near."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class PinholeNumbers:
-    """Intrinsics given as numbers (a settings mapping, --fx/--fy/--cx/--cy) [px]; a missing
-    width / height is the depth image's."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int | None = None
-    height: int | None = None
-
-    def to_json(self) -> dict:
-        return {k: v for k, v in vars(self).items() if v is not None}
 
 
 class Calibration(NamedTuple):

@@ -21,67 +21,16 @@ from typing import Literal
 import numpy as np
 import trimesh
 
-from ._camera import PinholeNumbers
 from ._capture import Capture, depth_scale_advice, is_georeferenced
-from ._choices import DEPTH_UNITS, FRAMES, METHODS, DepthUnits, Frame, Method
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
+from ._settings import CaptureSettings, MeshingConfig
 from ._surface import Surface, organized_surface, projected_surface, scattered_surface
 
 CAMERA_DEPTH_RANGE = (0.3, 8.0)
 """Default depth range of a camera-frame capture [m] (Kinect v2: 0.5-4.5 m rated)."""
 MAX_GRID_CELLS = 40_000_000
 """Largest height field the grid method builds (~1 GB of arrays); beyond it, crop."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class MeshingConfig:
-    """Settings of the capture-to-mesh pipeline."""
-
-    voxel: tuple[float, float, float] = (0.01, 0.01, 0.01)
-    """Voxel size dx, dy, dz in the camera frame [m] (section 3.1)."""
-    depth_range: tuple[float, float] | None = None
-    """Keep points this near/far [m]: along the optical axis in a camera frame, from the
-    sensor in a world frame; None: 0.3-8 m for a camera, everything for a world frame."""
-    crop: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    """World-frame box ((xmin, ymin, zmin), (xmax, ymax, zmax)) to keep [m]; None: all."""
-    outlier_neighbours: int = 16
-    outlier_std: float = 3.0
-    """Statistical outlier removal: drop points whose mean distance to their neighbours is
-    more than outlier_std standard deviations above the average."""
-    ground_threshold: float = 0.015
-    """RANSAC inlier distance of the ground plane [m]."""
-    ground_iterations: int = 1000
-    camera_pose: tuple[float, ...] | None = None
-    """World pose of the camera x, y, z [m], qx, qy, qz, qw; None: from the ground plane."""
-    frame: Frame = "auto"
-    """The capture's frame: "camera" (optical: x right, y down, z forward), "world" (z up,
-    or `up`), or "auto": what the file says (depth images, organized clouds, a bag's frame
-    id), else "world" for a georeferenced cloud or one all round the sensor, else "camera"."""
-    up: tuple[float, float, float] | None = None
-    """Up in the capture's frame (the gravity prior); None: a calibration's camera pose, a
-    bag's IMU, -y for a camera frame, +z for a world frame."""
-    ground_point: tuple[float, float, float] | None = None
-    """A point on the intended ground, capture frame [m]: the plane through it is the ground
-    (the page's "click the ground to re-level")."""
-    recentre: bool | None = None
-    """Put the cloud's centre at x = y = 0 (world frame); None: when georeferenced."""
-    method: Method = "sensor"
-    """"sensor": samples joined at the density the sensor took them (perception/_surface.py);
-    "grid": a height field of cell-size cells; "poisson", "ball-pivot": Open3D's."""
-    max_fill: float = 0.3
-    """Sensor method: holes inside an observed surface at most this wide [m], with a flat rim,
-    are filled from it; larger ones (and every shadow) stay unknown."""
-    cell: float | None = None
-    """Grid method: cell size of the height field [m] (default: dx, or the cloud's point
-    spacing when it is sparser, as an airborne lidar's metres)."""
-    fill_holes: int = 2
-    """Grid method: fill holes up to this many cells across from their neighbours."""
-    poisson_depth: int = 9
-    poisson_trim: float = 0.05
-    """Poisson: drop the vertices of the lowest-density fraction (surface the data never saw)."""
-    seed: int = 0
-    """Seed of RANSAC."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -707,162 +656,6 @@ def surface_mesh(points: np.ndarray, camera: np.ndarray, cfg: MeshingConfig) -> 
     out = trimesh.Trimesh(verts, faces, process=False)
     out.remove_unreferenced_vertices()
     return out
-
-
-@dataclass(frozen=True, kw_only=True)
-class CaptureSettings:
-    """How to read and mesh one capture: a scene's `perception:` block or `roachplan mesh`'s
-    flags."""
-
-    meshing: MeshingConfig = MeshingConfig()
-    intrinsics: str | PinholeNumbers | None = None
-    """Preset name, calibration file path, or the numbers fx, fy, cx, cy[, width, height]
-    (depth images; default: a calibration file beside the image)."""
-    depth_scale: float | None = None
-    """Depth units per metre (depth images; default 1000 or the sidecar's)."""
-    depth_units: DepthUnits | None = None
-    """"kinect-disparity": the depth image holds a Kinect v1's raw disparity; None: depth in
-    units of the depth scale (raw disparity is still recognised when plain)."""
-    units: Literal["m", "mm"] | None = None
-    """Point cloud units; None: metres unless the cloud can only be millimetres."""
-    topic: str | None = None
-    """Bag topic."""
-
-
-SETTING_KEYS = (
-    "voxel",
-    "method",
-    "intrinsics",
-    "depth_scale",
-    "depth_units",
-    "units",
-    "topic",
-    "camera_pose",
-    "crop",
-    "depth_range",
-    "cell",
-    "outlier_std",
-    "ground_threshold",
-    "seed",
-    "frame",
-    "up",
-    "ground_point",
-    "recentre",
-)
-
-
-def _num(k: str, v, lo: float = 0.0) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not v > lo:
-        raise CaptureError(f"{k}: expected a number > {lo:g}, got {v!r}")
-    return float(v)
-
-
-def _vec(k: str, v, n: int, lo: float = -np.inf) -> tuple[float, ...]:
-    if not isinstance(v, list | tuple) or len(v) != n:
-        raise CaptureError(f"{k}: expected a list of {n} numbers, got {v!r}")
-    return tuple(_num(k, x, lo) for x in v)
-
-
-def _choice(k: str, v, options: tuple[str, ...]) -> str:
-    if v not in options:
-        raise CaptureError(f"{k}: {v!r} is not one of {', '.join(options)}")
-    return v
-
-
-def _crop(k: str, v):
-    if not isinstance(v, list | tuple) or len(v) != 2:
-        raise CaptureError(f"{k}: expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {v!r}")
-    return (_vec(f"{k}[0]", v[0], 3), _vec(f"{k}[1]", v[1], 3))
-
-
-def _seed(k: str, v) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise CaptureError(f"{k}: expected a non-negative integer, got {v!r}")
-    return v
-
-
-def _bool(k: str, v) -> bool:
-    if not isinstance(v, bool):
-        raise CaptureError(f"{k}: expected true or false, got {v!r}")
-    return v
-
-
-_MESHING_PARSERS = {
-    "voxel": lambda k, v: _vec(k, v, 3, 0.0) if isinstance(v, list | tuple) else (_num(k, v),) * 3,
-    "method": lambda k, v: _choice(k, v, METHODS),
-    "camera_pose": lambda k, v: _vec(k, v, 7),
-    "crop": _crop,
-    "depth_range": lambda k, v: _vec(k, v, 2, 0.0),
-    "cell": _num,
-    "outlier_std": _num,
-    "ground_threshold": _num,
-    "seed": _seed,
-    "frame": lambda k, v: _choice(k, v, FRAMES),
-    "up": lambda k, v: _vec(k, v, 3),
-    "ground_point": lambda k, v: _vec(k, v, 3),
-    "recentre": _bool,
-}
-
-
-def _pinhole_numbers(k: str, v: dict) -> PinholeNumbers:
-    """{fx, fy, cx, cy[, width, height]} [px], every number > 0."""
-    names = ("fx", "fy", "cx", "cy", "width", "height")
-    unknown = [n for n in v if n not in names]
-    missing = [n for n in names[:4] if n not in v]
-    if unknown or missing:
-        raise CaptureError(
-            f"{k}: expected a mapping {{fx, fy, cx, cy[, width, height]}}; "
-            + (
-                f"unknown {', '.join(map(str, unknown))}"
-                if unknown
-                else f"missing {', '.join(missing)}"
-            )
-        )
-    for n in ("width", "height"):
-        if n in v and (isinstance(v[n], bool) or not isinstance(v[n], int) or v[n] < 1):
-            raise CaptureError(f"{k}.{n}: expected a whole number of pixels >= 1, got {v[n]!r}")
-    return PinholeNumbers(
-        **{n: _num(f"{k}.{n}", v[n]) for n in names[:4]},
-        width=v.get("width"),
-        height=v.get("height"),
-    )
-
-
-def capture_settings(data: dict, resolve=lambda p: p) -> CaptureSettings:
-    """Validate a mapping of capture settings (keys SETTING_KEYS); CaptureError names the key.
-    resolve: turns a relative intrinsics file name into a path (e.g. beside a scene file)."""
-    from ._camera import PRESETS
-
-    if not isinstance(data, dict):
-        raise CaptureError(f"expected a mapping with keys {', '.join(SETTING_KEYS)}, got {data!r}")
-    data = {k: v for k, v in data.items() if v is not None}  # null: the default
-    for k in data:
-        if k not in SETTING_KEYS:
-            raise CaptureError(f"{k}: unknown key; accepted keys: {', '.join(SETTING_KEYS)}")
-    meshing = {k: parse(k, data[k]) for k, parse in _MESHING_PARSERS.items() if k in data}
-    intr = data.get("intrinsics")
-    if isinstance(intr, dict):
-        intr = _pinhole_numbers("intrinsics", intr)
-    elif intr is not None and not isinstance(intr, str):
-        raise CaptureError(
-            f"intrinsics: expected a preset name, a file name or a mapping {{fx, fy, cx, cy"
-            f"[, width, height]}}, got {intr!r}"
-        )
-    topic = data.get("topic")
-    if topic is not None and not isinstance(topic, str):
-        raise CaptureError(f"topic: expected a topic name, got {topic!r}")
-    return CaptureSettings(
-        meshing=MeshingConfig(**meshing),
-        intrinsics=intr
-        if intr is None or isinstance(intr, PinholeNumbers) or intr in PRESETS
-        else str(resolve(intr)),
-        depth_scale=_num("depth_scale", data["depth_scale"]) if "depth_scale" in data else None,
-        depth_units=_choice("depth_units", data["depth_units"], DEPTH_UNITS)  # type: ignore[arg-type]
-        if "depth_units" in data
-        else None,
-        units=_choice("units", data["units"], ("m", "mm")) if "units" in data else None,  # type: ignore[arg-type]
-        topic=topic,
-    )
 
 
 def mesh_capture(

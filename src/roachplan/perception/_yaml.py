@@ -19,7 +19,6 @@ floats need a dot and a signed exponent), `017` as 15 (octal) and `1:30` as 90 (
 from __future__ import annotations
 
 import re
-import reprlib
 from collections.abc import Iterator
 from typing import Any
 
@@ -28,6 +27,8 @@ from yaml.composer import ComposerError
 from yaml.constructor import ConstructorError
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 from yaml.reader import ReaderError
+
+from roachplan._errors import short_repr
 
 MAX_YAML_BYTES = 2_000_000
 """Largest YAML text read as one document [bytes]: a scene or spec is a few kB, and PyYAML's pure
@@ -226,14 +227,3 @@ def _checked(read, where: str, error: type[Exception]) -> Any:
 
 def _clip(text: str, limit: int = 300) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-_SHORT = reprlib.Repr()
-_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxtuple, _SHORT.maxdict = 3, 6, 6, 4
-_SHORT.maxstring, _SHORT.maxother, _SHORT.maxlong = 60, 60, 40
-
-
-def short_repr(value: Any, limit: int = 100) -> str:
-    """repr(value), shortened (`...`) to at most `limit` characters however large or deep the
-    value: what an error message may echo of a value read from a user's file."""
-    return _clip(_SHORT.repr(value), limit)

@@ -10,8 +10,11 @@ __getattr__, __dir__, __all__ = lazy_exports(
     {
         "HeightField": "._heightfield",
         "heightfield_from_mesh": "._heightfield",
+        "IsolationError": "._isolated",
+        "run_isolated": "._isolated",
         "PLANNER_NAMES": "._names",
-        "PlannerConfig": "._ompl",
+        "MAX_TIME_LIMIT": "._config",
+        "PlannerConfig": "._config",
         "PlannerName": "._names",
         "PlanningError": "._names",
         "PlanResult": "._ompl",
@@ -30,19 +33,23 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "VALID": "._validity",
         "Footprint": "._validity",
         "StateCheck": "._validity",
-        "ValidityConfig": "._validity",
+        "ValidityConfig": "._config",
         "check_states": "._validity",
         "describe_state": "._validity",
     },
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._config import MAX_TIME_LIMIT as MAX_TIME_LIMIT
+    from ._config import PlannerConfig as PlannerConfig
+    from ._config import ValidityConfig as ValidityConfig
     from ._heightfield import HeightField as HeightField
     from ._heightfield import heightfield_from_mesh as heightfield_from_mesh
+    from ._isolated import IsolationError as IsolationError
+    from ._isolated import run_isolated as run_isolated
     from ._names import PLANNER_NAMES as PLANNER_NAMES
     from ._names import PlannerName as PlannerName
     from ._names import PlanningError as PlanningError
-    from ._ompl import PlannerConfig as PlannerConfig
     from ._ompl import PlanResult as PlanResult
     from ._ompl import plan_path as plan_path
     from ._ompl import waypoints_on_surface as waypoints_on_surface
@@ -59,6 +66,5 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._validity import VALID as VALID
     from ._validity import Footprint as Footprint
     from ._validity import StateCheck as StateCheck
-    from ._validity import ValidityConfig as ValidityConfig
     from ._validity import check_states as check_states
     from ._validity import describe_state as describe_state

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
+from roachplan._errors import InputError
+
 PlannerName = Literal[
     "prm",
     "stride",
@@ -26,5 +28,5 @@ PlannerName = Literal[
 PLANNER_NAMES: tuple[str, ...] = get_args(PlannerName)
 
 
-class PlanningError(ValueError):
+class PlanningError(InputError):
     """A planning request that cannot be planned as asked (e.g. an invalid start)."""

@@ -8,7 +8,8 @@ Determinism: our sampler draws from a numpy Generator seeded by the plan's seed;
 process-global RNG (RRT's goal bias, PRM's roadmap expansion, KPIECE's cell choice, the
 informed samplers once a solution exists, the path simplifier) is seeded from the same seed,
 which takes effect only before OMPL's first random draw in a process; so every plan runs in a
-child forked from a process that never drew (`_isolated.run_isolated`). Planners stop on an iteration budget rather than on
+child forked from a process that never drew (roachplan.processes, planning/_isolated.py).
+Planners stop on an iteration budget rather than on
 the clock, optimizing planners at their first solution unless asked to optimize, and PRM's and
 PRM*'s roadmaps are grown in this thread in fixed batches (OMPL's PRM.solve grows it in a second
 thread and stops whenever that thread notices a solution, which is timing-dependent).
@@ -32,10 +33,13 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from roachplan.processes import call
+
+from ._config import PlannerConfig
 from ._drivable import DrivablePath, drivable_path, spin_states
 from ._heightfield import HeightField
-from ._isolated import Method, run_isolated
-from ._names import PLANNER_NAMES, PlannerName, PlanningError
+from ._isolated import Method
+from ._names import PLANNER_NAMES, PlanningError
 from ._ompl_import import ob, og, ou
 from ._regions import StandableMap, homology_signature, standable_map
 from ._validity import Footprint, ValidityConfig, check_states, describe_state
@@ -65,56 +69,6 @@ ou.setLogLevel(ou.LOG_WARN)
 
 DRIVABLE_ATTEMPTS = 5
 """Routes searched, at most, for one the robot can follow (drivable plans) [-]."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class PlannerConfig:
-    """How to plan."""
-
-    name: PlannerName = "prm"
-    """OMPL planner, by its class name in lower case."""
-    time_limit: float = 20.0
-    """Wall-clock cap on planning [s]; plans that hit it are not reproducible."""
-    max_iterations: int = 20000
-    """Iteration budget (PRM: milestones) after which planning gives up [-]."""
-    prm_batch: int = 25
-    """PRM: milestones added between two checks for a start-goal connection [-]."""
-    check_resolution: float = 0.01
-    """Spacing of validity checks along a motion [m]."""
-    simplify: bool = False
-    """Shortcut the path: drop needless vertices, then try shortcuts between random pairs of
-    points (the report drove raw PRM paths, so off by default)."""
-    smooth: bool = False
-    """Round the path's corners with B-spline smoothing, keeping it valid."""
-    optimize: bool = False
-    """Optimizing planners (RRT*, PRM*, BIT*, ...) refine path length until the iteration
-    budget instead of stopping at their first solution."""
-    waypoint_spacing: float = 0.05
-    """Spacing of the waypoints handed to the driver [m]."""
-    turning_radius: float | None = 0.13
-    """Drivable plans (issue 18): turn the planner's route into arcs of this radius [m] and
-    straight lines, every state checked (planning/_drivable.py). From the turning calibration
-    (`roachplan calibrate-turning`, sim/_turning.py): the roach turns at most 10.3 /m on flat
-    ground, at the driver's largest motor ratio of 3; plans use 3/4 of that (PLAN_HEADROOM),
-    1 / (0.75 * 10.3) = 0.129 m, so the tracking driver keeps a third more to correct with
-    (tests/test_robot.py re-derives it). None: the planner's raw path, as the report drove it
-    (`reference: true`)."""
-    spin_margin: float | None = 0.03
-    """Drivable plans: where no arc of turning_radius goes on, the robot may turn on the spot
-    (its sides in opposite directions), every heading of the turn checked at the spin's point
-    and round it within this distance [m]: how far the body centre wanders in a spin, 2.1 cm in
-    the spin calibration (sim/_turning.py CALIBRATED_SPIN, half turns entered from a walk) plus
-    1 cm for where the tracking driver begins it (measured on the floor: up to 2.4 cm in all).
-    None: arcs only, no turns on the spot."""
-    goal_radius: float = 0.05
-    """Start and goal closer than this [m] coincide: the plan is trivial (the robot stands where
-    the driver counts the goal as reached; a drivable plan turns on the spot to the goal's
-    heading when it differs and the turn is valid). The tracking and reference drivers' goal
-    radius r_end, 5 cm (Tong 2018, chapter 7)."""
-    keep_roadmap: bool = False
-    """Return the planner's graph (roadmap or tree) with the plan, for display."""
-    validity: ValidityConfig = field(default_factory=ValidityConfig)
-    """Tolerances of the validity conditions."""
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -351,8 +305,8 @@ def plan_path(
     these bounds from start (computed when not given; pass it to save ~50 ms per plan).
     Raises PlanningError when the start or goal is itself invalid (naming the failed condition
     and leg); returns found=False when the planner gives up. Runs in a child process
-    (`run_isolated`, how: isolation), so the same seed gives the same plan whatever ran in this
-    process before.
+    (roachplan.processes.call; isolation: how it starts), so the same seed gives the same plan
+    whatever ran in this process before.
     """
     vcfg = cfg.validity
     (xa, ya), (xb, yb) = bounds
@@ -371,7 +325,9 @@ def plan_path(
     request: dict[str, Any] = dict(
         start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions
     )
-    return run_isolated(_plan_here, hf, fp, isolation=isolation, preload=__name__, **request)
+    return call(
+        _plan_here, (hf, fp), request, start=isolation, preload=(__name__,), task="planning"
+    )
 
 
 def _seed_ompl(seed: int) -> None:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._config import ValidityConfig
 from ._heightfield import HeightField
 
 VALID, COLLISION, BODY_HEIGHT, FOOT, SLOPE, OFF_MAP = range(6)
@@ -54,33 +55,6 @@ class Footprint:
         a turn moves the footprint's outermost point."""
         local = _footprint_terms(self)[0]
         return float(np.max(np.hypot(local[:, 0], local[:, 1])))
-
-
-@dataclass(frozen=True, kw_only=True)
-class ValidityConfig:
-    """Tolerances of the four validity conditions."""
-
-    foot_tolerance: float = 0.02
-    """Condition 3: the ground under a foot may lie at most this far below the support plane [m]."""
-    body_band: float = 0.03
-    """Condition 2: the ground under the body centre may lie at most this far below the
-    support plane [m]."""
-    collision_margin: float = 0.002
-    """Condition 1: the terrain may rise this far into the body's underside before it counts
-    as a collision [m] (absorbs interpolation error)."""
-    leg_clearance: float = 0.02
-    """Condition 1, the legs: the terrain where they sweep may rise at most this far above the
-    support plane [m]. A leg steps onto a bump lower than its hip (2.5 cm up) and strikes a
-    higher one (a chair's foot beside the body flipped the robot in a real room capture)."""
-    max_slope_deg: float = 25.0
-    """Condition 4: steepest allowed support plane [deg]."""
-    noise_sigmas: float = 2.5
-    """On a capture, conditions 1-3 allow this many standard deviations of the terrain's
-    height noise at each sample on top of their tolerances [-]: a floor that is flat within
-    the sensor's noise is flat; a step or an object higher than that still counts."""
-    max_noise_slack: float = 0.02
-    """...but at most this much [m]: terrain known worse than that (an airborne survey's 6 cm)
-    is not made more walkable by its noise."""
 
 
 @dataclass(frozen=True, kw_only=True)

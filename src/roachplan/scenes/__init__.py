@@ -16,7 +16,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "BACKENDS": "._openscad",
         "DEFAULT_BACKEND": "._openscad",
         "DEFAULT_TIMEOUT": "._openscad",
-        "MAX_TIMEOUT": "._openscad",
+        "MAX_TIMEOUT": "._scad_sandbox",
         "render_scad": "._openscad",
         "render_scad_result": "._openscad",
         "ScadRender": "._openscad",
@@ -24,7 +24,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotFile": "._robot_file",
         "load_robot_file": "._robot_file",
         "write_robot_file": "._robot_file",
-        "MAX_SEED": "._library",
+        "MAX_SEED": "roachplan._settings",
         "MESH_SUFFIXES": "._scene",
         "TERRAIN_SUFFIXES": "._scene",
         "terrain_file_scene": "._scene",
@@ -49,25 +49,26 @@ __getattr__, __dir__, __all__ = lazy_exports(
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from roachplan._settings import MAX_SEED as MAX_SEED
+
     from ._adjust import scaled_scene as scaled_scene
     from ._adjust import with_scad_backend as with_scad_backend
     from ._adjust import with_scad_timeout as with_scad_timeout
     from ._errors import SceneError as SceneError
     from ._library import LIBRARY as LIBRARY
-    from ._library import MAX_SEED as MAX_SEED
     from ._library import library_names as library_names
     from ._library import list_scenes as list_scenes
     from ._mesh import looks_like_millimetres as looks_like_millimetres
     from ._openscad import BACKENDS as BACKENDS
     from ._openscad import DEFAULT_BACKEND as DEFAULT_BACKEND
     from ._openscad import DEFAULT_TIMEOUT as DEFAULT_TIMEOUT
-    from ._openscad import MAX_TIMEOUT as MAX_TIMEOUT
     from ._openscad import ScadRender as ScadRender
     from ._openscad import render_scad as render_scad
     from ._openscad import render_scad_result as render_scad_result
     from ._robot_file import RobotFile as RobotFile
     from ._robot_file import load_robot_file as load_robot_file
     from ._robot_file import write_robot_file as write_robot_file
+    from ._scad_sandbox import MAX_TIMEOUT as MAX_TIMEOUT
     from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
     from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES
     from ._scene import Scene as Scene

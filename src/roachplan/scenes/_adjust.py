@@ -4,24 +4,19 @@ who renders them."""
 from __future__ import annotations
 
 import dataclasses
-import math
+
+from roachplan._settings import SettingError
 
 from ._errors import SceneError
-from ._openscad import backend_problem, timeout_problem
-from ._scene import Scene
+from ._scene import Scene, backend_check, scale_problem, timeout_check
 
 
 def scaled_scene(scene: Scene, factor: float | tuple[float, float, float]) -> Scene:
     """The scene with every terrain object's model scaled by factor (on top of its own
     `scale:`), about the model's origin, before it is placed: `--scale 0.001` loads models in
     millimetres. Positions, bounds, start and goal stay in metres."""
+    _refuse("--scale", factor, scale_problem(factor))
     factors = tuple(factor) if isinstance(factor, tuple | list) else (factor,) * 3
-    if len(factors) != 3 or not all(
-        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf for f in factors
-    ):
-        raise SceneError(
-            f"--scale: expected a positive number (0.001 for models in millimetres), got {factor!r}"
-        )
     return dataclasses.replace(
         scene,
         terrain=tuple(
@@ -33,20 +28,25 @@ def scaled_scene(scene: Scene, factor: float | tuple[float, float, float]) -> Sc
 
 def with_scad_timeout(scene: Scene, timeout: float) -> Scene:
     """The scene with every OpenSCAD object's render time limit set to timeout [s]."""
-    return _every_scad(scene, "--scad-timeout", timeout_problem(timeout), timeout=float(timeout))
+    _refuse("--scad-timeout", timeout, timeout_check(timeout))
+    return _every_scad(scene, timeout=float(timeout))
 
 
 def with_scad_backend(scene: Scene, backend: str) -> Scene:
     """The scene with every OpenSCAD object rendered by backend ("auto", "cgal" or
     "manifold")."""
-    return _every_scad(scene, "--scad-backend", backend_problem(backend), backend=backend)
+    _refuse("--scad-backend", backend, backend_check(backend))
+    return _every_scad(scene, backend=backend)
 
 
-def _every_scad(scene: Scene, flag: str, problem: str | None, **change) -> Scene:
-    """The scene with `change` made to every OpenSCAD object; SceneError naming the flag when
-    its value has a problem."""
-    if problem:
-        raise SceneError(f"{flag}: {problem}")
+def _refuse(flag: str, value, expected: str | None) -> None:
+    """SceneError naming the flag when its setting's validator refused value."""
+    if expected is not None:
+        raise SceneError(f"{flag}: {SettingError('', value, expected).problem}")
+
+
+def _every_scad(scene: Scene, **change) -> Scene:
+    """The scene with `change` made to every OpenSCAD object."""
     return dataclasses.replace(
         scene,
         terrain=tuple(

@@ -1,9 +1,11 @@
 """Start one program with operating-system limits, and, when asked, in a jail of its own.
 
-Run as `python -I -S _jail.py SPEC` by scenes/_openscad.py (SPEC: one JSON object, see main):
-standard library only, so it starts in a few milliseconds and imports nothing of the project.
-It sets the resource limits, builds the jail, and then becomes the program (exec), so the
-program keeps this process's id and a kill of its process group reaches it.
+Run as `python -I -S _jail.py SPEC` by scenes/_scad_sandbox.py (SPEC: one JSON object, see
+main), as a child of roachplan.processes.run_program: standard library only, so it starts in a
+few milliseconds and imports nothing of the project (so its limits are set here, by its own
+few lines, from values roachplan.processes parsed). It sets the resource limits, builds the
+jail, asks to die with its parent, and then becomes the program (exec), so the program keeps
+this process's id and a kill of the tree it heads reaches it.
 
 The jail is a fresh user, mount and network namespace whose root is an empty in-memory folder
 holding only what the spec lists: each path bound read-only at the same place (so the
@@ -19,6 +21,7 @@ import ctypes
 import json
 import os
 import resource
+import signal
 import stat
 import sys
 
@@ -33,6 +36,7 @@ _MS_REMOUNT, _MS_BIND, _MS_REC, _MS_PRIVATE = 32, 4096, 16384, 1 << 18
 _MS_NOATIME, _MS_NODIRATIME, _MS_RELATIME = 1024, 2048, 1 << 21
 _MS_MOVE, _MNT_DETACH = 1 << 13, 2
 _PR_SET_NO_NEW_PRIVS = 38
+_PR_SET_PDEATHSIG = 1
 # os.statvfs flag -> mount flag. A bind mount in a user namespace must keep these flags of its
 # source (the kernel locks them), so a read-only remount restates them.
 _LOCKED_FLAGS = {
@@ -145,7 +149,9 @@ def _limit(which: int, soft: int, hard: int | None = None) -> None:
 def main(spec: dict) -> None:
     """spec: argv (absolute program path first), env (null: this process's), memory [bytes]
     (address space, and the largest file it may write), cpu [s] (processor time: SIGXCPU, then
-    SIGKILL 2 s later), jail (see _enter) or null to run unconfined."""
+    SIGKILL 2 s later), jail (see _enter) or null to run unconfined, parent (optional): the
+    pid of the process that starts this one, whose end (the end of its thread that started
+    this one) SIGKILLs the program: a render outlives no one who waits for it."""
     try:
         if spec.get("jail"):
             _enter(spec["jail"])
@@ -154,6 +160,11 @@ def main(spec: dict) -> None:
         _limit(resource.RLIMIT_FSIZE, spec["memory"])
         _limit(resource.RLIMIT_CPU, spec["cpu"], spec["cpu"] + 2)
         _limit(resource.RLIMIT_CORE, 0)  # a crash must not leave gigabytes of core behind
+        if spec.get("parent") is not None:
+            # Last before exec: the jail's new credentials must not clear it.
+            _check(_libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0), "prctl(PDEATHSIG)")
+            if os.getppid() != spec["parent"]:  # it ended before the request could cover it
+                sys.exit(SETUP_FAILED)
     except (OSError, ValueError, SetupError) as exc:
         print(f"{SETUP_TAG} {exc}", file=sys.stderr)
         sys.exit(SETUP_FAILED)

@@ -1,8 +1,8 @@
 """Run openscad-evaluator (backend manifold) as OpenSCAD 2021.01 would render the model.
 
 Run as `python -I -S -B _manifold_main.py SITE_PATHS_JSON MODEL -o OUT ...` by
-scenes/_openscad.py, inside the render jail: it imports nothing of roachplan, puts only the
-evaluator's site-packages folder on sys.path, and hands the rest of its arguments to the
+scenes/_scad_manifold.py, inside the render jail: it imports nothing of roachplan, puts only
+the evaluator's site-packages folder on sys.path, and hands the rest of its arguments to the
 evaluator's command line.
 
 Three changes to the evaluator. First, seeded `rands(min, max, n, seed)` draws the numbers OpenSCAD
@@ -27,7 +27,7 @@ them (each checked against Debian's binary by tests/test_scad_backend.py):
   from the glyph boxes scaled alike; curves are cut into OpenSCAD 2021.01's
   number of segments (max(floor(fragments(size) / 8) + 1, 2)). What is left (FreeType's
   hinting and pixel sizes, which the evaluator does not reproduce) is measured in
-  scenes/_openscad.py, TEXT_DEVIATION.
+  scenes/_scad_manifold.py, TEXT_DEVIATION.
 - polyhedron() (_patch_polyhedron): a closed polyhedron whose faces are all wound the other
   way (counter-clockwise seen from outside: inward, a negative volume) has them turned
   round. OpenSCAD's CGAL makes a solid of such a polyhedron in a union or difference (and

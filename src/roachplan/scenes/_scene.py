@@ -7,52 +7,90 @@ user can get wrong is reported as a SceneError naming the file, the key and what
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
-import typing
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from roachplan._settings import (
+    SettingError,
+    check_settings,
+    finite,
+    from_mapping,
+    integer,
+    is_number,
+    numbers,
+    optional,
+)
+from roachplan._settings import seed as seed_number
+from roachplan._settings import setting as s
 from roachplan.perception import (
     CAPTURE_SUFFIXES,
     MAX_YAML_BYTES,
-    CaptureError,
     CaptureSettings,
-    capture_settings,
     load_yaml,
     short_repr,
 )
 from roachplan.planning import PlannerConfig
-from roachplan.sim import (
-    DriverConfig,
-    RobotConfig,
-    SimConfig,
-    UncertaintyConfig,
-    uncertainty_problem,
-)
+from roachplan.sim import DriverConfig, RobotConfig, SimConfig, UncertaintyConfig
 
 from ._errors import SceneError
-from ._library import LIBRARY, MAX_SEED, library_names
-from ._openscad import (
-    DEFAULT_BACKEND,
-    DEFAULT_TIMEOUT,
-    Backend,
-    backend_problem,
-    param_problem,
-    scad_variables,
-    timeout_problem,
-)
+from ._library import LIBRARY, library_names
+from ._openscad import DEFAULT_BACKEND, DEFAULT_TIMEOUT, Backend, backend_problem
+from ._scad_sandbox import timeout_problem
+from ._scad_source import param_problem, scad_variables
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
 TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
 """Files that are a scene of their own wherever a scene is taken."""
-MAX_SETTING_INT = 2**31 - 1
-"""Largest integer setting (iterations, batch sizes): what a C int holds (PyBullet, OMPL)."""
 QUATERNION_TOLERANCE = 1e-3
 """How far from 1 a quaternion's norm may be [-]: four rounded decimals ([0, 0, 0.7071,
 0.7071]) are within it and are normalised; further off is a typing error, refused."""
+
+
+def scale_problem(value: Any) -> str | None:
+    """A model's scale: a positive factor, or one per axis [x, y, z] (`scale:`, `--scale`)."""
+    factors = [value] * 3 if not isinstance(value, list | tuple) else value
+    if len(factors) == 3 and all(is_number(f) and 0 < f < math.inf for f in factors):
+        return None
+    return (
+        "expected a positive number (0.001 for a model in millimetres) or a list of 3 "
+        "positive numbers [x, y, z]"
+    )
+
+
+def orientation_problem(value: Any) -> str | None:
+    """A unit quaternion x, y, z, w, to QUATERNION_TOLERANCE."""
+    if not (isinstance(value, list | tuple) and len(value) == 4 and all(map(_finite, value))):
+        return "expected a unit quaternion [x, y, z, w]: 4 finite numbers"
+    norm = math.sqrt(sum(c * c for c in value))
+    if abs(norm - 1.0) <= QUATERNION_TOLERANCE:
+        return None
+    return (
+        f"quaternion has norm {norm:.6g}; expected a unit quaternion [x, y, z, w] (norm within "
+        f"{QUATERNION_TOLERANCE:g} of 1), e.g. [0, 0, 0.7071, 0.7071] for 90 degrees about z"
+    )
+
+
+def _finite(v: Any) -> bool:
+    return is_number(v) and math.isfinite(v)
+
+
+def _without_value(problem: str) -> str | None:
+    """An OpenSCAD setting's problem (scenes/_openscad.py, which ends it with the value given)
+    as a validator's words: the message adds the value where it is read."""
+    return problem.rpartition(", got ")[0] or problem or None
+
+
+def timeout_check(value: Any) -> str | None:
+    """A render time limit [s] (`timeout:`, `--scad-timeout`)."""
+    return _without_value(timeout_problem(value))
+
+
+def backend_check(value: Any) -> str | None:
+    """Who renders (`backend:`, `--scad-backend`)."""
+    return _without_value(backend_problem(value))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -63,16 +101,16 @@ class TerrainObject:
     """Absolute path of the .scad model or mesh file."""
     params: tuple[tuple[str, float | int | bool | str], ...] = ()
     """OpenSCAD `-D` overrides, sorted by name."""
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position: tuple[float, float, float] = s((0.0, 0.0, 0.0), numbers(3, "x, y, z [m]"))
     """Translation of the object's origin [m]."""
-    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    orientation: tuple[float, float, float, float] = s((0.0, 0.0, 0.0, 1.0), orientation_problem)
     """Rotation as a unit quaternion, xyzw (the report's order)."""
-    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    scale: tuple[float, float, float] = s((1.0, 1.0, 1.0), scale_problem)
     """Factors applied to the model's coordinates along x, y, z before it is placed (0.001
     turns a model in millimetres into metres)."""
-    timeout: float = DEFAULT_TIMEOUT
+    timeout: float = s(DEFAULT_TIMEOUT, timeout_check)
     """Time limit of the OpenSCAD render [s] (scad only)."""
-    backend: Backend = DEFAULT_BACKEND
+    backend: Backend = s(DEFAULT_BACKEND, backend_check)
     """Who renders the model (scad only): "auto" (manifold where it renders the model as the
     binary does, else the binary), "cgal", the openscad binary (the reference), or "manifold",
     openscad-evaluator (faster on CSG-heavy models; see _openscad.BACKENDS)."""
@@ -80,6 +118,9 @@ class TerrainObject:
     """Where the object sits in its scene file, for error messages."""
     capture: CaptureSettings | None = None
     """How to read and mesh the source (capture objects only)."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     @property
     def kind(self) -> Literal["scad", "mesh", "capture"]:
@@ -100,7 +141,7 @@ class Scene:
     """One line for people."""
     terrain: tuple[TerrainObject, ...]
     """Terrain objects, in world frame."""
-    ground: float | None = 0.0
+    ground: float | None = s(0.0, optional(finite("m")))
     """Height of an endless ground plane [m], or None for no ground."""
     start: tuple[float, float, float] | None = None
     """Robot start pose: x [m], y [m], yaw [rad]; None: picked when the world is built
@@ -121,8 +162,11 @@ class Scene:
     file named by `robot.file`; its friction is then the scene's sim.friction)."""
     robot_file: Path | None = None
     """The robot file the scene names, if any."""
-    seed: int = 0
+    seed: int = s(0, seed_number())
     """Seed of the first trial; trial k uses seed + k."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 def resolve_scene(name_or_path: str | Path) -> Path:
@@ -210,7 +254,9 @@ def read_yaml(path: Path, kind: str, error: type[ValueError]) -> Any:
 
 
 class YamlFields:
-    """Checks on the values read from one YAML file; every error names the file and the key."""
+    """Checks on the values read from one YAML file; every error names the file and the key.
+    The settings' own validators (roachplan/_settings.py) decide what is accepted; this says
+    where a refused value was read."""
 
     def __init__(self, path: Path, error: type[ValueError] = SceneError) -> None:
         self.path = path
@@ -220,6 +266,15 @@ class YamlFields:
         # A key may be a user's own name (a route, a scad parameter): shortened like a value.
         key = key if len(key) <= 120 else key[:117] + "..."
         return self.error(f"{self.path}: {key}: {msg}")
+
+    def refused(self, exc: SettingError, key: str = "") -> ValueError:
+        """A setting's error, read under `key` (the block it sits in) of this file."""
+        where = exc.within(key)
+        return (
+            self.fail(where.key, where.problem)
+            if where.key
+            else self.error(f"{self.path}: {where.problem}")
+        )
 
     def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required=()) -> dict:
         if not isinstance(value, dict):
@@ -238,34 +293,32 @@ class YamlFields:
                 raise self.fail(f"{key}.{k}" if key else k, "missing (required)")
         return value
 
-    def number(self, value: Any, key: str) -> float:
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
-            raise self.fail(key, f"expected a finite number, got {short_repr(value)}")
-        return float(value)
+    def checked(self, check, value: Any, key: str) -> Any:
+        """value, if `check` (a setting's validator) accepts it."""
+        expected = check(value)
+        if expected is not None:
+            raise self.refused(SettingError(key, value, expected))
+        return value
 
-    def integer(self, value: Any, key: str, minimum: int, maximum: int = MAX_SETTING_INT) -> int:
-        """An integer from minimum to maximum; a float without a fraction (`1e5`) is taken as
-        the integer it writes."""
+    def number(self, value: Any, key: str) -> float:
+        return float(self.checked(finite(), value, key))
+
+    def integer(self, value: Any, key: str, minimum: int, maximum: int | None = None) -> int:
+        """An integer from minimum to maximum (default: what a C int holds); a float without a
+        fraction (`1e5`) is taken as the integer it writes."""
         whole = int(value) if isinstance(value, float) and value.is_integer() else value
-        if isinstance(whole, bool) or not isinstance(whole, int) or not minimum <= whole <= maximum:
-            raise self.fail(
-                key, f"expected an integer from {minimum} to {maximum}, got {short_repr(value)}"
-            )
+        check = integer(minimum) if maximum is None else integer(minimum, maximum)
+        expected = check(whole)
+        if expected is not None:
+            raise self.refused(SettingError(key, value, expected))
         return whole
 
     def seed(self, value: Any, key: str) -> int:
-        """A seed: an integer from 0 to MAX_SEED."""
+        """A seed (roachplan/_settings.py seed): an integer from 0 to MAX_SEED."""
         whole = int(value) if isinstance(value, float) and value.is_integer() else value
-        if isinstance(whole, bool) or not isinstance(whole, int) or not 0 <= whole <= MAX_SEED:
-            raise self.fail(
-                key,
-                f"expected a non-negative integer up to {MAX_SEED} (what OMPL's generator "
-                f"takes), got {short_repr(value)}",
-            )
+        expected = seed_number()(whole)
+        if expected is not None:
+            raise self.refused(SettingError(key, value, expected))
         return whole
 
     def vector(self, value: Any, key: str, n: int) -> tuple[float, ...]:
@@ -281,55 +334,20 @@ class YamlFields:
             raise self.fail(key, f"min {lo} must be below max {hi} in x and y")
         return (lo, hi)  # type: ignore[return-value]
 
-    def config(self, cls: type, value: Any, key: str) -> Any:
-        """Build a frozen config dataclass from a mapping: known keys, right types, in range."""
-        fields = {f.name: f for f in dataclasses.fields(cls)}
-        data = self.mapping(value, key, tuple(fields))
-        hints = typing.get_type_hints(cls)
-        kwargs = {}
-        for k, v in data.items():
-            hint = hints[k]
-            if dataclasses.is_dataclass(hint):
-                kwargs[k] = self.config(hint, v, f"{key}.{k}")
-            elif typing.get_origin(hint) is Literal:
-                options = typing.get_args(hint)
-                if v not in options:
-                    raise self.fail(
-                        f"{key}.{k}",
-                        f"{short_repr(v)} is not one of {', '.join(map(str, options))}",
-                    )
-                kwargs[k] = v
-            elif hint is bool:
-                if not isinstance(v, bool):
-                    raise self.fail(f"{key}.{k}", f"expected true or false, got {short_repr(v)}")
-                kwargs[k] = v
-            elif hint is int:
-                kwargs[k] = self.integer(v, f"{key}.{k}", 1)
-            elif hint is float:
-                kwargs[k] = self.number(v, f"{key}.{k}")
-            elif hint == float | None:  # e.g. planner.turning_radius: null is "none"
-                kwargs[k] = None if v is None else self.number(v, f"{key}.{k}")
-            else:  # pragma: no cover - a config field type this loader does not know
-                raise self.fail(f"{key}.{k}", f"unsupported setting type {hint}")
-            if isinstance(kwargs[k], float | int) and not isinstance(kwargs[k], bool):
-                if kwargs[k] <= 0:
-                    raise self.fail(f"{key}.{k}", f"must be positive, got {short_repr(v)}")
-        return cls(**kwargs)
+    def config(self, cls: type, value: Any, key: str, base: Any = None) -> Any:
+        """A config of class cls from the mapping under `key` (over `base`, default cls's
+        defaults), each value checked by its setting's validator."""
+        try:
+            return from_mapping(cls, value, base=base)
+        except SettingError as exc:
+            raise self.refused(exc, key) from None
 
     def uncertainty(
         self, value: Any, key: str, base: UncertaintyConfig | None = None
     ) -> UncertaintyConfig:
         """An `uncertainty:` mapping: its fields over `base` (default: the defaults), each a
-        number in its range (sim.UNCERTAINTY_RANGES; 0 turns that spread off, so unlike the
-        other settings 0 is accepted)."""
-        fields = tuple(f.name for f in dataclasses.fields(UncertaintyConfig))
-        kwargs = {}
-        for k, v in self.mapping(value, key, fields).items():
-            x = self.number(v, f"{key}.{k}")
-            if (problem := uncertainty_problem(k, x)) is not None:
-                raise self.fail(f"{key}.{k}", problem)
-            kwargs[k] = x
-        return dataclasses.replace(base or UncertaintyConfig(), **kwargs)
+        number in its range (sim.UNCERTAINTY_RANGES; 0 turns that spread off)."""
+        return self.config(UncertaintyConfig, value, key, base=base)
 
 
 def _existing_file(ctx: YamlFields, name: str, key: str) -> Path:
@@ -359,30 +377,12 @@ def _capture_of(ctx: YamlFields, data: dict, key: str) -> CaptureSettings:
     """A capture object's `perception:` settings, checked (file names relative to the scene)."""
 
     def resolve(name: str) -> Path:
-        if "\0" in name:
-            raise CaptureError(f"intrinsics: {short_repr(name)} is not a file name (a NUL byte)")
         return (ctx.path.parent / name).resolve()
 
     try:
-        return capture_settings(data.get("perception") or {}, resolve=resolve)
-    except CaptureError as exc:  # "field: what" -> "<file>: terrain[i].perception.field: what"
-        field, _, what = str(exc).partition(": ")
-        what = what if len(what) <= 300 else what[:297] + "..."  # it may echo a whole value
-        raise ctx.fail(f"{key}.perception.{field}", what) from None
-
-
-def _scale(ctx: YamlFields, value: Any, key: str) -> tuple[float, float, float]:
-    """`scale: s` or `scale: [sx, sy, sz]`, each positive and finite."""
-    factors = [value] * 3 if not isinstance(value, list | tuple) else value
-    if len(factors) != 3 or not all(
-        isinstance(f, int | float) and not isinstance(f, bool) and 0 < f < math.inf for f in factors
-    ):
-        raise ctx.fail(
-            key,
-            f"expected a positive number (0.001 for a model in millimetres) or a list of 3 "
-            f"positive numbers [x, y, z], got {short_repr(value)}",
-        )
-    return tuple(float(f) for f in factors)  # type: ignore[return-value]
+        return CaptureSettings.from_mapping(data.get("perception") or {}, resolve=resolve)
+    except SettingError as exc:
+        raise ctx.refused(exc, f"{key}.perception") from None
 
 
 def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
@@ -437,29 +437,19 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
         problem = param_problem(name, v, variables, source.name)
         if problem:
             raise ctx.fail(f"{key}.params.{name}", problem)
-    timeout = data.get("timeout", DEFAULT_TIMEOUT)
-    if timeout_problem(timeout):
-        raise ctx.fail(f"{key}.timeout", timeout_problem(timeout))
-    backend = data.get("backend", DEFAULT_BACKEND)
-    if backend_problem(backend):
-        raise ctx.fail(f"{key}.backend", backend_problem(backend))
-    scale = _scale(ctx, data.get("scale", 1.0), f"{key}.scale")
+    timeout = ctx.checked(timeout_check, data.get("timeout", DEFAULT_TIMEOUT), f"{key}.timeout")
+    backend = ctx.checked(backend_check, data.get("backend", DEFAULT_BACKEND), f"{key}.backend")
+    scale = ctx.checked(scale_problem, data.get("scale", 1.0), f"{key}.scale")
     position = ctx.vector(data.get("position", [0, 0, 0]), f"{key}.position", 3)
     q = ctx.vector(data.get("orientation", [0, 0, 0, 1]), f"{key}.orientation", 4)
+    ctx.checked(orientation_problem, q, f"{key}.orientation")  # as written, then made unit
     norm = math.sqrt(sum(c * c for c in q))
-    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
-        raise ctx.fail(
-            f"{key}.orientation",
-            f"quaternion {list(q)} has norm {norm:.6g}; expected a unit quaternion [x, y, z, w] "
-            f"(norm within {QUATERNION_TOLERANCE:g} of 1), e.g. [0, 0, 0.7071, 0.7071] for 90 "
-            f"degrees about z",
-        )
     return TerrainObject(
         source=source,
         params=tuple(sorted(params.items())),
         position=position,  # type: ignore[arg-type]
         orientation=tuple(c / norm for c in q),  # type: ignore[arg-type]
-        scale=scale,
+        scale=tuple(float(f) for f in (scale if isinstance(scale, list | tuple) else [scale] * 3)),  # type: ignore[arg-type]
         timeout=float(timeout),
         backend=backend,
         key=key,
@@ -554,9 +544,9 @@ def _with_robot_file(ctx: YamlFields, scene: Scene, name: Any, sim: Any) -> Scen
             f"the robot file {path.name} gives the friction; give it in one place only",
         )
     robot_file = load_robot_file(path)
-    return dataclasses.replace(
+    return replace(
         scene,
         robot=robot_file.robot(),
         robot_file=path,
-        sim=dataclasses.replace(scene.sim, friction=robot_file.friction),
+        sim=replace(scene.sim, friction=robot_file.friction),
     )

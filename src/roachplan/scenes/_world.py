@@ -49,6 +49,14 @@ a table top or a chair's seat over the floor a camera saw under it. The robot (3
 walks under it; a step that high it could not climb anyway. Levels closer than this (a
 bridge 20 cm over the floor) stay the top surface, as a solid's top does (no upward
 surface under it)."""
+FAR_FROM_AREA = 10.0
+"""Farthest a terrain object may lie from the planning area [m] (or, when the scene leaves the
+area to be picked, from the rest of the terrain). The robot goes nowhere near it: the planner
+keeps its centre inside the area (its feet 0.15 m past it), and the area picked for a scene
+is at most 10 m across; so an object further off can only be a wrong position, a sign or a
+unit slipped (`position: [1e6, 0, 0]`), which would otherwise leave the robot on bare ground,
+or the planning area picked somewhere between the pieces. Scenery just outside the area (a
+capture's far wall, a second model beyond the goal) stays within it."""
 MAX_PLANNING_AREA = 400.0
 """Largest area the robot's centre may be planned over [m^2] (20 m x 20 m): the height field
 and the maps made from it take about 1 kB a cell, so 4 M cells at 1 cm is a few GB."""
@@ -179,6 +187,13 @@ def build_terrain(scene: Scene) -> Terrain:
         problem = below_ground_problem(placed, scene.ground)
         if problem:
             raise SceneError(f"{scene.path}: {obj.key}: {problem}")
+    pieces = [
+        (obj.key, obj.source.name, placed.bounds[:, :2])
+        for obj, (placed, _) in zip(scene.terrain, built)
+        if len(placed.faces)
+    ]
+    if far := far_piece(pieces, scene.bounds):
+        raise SceneError(f"{scene.path}: {far}")
     for m, _ in built:  # every piece carries the same values, or concatenate drops them
         for key in VERTEX_VALUES:
             if key not in m.vertex_attributes:
@@ -190,6 +205,63 @@ def build_terrain(scene: Scene) -> Terrain:
     assert isinstance(mesh, trimesh.Trimesh)  # (of Trimesh pieces, one Trimesh)
     mesh.merge_vertices()
     return Terrain(mesh, tuple(note for _, note in built if note))
+
+
+def _gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Distance between two boxes ((xmin, ymin), (xmax, ymax)) [m]; 0 when they overlap."""
+    d = np.maximum(np.maximum(a[0] - b[1], b[0] - a[1]), 0.0)
+    return float(np.hypot(*d))
+
+
+def _box_text(box) -> str:
+    (x0, y0), (x1, y1) = box
+    return f"x {x0:.2f} to {x1:.2f}, y {y0:.2f} to {y1:.2f}"
+
+
+def far_piece(pieces: list[tuple[str, str, np.ndarray]], bounds) -> str:
+    """ "key: why" for the first terrain piece (key, file name, placed (2, 2) xy box [m]) more
+    than FAR_FROM_AREA from the planning area `bounds`, or, without bounds, from the terrain's
+    largest group of pieces (each within FAR_FROM_AREA of another); else ""."""
+    why = (
+        f"more than {FAR_FROM_AREA:g} m off, where the robot never goes, so most likely a wrong "
+        f"position (a sign or a unit slipped); place it within {FAR_FROM_AREA:g} m of"
+    )
+    if bounds is not None:
+        area = np.asarray(bounds, dtype=float)
+        for key, name, box in pieces:
+            if (gap := _gap(box, area)) > FAR_FROM_AREA:
+                return (
+                    f"{key}: {name} lies {gap:.1f} m from the planning area ({_box_text(area)}), "
+                    f"at {_box_text(box)}: {why} the planning area, or widen the area"
+                )
+        return ""
+    groups = list(range(len(pieces)))  # single linkage: each piece's group, by union-find
+
+    def root(i: int) -> int:
+        while groups[i] != i:
+            i = groups[i]
+        return i
+
+    for i, (_, _, a) in enumerate(pieces):
+        for j in range(i):
+            if _gap(a, pieces[j][2]) <= FAR_FROM_AREA:
+                groups[root(i)] = root(j)
+    sizes: dict[int, float] = {}
+    for i, (_, _, box) in enumerate(pieces):
+        sizes[root(i)] = sizes.get(root(i), 0.0) + float(np.prod(box[1] - box[0]))
+    main = max(sizes, key=lambda g: (sizes[g], -g))
+    members = [box for i, (_, _, box) in enumerate(pieces) if root(i) == main]
+    rest = np.array(
+        [np.min([b[0] for b in members], axis=0), np.max([b[1] for b in members], axis=0)]
+    )
+    for i, (key, name, box) in enumerate(pieces):
+        if root(i) != main:
+            return (
+                f"{key}: {name} lies {_gap(box, rest):.1f} m from the rest of the terrain "
+                f"({_box_text(rest)}, where the planning area is picked), at {_box_text(box)}: "
+                f"{why} the other pieces"
+            )
+    return ""
 
 
 def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:

@@ -41,7 +41,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "quat_to_matrix": "._driver",
         "LEG_NAMES": "._robot",
         "RobotConfig": "._robot",
-        "SimError": "._simulation",
+        "SimError": "._errors",
         "Simulation": "._simulation",
         "UNCERTAINTY_RANGES": "._uncertainty",
         "UncertaintyConfig": "._uncertainty",
@@ -75,9 +75,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._driver import next_waypoint as next_waypoint
     from ._driver import omega_limit as omega_limit
     from ._driver import quat_to_matrix as quat_to_matrix
+    from ._errors import SimError as SimError
     from ._robot import LEG_NAMES as LEG_NAMES
     from ._robot import RobotConfig as RobotConfig
-    from ._simulation import SimError as SimError
     from ._simulation import Simulation as Simulation
     from ._turning import CALIBRATED_SPIN as CALIBRATED_SPIN
     from ._turning import CALIBRATED_SPINS as CALIBRATED_SPINS

@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from roachplan._settings import check_settings, integer, one_of, positive
+from roachplan._settings import setting as s
+
 from ._turning import CALIBRATED_SPIN, CALIBRATED_TURNING, TurningCurve
 
 
@@ -12,15 +15,18 @@ from ._turning import CALIBRATED_SPIN, CALIBRATED_TURNING, TurningCurve
 class SimConfig:
     """Physics settings of one simulated world."""
 
-    timestep: float = 1.0 / 1000.0
+    timestep: float = s(1.0 / 1000.0, positive("s"))
     """Fixed physics step [s]. Halving it changes a 10 s floor walk by < 0.5 % in distance and
     < 2.5 % in energy (README, timestep study)."""
-    solver_iterations: int = 30
+    solver_iterations: int = s(30, integer(1))
     """Constraint-solver iterations per step."""
-    friction: float = 0.9
+    friction: float = s(0.9, positive("-"))
     """Coulomb friction coefficient of feet, body and terrain [-]."""
-    settle_time: float = 0.3
+    settle_time: float = s(0.3, positive("s"))
     """Time the robot stands still after being dropped at its start pose [s]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,11 +35,11 @@ class DriverConfig:
     default) or `reference` (Tong 2018's algorithm 1, waypoint by waypoint, with the
     differential-drive P-controller of algorithm 2)."""
 
-    kind: Literal["tracking", "reference"] = "tracking"
+    kind: Literal["tracking", "reference"] = s("tracking", one_of(("tracking", "reference")))
     """tracking: steer onto the point `lookahead` metres further along the path than the
     robot's progress, which only grows, so a passed waypoint is never chased back;
     reference: algorithms 1 and 2 exactly as the report gives them (tables 7.1-7.3)."""
-    lookahead: float = 0.14
+    lookahead: float = s(0.14, positive("m"))
     """tracking: distance along the path from the robot's progress to the point it steers to
     [m]. Shorter tracks tighter and oscillates: at 0.1 m relative energy rose by about 20 % on
     kinect_bridge and double_bridge_rough; at 0.2 m the robot drifted 2-3 cm outside a tight
@@ -45,42 +51,45 @@ class DriverConfig:
     wants with the ratio `turning.ratio_for(curvature)`, so its steering gain follows from the
     calibration rather than from tuning."""
 
-    omega0: float = 20.0
+    omega0: float = s(20.0, positive("rad/s"))
     """Base leg speed of both sides [rad/s]."""
-    gain: float = 2.7
+    gain: float = s(2.7, positive("1/rad"))
     """P gain p: the faster side turns at omega0 * exp(|p * theta|) [1/rad]. Derived from the
     turning calibration (`roachplan calibrate-turning`, appendix A): curvature = 7.46 ln(ratio)
     on flat ground, and p = 2 / (7.46 * r_path) makes the controller drive the pure-pursuit arc
     onto a waypoint r_path ahead (see sim/_calibration.py, TurningModel.gain_for)."""
-    max_ratio: float = 3.0
+    max_ratio: float = s(3.0, positive("-"))
     """Cap on the fast side's speed relative to omega0 [-]: the exponential of algorithm 2 grows
     without bound, a real motor does not."""
-    r_path: float = 0.1
+    r_path: float = s(0.1, positive("m"))
     """Radius within which an intermediate waypoint counts as reached [m]."""
-    r_end: float = 0.05
+    r_end: float = s(0.05, positive("m"))
     """Radius within which the goal counts as reached [m] (Tong 2018, chapter 7: 5 cm)."""
-    time_limit: float = 60.0
+    time_limit: float = s(60.0, positive("s"))
     """Simulated time allowed to reach the goal [s] (Tong 2018, chapter 7: 60 s)."""
-    control_period: float = 0.02
+    control_period: float = s(0.02, positive("s"))
     """Time between two controller updates [s]."""
-    fall_drop: float = 0.08
+    fall_drop: float = s(0.08, positive("m"))
     """A body this far below the planned surface under it has fallen off that surface [m]."""
-    stuck_time: float = 10.0
+    stuck_time: float = s(10.0, positive("s"))
     """A drive that makes no progress for this long is stuck [s]."""
-    stuck_distance: float = 0.02
+    stuck_distance: float = s(0.02, positive("m"))
     """Progress: the next waypoint reached, or this much closer to it [m]."""
-    spin_speed: float = CALIBRATED_SPIN.omega
+    spin_speed: float = s(CALIBRATED_SPIN.omega, positive("rad/s"))
     """tracking: speed of each side's motor while the robot turns on the spot at a plan's spin,
     one side backwards [rad/s]. 10 rad/s turns at 1.44 rad/s for 0.0123 J/rad (the spin
     calibration, sim/_turning.py CALIBRATED_SPIN; 20 rad/s: twice the rate, a third more energy
     per radian, more wander). The reference driver makes no spins."""
-    spin_tolerance: float = 0.05
+    spin_tolerance: float = s(0.05, positive("rad"))
     """tracking: a spin ends when the heading is within this of the spin's [rad]; pure pursuit
     corrects what is left. The gait sways the heading by up to 0.12 rad about its mean within a
     spin (measured at 10 and 20 rad/s), so a tighter tolerance mostly turns back and forth
     longer."""
-    stuck_angle: float = 0.1
+    stuck_angle: float = s(0.1, positive("rad"))
     """Progress during a spin: this much closer to the spin's heading [rad] (a spin making
     angular progress is never stuck)."""
-    frame_period: float = 1.0 / 30.0
+    frame_period: float = s(1.0 / 30.0, positive("s"))
     """Simulated time between two recorded trajectory samples [s]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)

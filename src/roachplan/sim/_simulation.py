@@ -11,6 +11,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from ._config import SimConfig
+from ._errors import SimError
 from ._robot import RobotConfig
 
 
@@ -40,10 +41,6 @@ def _c_stdout_silenced(fds: tuple[int, ...] = (1,)) -> Iterator[None]:
 with _c_stdout_silenced((1, 2)):
     import pybullet as p
     from pybullet_utils.bullet_client import BulletClient
-
-
-class SimError(ValueError):
-    """The simulation cannot be built from what it was given."""
 
 
 class Simulation:

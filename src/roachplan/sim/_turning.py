@@ -16,12 +16,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from roachplan._settings import check_settings, is_number, non_negative, positive
+from roachplan._settings import setting as s
+
 PLAN_HEADROOM = 0.75
 """Part of the robot's tightest curvature a drivable plan may use [-]; the rest (a third of what
 the plan uses) is left for the tracking driver's corrections. The margin the project chose with
 the log-linear model (radius 0.16 m from 8.2 /m), kept for the fitted curve: 0.129 m. On
 kinect_bridge (25 paths) and bridge_rough (50), plans of 0.13 m and 0.16 m both succeeded every
 time, at about the same energy (README, "Drivable plans")."""
+
+
+def _above_one(v) -> str | None:
+    """A motor-speed ratio past equal speeds: above 1 (at 1 both sides walk straight)."""
+    return None if is_number(v) and 1 < v < math.inf else "expected a number above 1 [-]"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -35,15 +43,18 @@ class TurningCurve:
     simulated roach's curve (CALIBRATED_TURNING); a scene's `driver.turning` may change some.
     Ratios at or above lock_ratio have an infinite curvature."""
 
-    kappa_sat: float = 4.199
+    kappa_sat: float = s(4.199, non_negative("1/m"))
     """Curvature the saturating (slipping differential drive) term tends to [1/m]."""
-    rate: float = 2.147
+    rate: float = s(2.147, positive("-"))
     """How fast that term saturates: its part reached at ratio r is 1 - r^-rate [-]."""
-    lock: float = 0.1506
+    lock: float = s(0.1506, non_negative("1/m"))
     """Scale of the phase-locking term [1/m]."""
-    lock_ratio: float = 3.0772
+    lock_ratio: float = s(3.0772, _above_one)
     """Ratio at which the phase-locking term's curvature grows without bound [-]; above the
     calibrated range, so only ratios below it have a curvature."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     def curvature(self, ratio: float) -> float:
         """Curvature driven at motor-speed ratio `ratio` (>= 1, < lock_ratio) [1/m]."""
