@@ -8,7 +8,8 @@ them from its logged runs, for scenes to name (`robot: {file: my_roach.yaml}`).
     mass_scale: 1.0        # its body's mass / the model's 24 g [-]
     fitted: {...}          # what it was fitted to and how well (not read back)
 
-Every key but `fitted` is checked at load, naming the file, the key and what is accepted.
+Every key but `fitted` is checked by its setting's validator (roachplan/_settings.py) whenever a
+RobotFile is made; a file's error names the file, the key and what is accepted.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from typing import Any
 
 import yaml
 
+from roachplan._settings import between, check_settings
+from roachplan._settings import setting as s
 from roachplan.perception import short_repr
 from roachplan.sim import RobotConfig
 
@@ -36,14 +39,21 @@ RANGES = {
 
 @dataclass(frozen=True, kw_only=True)
 class RobotFile:
-    """One real robot's simulation parameters."""
+    """One real robot's simulation parameters, each checked by its validator however made."""
 
-    friction: float
-    motor_gain: float = 1.0
-    motor_mismatch: float = 0.0
-    mass_scale: float = 1.0
+    friction: float = s(0.9, between(*RANGES["friction"], "-"))
+    """Coulomb friction of its feet on the floor it ran on [-] (the scene's sim.friction)."""
+    motor_gain: float = s(1.0, between(*RANGES["motor_gain"], "-"))
+    """Both motors' speed / their command [-]."""
+    motor_mismatch: float = s(0.0, between(*RANGES["motor_mismatch"], "-"))
+    """Left x (1 + d), right x (1 - d) [-]."""
+    mass_scale: float = s(1.0, between(*RANGES["mass_scale"], "-"))
+    """Its body's mass / the model's [-]."""
     fitted: dict | None = None
     """Provenance: the logs, the errors before and after (written, not read back)."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     def robot(self, base: RobotConfig | None = None) -> RobotConfig:
         """base (default: the nominal roach) with this robot's motors and body mass."""
@@ -62,25 +72,29 @@ class RobotFile:
         }
         if self.fitted is not None:
             data["fitted"] = self.fitted
-        return "# written by roachplan (robot fit)\n" + yaml.safe_dump(data, sort_keys=False)
+        return HEADER + yaml.safe_dump(data, sort_keys=False)
+
+
+HEADER = "# written by roachplan (robot fit)\n"
+"""The first line of every robot file roachplan writes (`fit -o` replaces such a file)."""
 
 
 def load_robot_file(path: Path) -> RobotFile:
-    """Read and check a robot file; SceneError naming the file, the key and the range."""
+    """Read and check a robot file (friction required; each value by its setting's validator);
+    SceneError naming the file, the key and what is accepted."""
     from ._scene import YamlFields, read_yaml
 
     ctx = YamlFields(path)
     raw = read_yaml(path, "robot", SceneError)
+    if not isinstance(raw, dict):
+        raise SceneError(
+            f"{path}: expected a robot file: a mapping with keys {', '.join(RANGES)} (friction "
+            f"required), got {short_repr(raw)}"
+        )
     data = ctx.mapping(raw, "", (*RANGES, "fitted"), required=("friction",))
-    values = {}
-    for key, (lo, hi) in RANGES.items():
-        if key in data:
-            x = ctx.number(data[key], key)
-            if not lo <= x <= hi:
-                raise ctx.fail(key, f"expected a number from {lo:g} to {hi:g}, got {short_repr(x)}")
-            values[key] = x
-    fitted = data.get("fitted")
-    return RobotFile(**values, fitted=fitted if isinstance(fitted, dict) else None)
+    if not isinstance(data.get("fitted"), dict | None):
+        data = {k: v for k, v in data.items() if k != "fitted"}  # (provenance only)
+    return ctx.config(RobotFile, data, "")
 
 
 def write_robot_file(path: Path, robot: RobotFile) -> None:
