@@ -108,12 +108,13 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     assert len(back.poses["t_receive"]) > 100 and len(back.commands["t"]) > 100
     assert back.scene["name"] == "double_bridge" and len(back.scene["sha256"]) == 64
     assert back.prediction is not None and back.prediction["outcome"] == "success"
-    from roachplan.robot._compare import compare
+    from roachplan.robot import compare
 
     c = compare(back, world, latency=0.04)
     assert c.outcome_agrees
     assert c.closed_loop.end < 0.1
     assert len(c.open_loop.position) == len(c.closed_loop.position) > 100
+    assert len(c.windows.t) > 5 and c.windows.error() < 0.5
 
 
 def test_a_pose_dropout_stops_the_robot(world, tmp_path):
@@ -198,11 +199,13 @@ def test_fit_on_twin_logs_writes_a_robot_file_a_scene_loads(world, tmp_path):
                 on_loop=after(6.0, lambda loop: loop.stop()),
             )
             logs.append(log)
-    from roachplan.robot._compare import fit
+    from roachplan.robot import FitConfig, fit
 
     out = tmp_path / "roach.yaml"
-    result = fit(logs, world, seed=0, max_evaluations=12, latency=0.04, out=out)
-    assert result.error_after <= result.error_before
+    cfg = FitConfig(latency=0.04, max_evaluations=8, rounds=1, starts=3)
+    result = fit(logs, world, cfg=cfg, out=out)
+    assert result.evaluations <= 9  # (its budget, and the result's own statistics)
+    assert 0.2 <= result.params.friction <= 2.0 and result.error_before > 0
     scene = tmp_path / "scene.yaml"
     library = Path(roachplan.scenes.LIBRARY)
     text = (library / "double_bridge.yaml").read_text()

@@ -73,12 +73,32 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotRun": "._run",
         "drive_robot": "._run",
         "predict": "._run",
+        "Comparison": "._compare",
+        "FitConfig": "._compare",
+        "FitResult": "._compare",
+        "SimParams": "._compare",
+        "Windows": "._compare",
+        "compare": "._compare",
+        "fit": "._compare",
+        "nominal_params": "._compare",
+        "params_of_robot_file": "._compare",
+        "replay_windows": "._compare",
         "TwinConfig": "._twin",
         "run_twin": "._twin",
     },
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._compare import Comparison as Comparison
+    from ._compare import FitConfig as FitConfig
+    from ._compare import FitResult as FitResult
+    from ._compare import SimParams as SimParams
+    from ._compare import Windows as Windows
+    from ._compare import compare as compare
+    from ._compare import fit as fit
+    from ._compare import nominal_params as nominal_params
+    from ._compare import params_of_robot_file as params_of_robot_file
+    from ._compare import replay_windows as replay_windows
     from ._errors import RobotError as RobotError
     from ._frames import FRAME_SIZE as FRAME_SIZE
     from ._frames import CommandFrame as CommandFrame

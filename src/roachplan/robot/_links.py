@@ -12,6 +12,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from roachplan._settings import SettingError, check_settings, integer
+from roachplan._settings import setting as s
+
+from . import _checks
 from ._errors import RobotError
 from ._frames import FRAME_SIZE, CommandFrame, FrameReader, decode_command, encode_command
 
@@ -50,18 +54,19 @@ class _Sequencer:
 class UdpLinkSettings:
     """Commands as UDP datagrams, one frame each."""
 
-    host: str = "127.0.0.1"
+    host: str = s("127.0.0.1", _checks.host())
     """The robot's (or its bridge's) address."""
-    port: int = 9870
+    port: int = s(9870, _checks.port())
     """Its UDP port."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 class UdpCommandLink:
     """Sends each frame as one UDP datagram."""
 
     def __init__(self, settings: UdpLinkSettings) -> None:
-        if not 0 < settings.port < 65536:
-            raise RobotError(f"command link udp: port {settings.port}: expected 1-65535")
         self.settings = settings
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._seq = _Sequencer()
@@ -84,10 +89,13 @@ class SerialLinkSettings:
     """Commands over a serial line (the VelociRoACH's radio bridge is one), frames back to
     back."""
 
-    port: str
+    port: str = s(check=_checks.device())
     """The device: /dev/ttyUSB0, /dev/ttyACM0, COM3, a pseudo-terminal."""
-    baudrate: int = 115200
+    baudrate: int = s(115200, integer(300, 4_000_000, noun="a line speed [bit/s]"))
     """Line speed [bit/s]: a 28-byte frame takes 2.4 ms at 115200, well inside 20 ms."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 class SerialCommandLink:
@@ -140,7 +148,7 @@ def open_link(name: str, **settings) -> CommandLink:
         raise RobotError(f"command link {name!r}: choose from {', '.join(sorted(LINKS))}")
     try:
         return LINKS[name](**settings)
-    except TypeError as exc:
+    except (TypeError, SettingError) as exc:
         raise RobotError(f"command link {name!r}: {exc}") from None
 
 

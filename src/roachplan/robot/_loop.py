@@ -23,6 +23,8 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from roachplan._settings import between, check_settings
+from roachplan._settings import setting as s
 from roachplan.sim import DriverConfig, make_follower, omega_limit
 
 from ._frames import CommandFrame
@@ -36,12 +38,15 @@ from ._transform import FrameTransform
 class LoopConfig:
     """How the loop runs."""
 
-    rate: float = 50.0
+    rate: float = s(50.0, between(1.0, 1000.0, "Hz"))
     """Control rate [Hz]."""
     safety: SafetyConfig = field(default_factory=SafetyConfig)
-    late_tolerance: float = 0.25
+    late_tolerance: float = s(0.25, between(0.0, 1.0, "-"))
     """A period whose command leaves more than this share of a period after its instant is
     late (counted, and recorded) [-]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -209,6 +214,12 @@ class RobotLoop:
         """The result once the loop has ended (None if it has not within timeout [s])."""
         self._done.wait(timeout)
         return self._result
+
+    @property
+    def stopping(self) -> bool:
+        """A stop was asked for (stop(), cancel(), a signal), or the loop has ended."""
+        with self._lock:
+            return self._requested is not None or self._done.is_set()
 
     @property
     def running(self) -> bool:

@@ -47,6 +47,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from roachplan._settings import check_settings, one_of, positive
+from roachplan._settings import setting as s
+
+from . import _checks
 from ._errors import RobotError
 from ._pose import PoseSample
 from ._transform import quat_multiply
@@ -258,19 +262,22 @@ class NatNetServer:
 class NatNetSettings:
     """Where Motive streams and which rigid body is the robot."""
 
-    server: str = "127.0.0.1"
+    server: str = s("127.0.0.1", _checks.host())
     """Motive's address (Motive: Streaming, Local Interface)."""
-    local: str = "127.0.0.1"
+    local: str = s("127.0.0.1", _checks.host())
     """This computer's address on the network Motive streams on."""
-    command_port: int = 1510
+    command_port: int = s(1510, _checks.port())
     """Motive's command port (Streaming: Command Port; 1510 by default)."""
-    rigid_body: int | str = 1
+    rigid_body: int | str = s(1, _checks.rigid_body())
     """The robot's rigid body: its streaming id, or its name in Motive."""
-    up_axis: str = "z"
+    up_axis: str = s("z", one_of(("z", "y")))
     """The stream's up axis (Motive: Streaming, Up Axis): "z", or "y" (Motive's default),
     turned to z up here (x, y, z)_zup = (x, -z, y) before the mocap-to-world transform."""
-    connect_timeout: float = 5.0
+    connect_timeout: float = s(5.0, positive("s", 60.0))
     """How long to wait for Motive's answer to NAT_CONNECT [s]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 _Y_UP_TO_Z_UP = (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))  # +90 deg about x, xyzw
@@ -283,8 +290,6 @@ class NatNetPoseSource:
     def __init__(self, settings: NatNetSettings) -> None:
         from natnet import NatNetClient  # the client loads only with a NatNet source
 
-        if settings.up_axis not in ("z", "y"):
-            raise RobotError(f"natnet up_axis {settings.up_axis!r}: choose z or y")
         self.settings = settings
         self._lock = threading.Lock()
         self._latest: PoseSample | None = None

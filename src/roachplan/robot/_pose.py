@@ -25,6 +25,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from roachplan._settings import SettingError, check_settings
+from roachplan._settings import setting as s
+
+from . import _checks
 from ._errors import RobotError
 
 
@@ -58,10 +62,13 @@ class PoseSource(Protocol):
 class UdpJsonSettings:
     """A UDP/JSON pose stream (the module docstring)."""
 
-    host: str = "127.0.0.1"
+    host: str = s("127.0.0.1", _checks.host())
     """The address to receive on."""
-    port: int = 9871
+    port: int = s(9871, _checks.port(free=True))
     """The port to receive on (0: a free one; UdpJsonPoseSource.port says which)."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 def parse_pose_json(data: bytes) -> tuple[int, float, tuple, tuple] | None:
@@ -183,5 +190,5 @@ def open_pose_source(name: str, **settings) -> PoseSource:
         raise RobotError(f"pose source {name!r}: choose from {', '.join(sorted(POSE_SOURCES))}")
     try:
         return POSE_SOURCES[name](**settings)
-    except TypeError as exc:
+    except (TypeError, SettingError) as exc:
         raise RobotError(f"pose source {name!r}: {exc}") from None

@@ -16,6 +16,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roachplan._settings import check_settings, optional, positive, seed
+from roachplan._settings import setting as s
+
 from ._errors import RobotError
 from ._links import CommandLink, open_link
 from ._loop import LoopConfig, LoopEvent, RobotLoop, RunResult
@@ -43,15 +46,18 @@ class RobotSettings:
     """Its settings (udp: host, port; serial: port, baudrate)."""
     transform: FrameTransform | None = None
     """T_world_mocap; None: measured from the first pose, the robot placed at the start."""
-    seed: int | None = None
+    seed: int | None = s(None, optional(seed()))
     """The plan's seed (None: the scene's)."""
     loop: LoopConfig = field(default_factory=LoopConfig)
     log: Path | None = None
     """The run's MCAP file (None: not recorded)."""
     predict: bool = True
     """Record the simulation's prediction of the plan from the robot's actual start."""
-    first_pose_timeout: float = 5.0
+    first_pose_timeout: float = s(5.0, positive("s", 600.0))
     """How long to wait for the robot's first pose [s]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -113,11 +119,15 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     link: CommandLink | None = None,
     listeners: Sequence[Callable[[LoopEvent], None]] = (),
     on_loop: Callable[[RobotLoop], None] | None = None,
+    ready: Callable[[RobotLoop], bool] | None = None,
 ) -> RobotRun:
     """Plan from where the robot stands (or take `plan`), Go, drive until the goal or a stop,
     and record it. source/link: already open ones (default: opened from the settings and
     closed at the end). on_loop(loop) is called once the loop runs (a caller's Stop button).
-    Ctrl-C and SIGTERM stop the robot (when called from the main thread)."""
+    ready(loop): the user's Go - called once the loop runs (sending stop frames: nothing
+    moves) with the plan made (loop.path), it returns True to drive, False not to (the run
+    then ends as "cancel"); None: go at once. Ctrl-C and SIGTERM stop the robot, while it
+    waits for Go too (when called from the main thread)."""
     own_source = source is None
     own_link = link is None
     source = source or open_pose_source(settings.source, **settings.source_settings)
@@ -178,7 +188,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             loop.start()
             if on_loop is not None:
                 on_loop(loop)
-            loop.go()
+            if ready is None or ready(loop):
+                loop.go()
+            else:
+                loop.stop("cancel", "not started: Go was not given")
             while (result := loop.wait(0.1)) is None:
                 pass
         finally:
@@ -247,7 +260,7 @@ def _stop_on_signals(loop: RobotLoop) -> Callable[[], None]:
     before = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
 
     def restore() -> None:
-        for s, h in before.items():
-            signal.signal(s, h)
+        for signum, h in before.items():
+            signal.signal(signum, h)
 
     return restore

@@ -10,6 +10,9 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from roachplan._settings import check_settings, positive
+from roachplan._settings import setting as s
+
 if TYPE_CHECKING:
     from roachplan.scenes import World
 
@@ -41,27 +44,22 @@ Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a l
 class SafetyConfig:
     """When the robot is stopped, and how."""
 
-    max_pose_age: float = 0.2
+    max_pose_age: float = s(0.2, positive("s", 10.0))
     """A pose older than this stops the robot [s] (the mocap lost it, or the stream died)."""
-    area_margin: float = 0.05
+    area_margin: float = s(0.05, positive("m", 10.0))
     """How far the robot's centre may be outside the planning area [m]."""
-    standable_margin: float = 0.05
+    standable_margin: float = s(0.05, positive("m", 10.0))
     """How far the robot's centre may be from the nearest place it can stand (the World's
     standable map, 4 cm cells) [m]: past a bridge's edge, it is falling."""
-    max_deviation: float = 0.15
+    max_deviation: float = s(0.15, positive("m", 10.0))
     """How far the robot's centre may be from the path [m] (1.5 body lengths: the tracking
     driver keeps within a few cm on the library's scenes)."""
-    stop_hold: float = 0.5
+    stop_hold: float = s(0.5, positive("s", 60.0))
     """After a stop, zero commands go on at the control rate this long [s], so a robot that
     missed one datagram still gets one."""
 
     def __post_init__(self) -> None:
-        for name in ("max_pose_age", "area_margin", "standable_margin", "max_deviation"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and value > 0 and math.isfinite(value)):
-                from ._errors import RobotError
-
-                raise RobotError(f"safety.{name}: expected a positive number, got {value!r}")
+        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -29,6 +29,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from roachplan._settings import (
+    between,
+    check_settings,
+    non_negative,
+    numbers,
+    one_of,
+    optional,
+    positive,
+    seed,
+)
+from roachplan._settings import setting as s
+
+from . import _checks
 from ._errors import RobotError
 from ._links import FdCommandReceiver, UdpCommandReceiver
 from ._natnet import NatNetServer, RigidBodyFrame, RigidBodyModel, frame_packet
@@ -42,48 +55,53 @@ class TwinConfig:
 
     scene: str = "double_bridge"
     """A library scene's name, a scene file or a terrain file."""
-    start: tuple[float, float, float] | None = None
+    start: tuple[float, float, float] | None = s(
+        None, optional(numbers(3, "x [m], y [m], yaw [rad]"))
+    )
     """Where the robot stands at first (x [m], y [m], yaw [rad]); None: the scene's start."""
-    friction: float | None = None
+    friction: float | None = s(None, optional(between(0.05, 5.0, "-")))
     """Ground friction [-]; None: the scene's."""
-    motor_gain: float = 1.0
+    motor_gain: float = s(1.0, between(0.2, 5.0, "-"))
     """Both motors run at this times their command [-]."""
-    motor_mismatch: float = 0.0
+    motor_mismatch: float = s(0.0, between(-0.5, 0.5, "-"))
     """Left x (1 + d), right x (1 - d) [-], as the scenes' `uncertainty:` draws it."""
-    mass_scale: float = 1.0
+    mass_scale: float = s(1.0, between(0.2, 5.0, "-"))
     """The body's mass (and inertia) x this [-]."""
-    pose: str = "natnet"
+    pose: str = s("natnet", one_of(("natnet", "udp-json")))
     """How the pose is served: "natnet" or "udp-json"."""
-    natnet_port: int = 0
+    natnet_port: int = s(0, _checks.port(free=True))
     """NatNet command port (0: a free one; Motive's is 1510)."""
     rigid_body: tuple[int, str] = (1, "roach")
     """The rigid body's streaming id and name."""
     pose_target: tuple[str, int] | None = None
     """udp-json: where to send the poses."""
-    pose_rate: float = 120.0
+    pose_rate: float = s(120.0, between(1.0, 1000.0, "Hz"))
     """Poses per second [Hz] (Motive's default frame rate: 120)."""
-    latency: float = 0.0
+    latency: float = s(0.0, between(0.0, 5.0, "s"))
     """How long after the simulation's instant a pose is sent [s]."""
-    noise: float = 0.0
+    noise: float = s(0.0, non_negative("m"))
     """Standard deviation of each position coordinate's noise [m]."""
-    noise_angle: float = 0.0
+    noise_angle: float = s(0.0, non_negative("rad"))
     """Standard deviation of the orientation's noise, about each axis [rad]."""
-    drop: float = 0.0
+    drop: float = s(0.0, between(0.0, 1.0, "-", high_included=False))
     """Probability that a pose is not sent [-]."""
-    seed: int = 0
+    seed: int = s(0, seed())
     """Seed of the noise and the drops."""
     mocap: FrameTransform = FrameTransform()
     """T_world_mocap: the twin's poses are given in the mocap frame (its inverse applied)."""
-    command: str = "udp"
+    command: str = s("udp", one_of(("udp", "serial")))
     """How commands come: "udp" or "serial"."""
-    command_port: int = 0
+    command_port: int = s(0, _checks.port(free=True))
     """udp: the port commands come to (0: a free one)."""
     serial: str = "pty"
     """serial: "pty" (a pseudo-terminal the twin makes; its device is announced) or a device."""
-    command_timeout: float = 0.25
+    command_timeout: float = s(0.25, positive("s", 10.0))
     """With no valid command for this long the robot stops by itself [s]."""
-    host: str = "127.0.0.1"
+    host: str = s("127.0.0.1", _checks.host())
     """The address every socket of the twin binds to."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 class _Announce:

@@ -186,10 +186,20 @@ class Simulation:
             z = self.surface_height(x, y, surface + 0.1)
         return z
 
-    def reset(self, x: float, y: float, yaw: float, surface: float | None = None) -> None:
+    def reset(
+        self,
+        x: float,
+        y: float,
+        yaw: float,
+        surface: float | None = None,
+        *,
+        phase: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
         """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle.
         surface: the height the planner stands it on there [m]; the ground is then looked for
-        just above it (under a table, the floor the plan is on, not the table top)."""
+        just above it (under a table, the floor the plan is on, not the table top). phase: the
+        (left, right) motors' phase to stand at [rad] (0: the tripod stance; a robot caught
+        mid-stride, as a logged run's re-simulation from one of its poses starts it)."""
         bc, r = self._bc, self.robot
         # Park the robot out of the ray's way before looking for the ground under the start.
         bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
@@ -209,9 +219,9 @@ class Simulation:
             position, quat = tilted
         bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
         bc.resetBaseVelocity(self.robot_id, (0, 0, 0), (0, 0, 0))
-        self._phase[:] = 0.0
+        self._phase[:] = phase
         self._omega[:] = 0.0
-        q0, _ = r.leg_angle(self._offsets)
+        q0, _ = r.leg_angle(self._phase[self._sides] + self._offsets)
         for j in self._joints:
             bc.resetJointState(self.robot_id, j, float(q0[j]), 0.0)
         self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
