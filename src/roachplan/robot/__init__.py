@@ -58,7 +58,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "StopReason": "._safety",
         "check_pose": "._safety",
         "distance_to_path": "._safety",
-        "LoopConfig": "._loop",
+        "LoopConfig": "._config",
         "RobotLoop": "._loop",
         "RunResult": "._loop",
         "LoopEvent": "._loop",
@@ -69,7 +69,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RunRecorder": "._record",
         "RunLog": "._record",
         "read_run": "._record",
-        "RobotSettings": "._run",
+        "RobotSettings": "._config",
         "RobotRun": "._run",
         "drive_robot": "._run",
         "predict": "._run",
@@ -80,6 +80,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "Windows": "._compare",
         "compare": "._compare",
         "fit": "._compare",
+        "log_world": "._compare",
+        "motor_phase": "._compare",
         "nominal_params": "._compare",
         "params_of_robot_file": "._compare",
         "replay_windows": "._compare",
@@ -96,9 +98,13 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._compare import Windows as Windows
     from ._compare import compare as compare
     from ._compare import fit as fit
+    from ._compare import log_world as log_world
+    from ._compare import motor_phase as motor_phase
     from ._compare import nominal_params as nominal_params
     from ._compare import params_of_robot_file as params_of_robot_file
     from ._compare import replay_windows as replay_windows
+    from ._config import LoopConfig as LoopConfig
+    from ._config import RobotSettings as RobotSettings
     from ._errors import RobotError as RobotError
     from ._frames import FRAME_SIZE as FRAME_SIZE
     from ._frames import CommandFrame as CommandFrame
@@ -117,7 +123,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._links import register_link as register_link
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent
-    from ._loop import LoopConfig as LoopConfig
     from ._loop import LoopEvent as LoopEvent
     from ._loop import PoseEvent as PoseEvent
     from ._loop import RobotLoop as RobotLoop
@@ -145,7 +150,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import RunRecorder as RunRecorder
     from ._record import read_run as read_run
     from ._run import RobotRun as RobotRun
-    from ._run import RobotSettings as RobotSettings
     from ._run import drive_robot as drive_robot
     from ._run import predict as predict
     from ._safety import SafetyConfig as SafetyConfig

@@ -446,6 +446,35 @@ def compare(
     )
 
 
+def log_world(log: RunLog, scene: str | Path | None = None) -> World:
+    """The world a run was made on: `scene` (a library name or a file) if given, else the
+    scene file the log names - RobotError when it is gone or has changed since the run (its
+    SHA-256 is in the log): then give the scene."""
+    import hashlib
+
+    from roachplan.scenes import build_world, load_scene
+
+    if scene is not None:
+        return build_world(load_scene(scene))
+    recorded = log.scene or {}
+    path = recorded.get("path")
+    if not path:
+        raise RobotError(f"{log.path}: the log names no scene file; give the scene (--scene)")
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise RobotError(
+            f"{log.path}: its scene file {path} cannot be read ({exc.strerror}); give the "
+            f"scene (--scene)"
+        ) from None
+    if recorded.get("sha256") and hashlib.sha256(data).hexdigest() != recorded["sha256"]:
+        raise RobotError(
+            f"{log.path}: its scene file {path} has changed since the run; give the scene "
+            f"(--scene) to use it as it is now"
+        )
+    return build_world(load_scene(path))
+
+
 def params_of_robot_file(path: str | Path) -> SimParams:
     """The parameters a robot file holds (scenes/_robot_file.py)."""
     from roachplan.scenes import load_robot_file

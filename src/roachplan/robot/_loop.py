@@ -18,35 +18,19 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
 
-from roachplan._settings import between, check_settings
-from roachplan._settings import setting as s
 from roachplan.sim import DriverConfig, make_follower, omega_limit
 
+from ._config import LoopConfig
 from ._frames import CommandFrame
 from ._links import CommandLink
 from ._pose import PoseSample, PoseSource
-from ._safety import SafetyConfig, SafetyMap, Stop, StopReason, check_pose
+from ._safety import SafetyMap, Stop, StopReason, check_pose
 from ._transform import FrameTransform
-
-
-@dataclass(frozen=True, kw_only=True)
-class LoopConfig:
-    """How the loop runs."""
-
-    rate: float = s(50.0, between(1.0, 1000.0, "Hz"))
-    """Control rate [Hz]."""
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
-    late_tolerance: float = s(0.25, between(0.0, 1.0, "-"))
-    """A period whose command leaves more than this share of a period after its instant is
-    late (counted, and recorded) [-]."""
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True)

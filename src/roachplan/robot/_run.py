@@ -10,18 +10,16 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from roachplan._settings import check_settings, optional, positive, seed
-from roachplan._settings import setting as s
-
+from ._config import RobotSettings
 from ._errors import RobotError
 from ._links import CommandLink, open_link
-from ._loop import LoopConfig, LoopEvent, RobotLoop, RunResult
+from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
 from ._safety import SafetyMap
@@ -30,34 +28,6 @@ from ._transform import FrameTransform, measure_transform, yaw_of
 if TYPE_CHECKING:
     from roachplan.planning import PlanResult
     from roachplan.scenes import World
-
-
-@dataclass(frozen=True, kw_only=True)
-class RobotSettings:
-    """One drive of a real robot (the `roachplan robot` command's settings)."""
-
-    source: str = "natnet"
-    """The pose source's name (robot.POSE_SOURCES)."""
-    source_settings: dict[str, Any] = field(default_factory=dict)
-    """Its settings (e.g. natnet: server, local, command_port, rigid_body, up_axis)."""
-    link: str = "udp"
-    """The command link's name (robot.LINKS)."""
-    link_settings: dict[str, Any] = field(default_factory=dict)
-    """Its settings (udp: host, port; serial: port, baudrate)."""
-    transform: FrameTransform | None = None
-    """T_world_mocap; None: measured from the first pose, the robot placed at the start."""
-    seed: int | None = s(None, optional(seed()))
-    """The plan's seed (None: the scene's)."""
-    loop: LoopConfig = field(default_factory=LoopConfig)
-    log: Path | None = None
-    """The run's MCAP file (None: not recorded)."""
-    predict: bool = True
-    """Record the simulation's prediction of the plan from the robot's actual start."""
-    first_pose_timeout: float = s(5.0, positive("s", 600.0))
-    """How long to wait for the robot's first pose [s]."""
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
