@@ -2,7 +2,7 @@
 a pose dropout and Stop stop the robot, and how well fit recovers the twin's hidden
 parameters. Prints shares and ratios; a busy machine shows in them (load average printed).
 
-    .venv/bin/python benchmarks/bench_robot.py [--fit-evaluations 40] [--skip-fit]
+    .venv/bin/python benchmarks/bench_robot.py [--fit-evaluations 80] [--skip-fit]
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 from tempfile import TemporaryDirectory
 
 import roachplan
-from roachplan.robot import RobotSettings, drive_robot
+from roachplan.robot import RobotSettings, SimParams, drive_robot
 
 HIDDEN = {"friction": 0.7, "motor_mismatch": 0.03, "motor_gain": 0.96}
 MOCAP = ["--latency", "0.04", "--noise", "0.002", "--seed", "5"]
@@ -70,7 +70,7 @@ def after(seconds, action):
 
 def main() -> None:  # noqa: PLR0915 - the benchmark's steps in order
     ap = argparse.ArgumentParser()
-    ap.add_argument("--fit-evaluations", type=int, default=40)
+    ap.add_argument("--fit-evaluations", type=int, default=80)
     ap.add_argument("--skip-fit", action="store_true")
     args = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
@@ -131,29 +131,41 @@ def main() -> None:  # noqa: PLR0915 - the benchmark's steps in order
             twin.close()
         if args.skip_fit:
             return
-        from roachplan.robot._compare import compare, fit
+        fit_and_compare(world, logs, args.fit_evaluations)
 
-        t = time.monotonic()
-        result = fit(logs, world, seed=0, max_evaluations=args.fit_evaluations, latency=0.04)
-        p = result.params
+
+def fit_and_compare(world, logs, evaluations: int) -> None:
+    """fit on the three logs; compare each before (the scene's nominal robot) and after."""
+    from roachplan.robot import FitConfig, compare, fit
+
+    t = time.monotonic()
+    result = fit(logs, world, cfg=FitConfig(latency=0.04, max_evaluations=evaluations))
+    p = result.params
+    print(
+        f"fit ({result.evaluations} evaluations, {time.monotonic() - t:.0f} s): friction "
+        f"{p.friction:.3f} (twin {HIDDEN['friction']}, "
+        f"{100 * abs(p.friction / HIDDEN['friction'] - 1):.1f} % off, goal 10 %), "
+        f"mismatch {p.motor_mismatch:.4f} (twin {HIDDEN['motor_mismatch']}, off by "
+        f"{abs(p.motor_mismatch - HIDDEN['motor_mismatch']):.4f}, goal 0.02), gain "
+        f"{p.motor_gain:.3f} (twin {HIDDEN['motor_gain']}, "
+        f"{100 * abs(p.motor_gain / HIDDEN['motor_gain'] - 1):.1f} % off); windows' error "
+        f"{result.error_before:.4f} -> {result.error_after:.4f} m"
+    )
+    exact = SimParams(**HIDDEN)
+    for log in logs:
+        row = []
+        for label, params in (("nominal", None), ("fitted", p), ("twin's own", exact)):
+            c = compare(log, world, params=params, latency=0.04)
+            row.append((label, c.open_loop.end, c.windows.error(), c.closed_loop.end))
+        (_, o0, w0, c0) = row[0]
         print(
-            f"fit ({result.evaluations} evaluations, {time.monotonic() - t:.0f} s): friction "
-            f"{p.friction:.3f} (twin {HIDDEN['friction']}, "
-            f"{100 * abs(p.friction / HIDDEN['friction'] - 1):.1f} % off, goal 10 %), "
-            f"mismatch {p.motor_mismatch:.4f} (twin {HIDDEN['motor_mismatch']}, off by "
-            f"{abs(p.motor_mismatch - HIDDEN['motor_mismatch']):.4f}, goal 0.02), gain "
-            f"{p.motor_gain:.3f} (twin {HIDDEN['motor_gain']}); error "
-            f"{result.error_before:.4f} -> {result.error_after:.4f} m"
-        )
-        for log in logs:
-            before = compare(log, world, latency=0.04)
-            after_ = compare(log, world, params=p, latency=0.04)
-            print(
-                f"compare {log.name}: open-loop end error {before.open_loop.end:.3f} -> "
-                f"{after_.open_loop.end:.3f} m (ratio {after_.open_loop.end / before.open_loop.end:.2f}, "
-                f"goal <= 0.33); closed-loop end {before.closed_loop.end:.3f} -> "
-                f"{after_.closed_loop.end:.3f} m; outcome agrees {after_.outcome_agrees}"
+            f"compare {log.name}: "
+            + "; ".join(
+                f"{label}: open-loop end {o:.3f} m ({o / o0:.2f}), windows {w:.3f} m "
+                f"({w / w0:.2f}), closed-loop end {c:.3f} m"
+                for label, o, w, c in row
             )
+        )
 
 
 if __name__ == "__main__":

@@ -537,7 +537,7 @@ def run_replay(path: Path, *, scene: str | None = None) -> Replay:
         frames=tuple(frames),
         note=note,
         rows=tuple(rows),
-        lines=(("/robot/track", tuple(map(tuple, p.tolist())), LIVE),) if len(p) >= 2 else (),
+        lines=(("/live/track", tuple(map(tuple, p.tolist())), LIVE),) if len(p) >= 2 else (),
         legend="planned path black, the simulation's prediction blue, the robot green",
     )
 

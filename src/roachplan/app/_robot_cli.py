@@ -20,24 +20,17 @@ from roachplan.experiments import check_output_file
 from ._flags import UsageError, clip, numbers, pose, refused, setting_flag
 
 
-def _address(text: str | None, flag: str, *, default_host: str = "127.0.0.1"):
+def _address(text: str | None, flag: str):
     """'HOST:PORT' (or 'PORT') -> (host, port), each checked by the robot's validators."""
     if text is None:
         return None
-    from roachplan.robot._checks import host, port
+    from roachplan.robot._checks import parse_address
 
-    h, sep, p = text.rpartition(":")
-    h = h if sep else default_host
     try:
-        number = int(p)
-    except ValueError:
-        raise UsageError(
-            f"{flag} {clip(repr(text), 80)}: expected HOST:PORT (or PORT), e.g. 127.0.0.1:9870"
-        ) from None
-    for check, value in ((host(), h), (port(), number)):
-        if (expected := check(value)) is not None:
-            raise refused(flag, text, expected)
-    return h, number
+        return parse_address(text)
+    except ValueError as exc:
+        shown = repr(text) if str(exc).startswith("expected HOST") else text
+        raise UsageError(f"{flag} {clip(shown, 80)}: {exc}") from None
 
 
 def _transform(text: str | None, flag: str):

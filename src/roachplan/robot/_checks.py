@@ -42,3 +42,17 @@ def rigid_body() -> Check:
         return None if isinstance(v, str) and v.strip() else expected
 
     return check
+
+
+def parse_address(text: str, *, default_host: str = "127.0.0.1") -> tuple[str, int]:
+    """'HOST:PORT' (or 'PORT') -> (host, port); ValueError saying what is accepted."""
+    h, sep, p = text.strip().rpartition(":")
+    h = h if sep else default_host
+    try:
+        number = int(p)
+    except ValueError:
+        raise ValueError("expected HOST:PORT (or PORT), e.g. 127.0.0.1:9870") from None
+    for check, value in ((host(), h), (port(), number)):
+        if (expected := check(value)) is not None:
+            raise ValueError(expected)
+    return h, number
