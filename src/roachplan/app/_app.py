@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from ._loading import BackgroundLoad
     from ._loop import CommandLoop
     from ._markers import StartGoal
+    from ._robot_panel import RobotPanel, RobotSession
     from ._voxel_panel import VoxelPanel
 
 
@@ -63,6 +64,7 @@ class Page(Protocol):
     voxel_panel: VoxelPanel
     choose_panel: ChoosePanel
     batch_panel: BatchPanel
+    robot_panel: RobotPanel
 
     def set_status(self, text: str) -> None:
         """The status line at the top of the panel."""
@@ -114,6 +116,11 @@ class Page(Protocol):
         """The robot as in a simulation frame (cameras following it, when ticked)."""
         ...
 
+    def show_robot_pose(self, position, wxyz, leg_angles) -> None:
+        """The robot at a pose (world frame [m], wxyz) with its legs at angles [rad] (a real
+        robot's live pose; cameras following it, when ticked)."""
+        ...
+
     def list_plans(self, count: int) -> None:
         """The Drive path picker offers paths 1 to count, the first chosen."""
         ...
@@ -163,6 +170,8 @@ class App:
         self.files: dict[str, tuple[str, bool]] = {}
         """Scene picker label -> (scene file, written by the app) of each scene loaded from a
         file: uploads, re-meshed copies, `serve --scene FILE`."""
+        self.robot: RobotSession | None = None
+        """The real robot connected in the Robot folder, its plan and loop."""
         self._host: WorldHost | None = None
 
     @property
@@ -214,7 +223,10 @@ class App:
         return job
 
     def close(self) -> None:
-        """End the world's host."""
+        """Stop a robot still held or driven, and end the world's host."""
+        if self.robot is not None:
+            self.robot.close()
+            self.robot = None
         if self._host is not None:
             self._host.close()
 
@@ -242,7 +254,11 @@ class App:
     # -- the world's plans and trials -----------------------------------------------------------
 
     def show_world(self) -> None:
-        """The world on the page afresh (a new world): no plans, its trials."""
+        """The world on the page afresh (a new world): no plans, its trials; a robot held or
+        driven on the last world stopped."""
+        if self.robot is not None:
+            self.robot.close()
+            self.robot = None
         self.plan_endpoints = None
         self.page.show_world()
         self.set_plans([])

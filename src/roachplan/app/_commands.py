@@ -64,6 +64,24 @@ class ShareCmd(Cmd):
     """Share: the shown trial (else the last) as a replay page, a download."""
 
 
+# -- Robot ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RobotPlanCmd(Cmd):
+    """Route from robot: connect, locate the robot, plan from where it stands, predict, hold it."""
+
+
+@dataclass(frozen=True)
+class RobotGoCmd(Cmd):
+    """Go: drive the held robot along its plan."""
+
+
+@dataclass(frozen=True)
+class RobotStopCmd(Cmd):
+    """Stop (the Robot folder's): the robot stopped now, even while Go runs."""
+
+
 # -- Start and goal, View -------------------------------------------------------------------------
 
 

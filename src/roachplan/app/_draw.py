@@ -12,6 +12,9 @@ import numpy as np
 from roachplan.scenes import World
 
 BLACK, BLUE = (0, 0, 0), (30, 90, 255)
+LIVE = (0, 170, 90)
+"""Where the real robot went (its live poses): green, beside the plan (black) and the
+simulation's prediction (blue)."""
 MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}
 INVALID = (220, 30, 30)
 TERRAIN_COLOUR = (196, 164, 120)

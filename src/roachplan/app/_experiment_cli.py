@@ -94,12 +94,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
         kind="a replay roachplan wrote",
         force=args.force,
     )
-    replay = load_replay(args.folder, trial=args.trial)
+    replay = load_replay(args.folder, trial=args.trial, scene=args.scene)
     size = write_replay(replay, out)
     shown = replay.trials[replay.shown]
     print(
         f"wrote {out} ({size / 1e6:.1f} MB): {replay.title}; {shown['label']} plays "
-        f"({len(replay.frames)} frames, {shown['outcome']})"
+        f"({len(replay.frames)} frames{', ' + shown['outcome'] if 'outcome' in shown else ''})"
     )
     if replay.note:
         print(f"roachplan: {replay.note}", file=sys.stderr)

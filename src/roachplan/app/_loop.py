@@ -27,7 +27,20 @@ from ._commands import Cmd
 
 if TYPE_CHECKING:
     from ._app import App
-    from ._jobs import Job
+
+
+class Followed(Protocol):
+    """What `follow` follows: a job in a child (app/_jobs.py Job), or other work that tells its
+    progress as events and stops when cancelled (the Robot folder's loop)."""
+
+    def poll(self, timeout: float = 0.0) -> list:
+        """The events sent since the last poll, waiting up to timeout [s] for the first."""
+        ...
+
+    def cancel(self) -> None:
+        """Stop the work now."""
+        ...
+
 
 WhileBusy = Literal["run", "queue", "once"]
 """What a click does while another command runs: "run" at once, "queue" (wait its turn, said to
@@ -99,7 +112,7 @@ class CommandLoop:
         """Commands clicked while another ran, in order."""
         self.running: str | None = None
         """The name of the command whose job is followed now."""
-        self.job: Job | None = None
+        self.job: Followed | None = None
         """That job."""
         self._cancel = False
         self._stop = threading.Event()
@@ -133,7 +146,12 @@ class CommandLoop:
     # -- for handlers ---------------------------------------------------------------------------
 
     def follow(
-        self, job: Job, name: str, step: Callable[[list], bool], *, hard_stop: float | None = None
+        self,
+        job: Followed,
+        name: str,
+        step: Callable[[list], bool],
+        *,
+        hard_stop: float | None = None,
     ) -> FollowEnd:
         """Keep the page live while job runs: step(messages) shows its progress and returns
         True when the work is complete. Meanwhile clicks are taken in (`_intake`) and the

@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_experiment_parser(sub)
     add_choose_parser(sub, TERRAIN_HELP)
     _add_replay_parser(sub)
+    _add_robot_parsers(sub)
     _add_perception_parsers(sub)
 
     _add_calibrate_parser(sub)
@@ -79,12 +80,14 @@ def _all_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParse
 
 def _add_replay_parser(sub) -> None:
     p = sub.add_parser(
-        "replay", help="a trial, experiment or choice as one HTML file that plays offline"
+        "replay",
+        help="a trial, experiment, choice or robot run as one HTML file that plays offline",
     )
     p.add_argument(
         "folder",
-        metavar="DIR",
-        help="an experiment's results folder (`experiment --out`) or a choice's (`choose --out`)",
+        metavar="DIR|LOG.mcap",
+        help="an experiment's results folder (`experiment --out`), a choice's (`choose --out`) "
+        "or a robot run's log (`roachplan robot -o`)",
     )
     p.add_argument(
         "--trial",
@@ -101,6 +104,12 @@ def _add_replay_parser(sub) -> None:
         help=".html (standalone: viser's client and the recording in one file, opens "
         "offline) or .viser (viser's recording), in an existing folder; an "
         "existing file is replaced only if roachplan wrote it (else --force)",
+    )
+    p.add_argument(
+        "--scene",
+        default=None,
+        help="a robot run's log only: the scene to show it on (default: the scene file the "
+        "log names, as it was then)",
     )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     _runs(p, "_experiment_cli:cmd_replay")
@@ -510,3 +519,326 @@ def _add_scene_parsers(sub) -> None:
     _scad_flags(q)
     q.add_argument("--force", action="store_true", help=FORCE_HELP)
     _runs(q, "_scene_cli:cmd_scene_build")
+
+
+def _add_robot_parsers(sub) -> None:
+    """twin, robot, compare and fit: a real robot (or its stand-in) in the loop."""
+    p = sub.add_parser(
+        "twin",
+        help="a simulated roach that speaks as a real one: pose over NatNet or UDP/JSON, "
+        "motor commands over UDP or a serial line",
+    )
+    p.add_argument("--scene", default="double_bridge", help=TERRAIN_HELP)
+    p.add_argument(
+        "--start", default=None, help="x,y,yaw_deg where it stands (default: the scene's)"
+    )
+    hidden = (
+        ("friction", "ground friction [-] (default: the scene's)"),
+        ("motor-gain", "both motors run at this x their command [-] (default 1)"),
+        ("motor-mismatch", "left x (1 + d), right x (1 - d) [-] (default 0)"),
+        ("mass-scale", "the body's mass x this [-] (default 1)"),
+    )
+    for flag, what in hidden:
+        p.add_argument(
+            f"--{flag}",
+            dest=f"twin_{flag.replace('-', '_')}",
+            metavar=flag.upper().replace("-", "_"),
+            type=float,
+            default=None if flag == "friction" else (0.0 if flag == "motor-mismatch" else 1.0),
+            help=f"hidden parameter: {what}",
+        )
+    p.add_argument(
+        "--pose", choices=("natnet", "udp-json"), default="natnet", help="how the pose is served"
+    )
+    p.add_argument(
+        "--natnet-port",
+        dest="twin_natnet_port",
+        metavar="NATNET_PORT",
+        type=int,
+        default=0,
+        help="NatNet command port to serve on (Motive's is 1510; default 0: a free one, announced)",
+    )
+    p.add_argument(
+        "--rigid-body",
+        dest="twin_rigid_body",
+        metavar="RIGID_BODY",
+        type=int,
+        default=1,
+        help="its streaming id",
+    )
+    p.add_argument(
+        "--pose-target", default=None, metavar="HOST:PORT", help="udp-json: where to send the poses"
+    )
+    p.add_argument(
+        "--pose-rate",
+        dest="twin_pose_rate",
+        metavar="POSE_RATE",
+        type=float,
+        default=120.0,
+        help="[Hz]",
+    )
+    p.add_argument(
+        "--latency",
+        dest="twin_latency",
+        metavar="LATENCY",
+        type=float,
+        default=0.0,
+        help="pose latency [s]",
+    )
+    p.add_argument(
+        "--noise",
+        dest="twin_noise",
+        metavar="NOISE",
+        type=float,
+        default=0.0,
+        help="position noise, sigma [m]",
+    )
+    p.add_argument(
+        "--noise-angle",
+        dest="twin_noise_angle",
+        metavar="NOISE_ANGLE",
+        type=float,
+        default=0.0,
+        help="orientation noise, sigma about each axis [rad]",
+    )
+    p.add_argument(
+        "--drop",
+        dest="twin_drop",
+        metavar="DROP",
+        type=float,
+        default=0.0,
+        help="share of poses lost",
+    )
+    p.add_argument("--seed", type=int, default=None, help="seed of the noise and drops (default 0)")
+    p.add_argument(
+        "--mocap",
+        default=None,
+        metavar="X,Y,Z,YAW_DEG",
+        help="T_world_mocap: the poses are given in this capture frame (default: the world's)",
+    )
+    p.add_argument("--command", choices=("udp", "serial"), default="udp", help="how commands come")
+    p.add_argument(
+        "--command-port",
+        dest="twin_command_port",
+        metavar="COMMAND_PORT",
+        type=int,
+        default=0,
+        help="udp: the port commands come to (default 0: a free one, announced)",
+    )
+    p.add_argument(
+        "--serial", default="pty", help="serial: pty (a pseudo-terminal, announced) or a device"
+    )
+    p.add_argument(
+        "--command-timeout",
+        dest="twin_command_timeout",
+        metavar="COMMAND_TIMEOUT",
+        type=float,
+        default=0.25,
+        help="it stops by itself with no valid command for this long [s]",
+    )
+    p.add_argument(
+        "--host",
+        dest="twin_host",
+        metavar="HOST",
+        default="127.0.0.1",
+        help="the address its sockets bind to (default: loopback only)",
+    )
+    _runs(p, "_robot_cli:cmd_twin")
+    _add_robot_parser(sub)
+    _add_log_parsers(sub)
+
+
+def _add_robot_parser(sub) -> None:
+    p = sub.add_parser(
+        "robot",
+        help="drive a real robot (or a twin) headless: plan from where it stands, wait for Go, "
+        "drive, record the run",
+    )
+    p.add_argument("--scene", default="double_bridge", help=TERRAIN_HELP)
+    p.add_argument("--source", choices=("natnet", "udp-json"), default="natnet", help="pose source")
+    p.add_argument("--natnet-server", default="127.0.0.1", metavar="HOST", help="Motive's address")
+    p.add_argument(
+        "--natnet-local",
+        default="127.0.0.1",
+        metavar="HOST",
+        help="this computer's address on Motive's network",
+    )
+    p.add_argument(
+        "--natnet-port",
+        dest="robot_natnet_port",
+        metavar="NATNET_PORT",
+        type=int,
+        default=1510,
+        help="Motive's command port (default 1510)",
+    )
+    p.add_argument(
+        "--rigid-body", default="1", metavar="ID|NAME", help="the robot's rigid body in Motive"
+    )
+    p.add_argument("--up-axis", choices=("z", "y"), default="z", help="Motive's streaming up axis")
+    p.add_argument(
+        "--pose-host",
+        default="127.0.0.1",
+        metavar="HOST",
+        help="udp-json: the address to receive on",
+    )
+    p.add_argument(
+        "--pose-port",
+        dest="robot_pose_port",
+        metavar="POSE_PORT",
+        type=int,
+        default=None,
+        help="udp-json: the port to receive on (default 9871)",
+    )
+    p.add_argument("--link", choices=("udp", "serial"), default="udp", help="command link")
+    p.add_argument(
+        "--robot",
+        dest="robot_address",
+        default=None,
+        metavar="HOST:PORT",
+        help="udp: the robot's (or its bridge's) address (default 127.0.0.1:9870)",
+    )
+    p.add_argument(
+        "--serial", dest="serial_device", default=None, metavar="DEVICE", help="serial: the device"
+    )
+    p.add_argument(
+        "--baudrate",
+        dest="robot_baudrate",
+        metavar="BAUDRATE",
+        type=int,
+        default=115200,
+        help="serial: [bit/s]",
+    )
+    p.add_argument(
+        "--transform",
+        default=None,
+        metavar="X,Y,Z,YAW_DEG",
+        help="T_world_mocap (default: measured from the first pose, the robot placed at the "
+        "scene's start)",
+    )
+    p.add_argument("--seed", type=int, default=None, help="the plan's seed (default: the scene's)")
+    p.add_argument(
+        "--rate",
+        dest="robot_rate",
+        metavar="RATE",
+        type=float,
+        default=50.0,
+        help="control rate [Hz]",
+    )
+    for flag, what in (
+        ("max-pose-age", "a pose older than this stops the robot [s] (default 0.2)"),
+        ("max-deviation", "this far off the path stops it [m] (default 0.15)"),
+        ("area-margin", "this far outside the planning area stops it [m] (default 0.05)"),
+        ("standable-margin", "this far from where it can stand stops it [m] (default 0.05)"),
+        ("stop-hold", "zero commands go on this long after a stop [s] (default 0.5)"),
+    ):
+        p.add_argument(
+            f"--{flag}",
+            dest=f"robot_{flag.replace('-', '_')}",
+            metavar=flag.upper().replace("-", "_"),
+            type=float,
+            default=None,
+            help=what,
+        )
+    p.add_argument(
+        "--first-pose-timeout",
+        dest="robot_first_pose_timeout",
+        metavar="FIRST_POSE_TIMEOUT",
+        type=float,
+        default=5.0,
+        help="how long to wait for the robot's first pose [s]",
+    )
+    p.add_argument(
+        "--go",
+        action="store_true",
+        help="drive as soon as the plan is made (default: ask, and wait for Enter)",
+    )
+    p.add_argument(
+        "--no-predict",
+        action="store_true",
+        help="do not simulate the plan from the robot's start for the log",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        default=None,
+        help="the run's log (.mcap, in an existing folder; default SCENE-robot-TIME.mcap "
+        "here); an existing file is replaced only if it is a run log roachplan wrote (else "
+        "--force)",
+    )
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    _runs(p, "_robot_cli:cmd_robot")
+
+
+def _add_log_parsers(sub) -> None:
+    """compare and fit: what is made of robot run logs."""
+
+    def log_flags(q) -> None:
+        q.add_argument(
+            "--scene",
+            default=None,
+            help="the scene to re-simulate on (default: the scene file the log names, as it "
+            "was then)",
+        )
+        q.add_argument(
+            "--latency",
+            type=float,
+            default=None,
+            help="the pose stream's latency [s]: a pose received at t shows the robot at "
+            "t - latency (default 0)",
+        )
+        q.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser(
+        "compare",
+        help="how well the simulation predicted a robot run: open loop, closed loop, windows",
+    )
+    p.add_argument("log", metavar="LOG.mcap", help="a run log (`roachplan robot -o`)")
+    p.add_argument(
+        "--robot-file",
+        default=None,
+        metavar="FILE.yaml",
+        help="simulate with these parameters (`roachplan fit -o`; default: the scene's)",
+    )
+    log_flags(p)
+    _runs(p, "_robot_cli:cmd_compare")
+
+    p = sub.add_parser(
+        "fit", help="fit the simulation's friction and motors to robot runs: a robot file"
+    )
+    p.add_argument("logs", nargs="+", metavar="LOG.mcap", help="run logs of one robot on one floor")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="the robot file (.yaml) a scene names (`robot: {file: ...}`), in an existing "
+        "folder; an existing file is replaced only if roachplan wrote it (else --force)",
+    )
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.add_argument(
+        "--parameters",
+        default=None,
+        metavar="P,Q,...",
+        help="what to fit: friction, motor_gain, motor_mismatch, mass_scale (default: the "
+        "first three)",
+    )
+    p.add_argument(
+        "--evaluations",
+        type=int,
+        default=None,
+        help="at most this many re-simulations of the logs (default 80)",
+    )
+    p.add_argument(
+        "--rounds", type=int, default=None, help="passes over the parameters (default 2)"
+    )
+    p.add_argument(
+        "--starts",
+        type=int,
+        default=None,
+        help="friction: points searched across its range before refining (default 5)",
+    )
+    p.add_argument(
+        "--horizon", type=float, default=None, help="the windows' length [s] (default 1)"
+    )
+    log_flags(p)
+    _runs(p, "_robot_cli:cmd_fit")

@@ -27,6 +27,9 @@ from ._commands import (
     PlaceCmd,
     PlanCmd,
     ResetCmd,
+    RobotGoCmd,
+    RobotPlanCmd,
+    RobotStopCmd,
     RunTrialsCmd,
     ShareCmd,
     ShowTrialCmd,
@@ -40,6 +43,7 @@ from ._loop import Command
 from ._markers import click_while_busy, do_check_markers, do_place
 from ._plan_drive import do_best_path, do_drive, do_export, do_plan, do_reset, show_trial
 from ._replay import share_trial
+from ._robot_panel import do_robot_go, do_robot_plan, do_robot_stop
 from ._voxel_panel import do_voxel
 
 
@@ -64,6 +68,8 @@ COMMANDS: dict[type[Cmd], Command[Any]] = {
     ShowTrialCmd: Command(handler=show_trial, name="Show trial"),
     ShareCmd: Command(handler=share_trial, name="Share"),
     VoxelCmd: Command(handler=do_voxel, name="Voxel study"),
+    RobotPlanCmd: Command(handler=do_robot_plan, name="Route from robot"),
+    RobotGoCmd: Command(handler=do_robot_go, name="Go"),
     PlaceCmd: Command(handler=do_place, name="Click", while_busy=click_while_busy),
     # A drag sends many: one re-check after the running command, unannounced.
     MarkersCmd: Command(handler=do_check_markers, name="Marker check", while_busy="once"),
@@ -75,6 +81,7 @@ COMMANDS: dict[type[Cmd], Command[Any]] = {
     ExportCmd: Command(handler=do_export, name="Export CSV", while_busy="run"),
     ViewCmd: Command(handler=change_view, name="View", while_busy="run"),
     CancelCmd: Command(handler=cancel_running, name="Cancel", while_busy="run"),
+    RobotStopCmd: Command(handler=do_robot_stop, name="Stop robot", while_busy="run"),
     CancelLoadCmd: Command(handler=do_cancel_load, name="Cancel load", while_busy="run"),
     CancelBatchCmd: Command(handler=do_cancel_batch, name="Cancel batch", while_busy="run"),
 }

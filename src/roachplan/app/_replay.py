@@ -21,6 +21,7 @@ import dataclasses
 import html
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,7 +33,16 @@ from roachplan.scenes import World
 from roachplan.sim import Frame
 
 from ._commands import ShareCmd
-from ._draw import BLACK, BLUE, MARKER_COLOURS, SceneView, on_surface, wxyz_from_xyzw, yaw_wxyz
+from ._draw import (
+    BLACK,
+    BLUE,
+    LIVE,
+    MARKER_COLOURS,
+    SceneView,
+    on_surface,
+    wxyz_from_xyzw,
+    yaw_wxyz,
+)
 
 if TYPE_CHECKING:
     from ._app import App
@@ -65,6 +75,12 @@ class Replay:
     """The shown trial's robot per frame (empty: it stays at its start)."""
     note: str = ""
     """Anything the viewer should know (a re-drive that differs from the store)."""
+    rows: tuple[tuple[str, str], ...] = ()
+    """The numbers shown (name, value); empty: the shown trial's (`numbers`)."""
+    lines: tuple[tuple[str, tuple, tuple[int, int, int]], ...] = ()
+    """More polylines to draw: (node name, points [[x, y, z]...] [m], colour)."""
+    legend: str = "planned path black, driven trajectory blue"
+    """What the colours are."""
 
 
 # -- building a replay from a results folder -----------------------------------------------------
@@ -101,11 +117,23 @@ def redrive(world: World, record: dict) -> tuple[tuple[Frame, ...], str]:
     return tuple(frames), ""
 
 
-def load_replay(folder: str | Path, *, trial: int | None = None) -> Replay:
-    """The replay of an experiment's results folder (every trial, or only `trial`) or of a
-    choice's folder (its chosen path). ExperimentError naming the folder or --trial when it
-    holds neither, or not that trial."""
+def load_replay(
+    folder: str | Path, *, trial: int | None = None, scene: str | None = None
+) -> Replay:
+    """The replay of an experiment's results folder (every trial, or only `trial`), of a
+    choice's folder (its chosen path) or of a robot run's log (LOG.mcap: on `scene`, default
+    the scene file it names). ExperimentError naming the folder or --trial when it holds
+    neither, or not that trial."""
     folder = Path(folder)
+    if is_run_log(folder):
+        if trial is not None:
+            raise ExperimentError(f"--trial {trial}: {folder} is one robot run; drop --trial")
+        return run_replay(folder, scene=scene)
+    if scene is not None:
+        raise ExperimentError(
+            f"--scene {scene}: a results folder replays on its own recorded scene; --scene is "
+            f"for a robot run's log"
+        )
     if not folder.is_dir():
         raise ExperimentError(
             f"{folder}: not a folder; give an experiment's results folder "
@@ -296,6 +324,8 @@ def _record(replay: Replay):
                 view.draw(f"/plans/{k}", np.asarray(t["path"]) + [0, 0, 0.005], BLACK)
             if t.get("trajectory"):
                 view.draw(f"/trajectories/{k}", [p[1:] for p in t["trajectory"]], BLUE)
+        for name, points, colour in replay.lines:
+            view.draw(name, points, colour)
         lo, hi = (
             np.asarray(world.mesh.bounds)
             if len(world.mesh.faces)
@@ -304,7 +334,7 @@ def _record(replay: Replay):
         centre, span = (lo + hi) / 2, float(max(hi[0] - lo[0], hi[1] - lo[1], 0.5))
         server.initial_camera.look_at = tuple(centre)
         server.initial_camera.position = tuple(centre + np.array([-0.25, -0.6, 0.5]) * span)
-        label = " · ".join(v for _, v in numbers(shown)[3:8])
+        label = " · ".join(v for _, v in (replay.rows or numbers(shown)[3:8]))
         start = on_surface(world, tuple(shown.get("start") or world.start))
         server.scene.add_label(
             "/replay/numbers",
@@ -357,7 +387,9 @@ def _overlay(replay: Replay) -> str:
     """The trial's numbers in a box over the 3D view (top left, clear of viser's panels)."""
     esc = html.escape
     shown = replay.trials[replay.shown]
-    rows = "".join(f"<tr><td>{esc(k)}</td><td>{esc(v)}</td></tr>" for k, v in numbers(shown))
+    rows = "".join(
+        f"<tr><td>{esc(k)}</td><td>{esc(v)}</td></tr>" for k, v in (replay.rows or numbers(shown))
+    )
     table = ""
     if len(replay.trials) > 1:
         head = (
@@ -385,7 +417,7 @@ def _overlay(replay: Replay) -> str:
         "padding:0 6px 0 0;text-align:left;vertical-align:top}#roachplan-replay .shown{"
         "font-weight:bold}#roachplan-replay .note{color:#a33}</style>"
         f"<div id=roachplan-replay><b>{esc(replay.title)}</b><div>{esc(shown['label'])} "
-        f"plays: planned path black, driven trajectory blue</div><table id=roachplan-numbers>"
+        f"plays: {esc(replay.legend)}</div><table id=roachplan-numbers>"
         f"{rows}</table>{note}{table}</div>"
     )
 
@@ -408,7 +440,110 @@ def replay_written(head: bytes) -> bool:
 def replay_inputs(folder: str | Path) -> list[Path]:
     """The files a replay of `folder` reads: never its output."""
     folder = Path(folder)
+    if is_run_log(folder):
+        return [folder]
     return [folder / n for n in ("manifest.json", "trials.jsonl", "choice.json", "best_path.json")]
+
+
+# -- a robot run's log ------------------------------------------------------------------------------
+
+REPLAY_RATE = 30.0
+"""Frames per second of a robot run's replay (its poses come at the mocap's rate)."""
+
+
+def is_run_log(path: Path) -> bool:
+    """A robot run's log by its name (LOG.mcap, or a killed run's LOG.mcap.partial)."""
+    return path.name.endswith((".mcap", ".mcap.partial")) and not path.is_dir()
+
+
+def run_replay(path: Path, *, scene: str | None = None) -> Replay:
+    """A robot run as a replay: the plan (black), the simulation's prediction from the robot's
+    start (blue) and where the robot went (green), the robot walking its logged poses (legs
+    at the phase of its commands), and the run's numbers."""
+    from roachplan.robot import log_world, motor_phase, read_run
+
+    log = read_run(path)
+    world = log_world(log, scene)
+    t_go = log.t_go
+    poses = log.poses
+    t_stop = next((e["t"] for e in log.events if e["name"] == "stop"), math.inf)
+    if t_go is None:
+        keep = np.ones(len(poses["t_receive"]), dtype=bool)
+        t0 = float(poses["t_receive"][0]) if len(poses["t_receive"]) else 0.0
+    else:
+        keep = (poses["t_receive"] >= t_go) & (poses["t_receive"] <= t_stop + 0.5)
+        t0 = t_go
+    t = poses["t_receive"][keep] - t0
+    p, q = poses["world_p"][keep], poses["world_q"][keep]
+    ct = log.commands["t"] - t0
+    stop = log.commands["stop"]
+    left = np.where(stop, 0.0, log.commands["left"])
+    right = np.where(stop, 0.0, log.commands["right"])
+    after = ct >= 0
+    phase = motor_phase(
+        ct[after], left[after], right[after], world.robot.motor_gain, world.robot.max_motor_speed
+    )
+    robot = world.robot
+    frames: list[Frame] = []
+    for k in range(len(t)):
+        if frames and t[k] < frames[-1].t + 1.0 / REPLAY_RATE:
+            continue
+        pl, pr = phase(float(t[k]))
+        sides = np.where(np.asarray(robot.leg_sides) == 0, pl, pr)
+        legs, _ = robot.leg_angle(sides + np.asarray(robot.leg_phase_offsets))
+        frames.append(
+            Frame(
+                t=float(t[k]),
+                p_world_body=tuple(float(v) for v in p[k]),  # type: ignore[arg-type]
+                quat_world_body=tuple(float(v) for v in q[k]),  # type: ignore[arg-type]
+                leg_angles=tuple(float(a) for a in legs),
+            )
+        )
+    result = log.result or {}
+    prediction = log.prediction or {}
+    plan = log.plan or {}
+    start = log.start or (tuple(plan["start"]) if plan.get("start") else world.scene.start)
+    record = {
+        "label": "the robot's run",
+        "start": list(start) if start is not None else None,
+        "goal": plan.get("goal") or (list(world.scene.goal) if world.scene.goal else None),
+        "path": plan.get("path") or [],
+        "trajectory": [[r[0], r[1], r[2], r[3]] for r in prediction.get("trajectory", [])],
+    }
+    rows = [
+        ("scene", world.scene.name),
+        ("log", path.name + ("" if log.complete else " (incomplete: the run was killed)")),
+        ("stopped", f"{result.get('reason', '?')}: {result.get('detail', '')}"),
+    ]
+    if result.get("t_go") is not None and result.get("t_stop") is not None:
+        rows.append(("drive time", f"{result['t_stop'] - result['t_go']:.2f} s"))
+    if result.get("periods"):
+        rows.append(("late periods", f"{result['late']} of {result['periods']}"))
+    if prediction:
+        rows.append(
+            (
+                "prediction",
+                f"{prediction['outcome']} ({prediction['reason']}) in "
+                f"{prediction['drive_time']:.2f} s",
+            )
+        )
+        if prediction.get("trajectory") and len(p):
+            end = np.asarray(prediction["trajectory"][-1][1:3])
+            rows.append(
+                ("robot's end to predicted", f"{float(np.linalg.norm(p[-1, :2] - end)):.3f} m")
+            )
+    note = "" if frames else "no pose of the robot was logged between Go and the stop"
+    return Replay(
+        title=f"{world.scene.name}: robot run {path.name}",
+        world=world,
+        trials=(record,),
+        shown=0,
+        frames=tuple(frames),
+        note=note,
+        rows=tuple(rows),
+        lines=(("/live/track", tuple(map(tuple, p.tolist())), LIVE),) if len(p) >= 2 else (),
+        legend="planned path black, the simulation's prediction blue, the robot green",
+    )
 
 
 # -- the page's Share button ----------------------------------------------------------------------

@@ -66,6 +66,7 @@ from ._markers import StartGoal, pick_failure
 from ._panel import energy_plot, summary_markdown, trials_markdown
 from ._registry import COMMANDS
 from ._relevel import CaptureView
+from ._robot_panel import RobotPanel
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
 from ._voxel_panel import VoxelPanel
 
@@ -245,6 +246,7 @@ class RoachApp:
             )
         self.choose_panel = ChoosePanel(gui, put)
         self.batch_panel = BatchPanel(gui, put)
+        self.robot_panel = RobotPanel(gui, put)
         with gui.add_folder("Results"):
             self.show_trial: viser.GuiDropdownHandle[str] = gui.add_dropdown(
                 "Show trial", _NAMES_NO_TRIAL
@@ -424,14 +426,17 @@ class RoachApp:
         self.view.show_robot(self.server, (x, y, z + r.standing_height), yaw_wxyz(start[2]), q0)
 
     def show_frame(self, frame: Frame) -> None:
-        self.view.show_robot(
-            self.server, frame.p_world_body, wxyz_from_xyzw(frame.quat_world_body), frame.leg_angles
+        self.show_robot_pose(
+            frame.p_world_body, wxyz_from_xyzw(frame.quat_world_body), frame.leg_angles
         )
+
+    def show_robot_pose(self, position, wxyz, leg_angles) -> None:
+        self.view.show_robot(self.server, position, wxyz, leg_angles)
         now = time.monotonic()
         if self.follow.value and now - self._followed > 1 / 20:  # (20 camera moves a second)
             self._followed = now
             for client in self.server.get_clients().values():
-                self._aim(client, frame.p_world_body, zoom=False)
+                self._aim(client, position, zoom=False)
 
     def list_plans(self, count: int) -> None:
         names = tuple(str(k + 1) for k in range(count)) or ("none",)

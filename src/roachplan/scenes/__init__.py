@@ -21,6 +21,9 @@ _getattr, __dir__, __all__ = lazy_exports(
         "render_scad_result": "._openscad",
         "ScadRender": "._openscad",
         "LIBRARY": "._library",
+        "RobotFile": "._robot_file",
+        "load_robot_file": "._robot_file",
+        "write_robot_file": "._robot_file",
         "MAX_SEED": "roachplan._settings",
         "MESH_SUFFIXES": "._scene",
         "TERRAIN_SUFFIXES": "._scene",
@@ -67,6 +70,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._openscad import ScadRender as ScadRender
     from ._openscad import render_scad as render_scad
     from ._openscad import render_scad_result as render_scad_result
+    from ._robot_file import RobotFile as RobotFile
+    from ._robot_file import load_robot_file as load_robot_file
+    from ._robot_file import write_robot_file as write_robot_file
     from ._scad_sandbox import MAX_TIMEOUT as MAX_TIMEOUT
     from ._scene import MESH_SUFFIXES as MESH_SUFFIXES
     from ._scene import TERRAIN_SUFFIXES as TERRAIN_SUFFIXES

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, overload
 
@@ -33,7 +33,7 @@ from roachplan.perception import (
     short_repr,
 )
 from roachplan.planning import PlannerConfig
-from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig
+from roachplan.sim import DriverConfig, RobotConfig, SimConfig, UncertaintyConfig
 
 from ._errors import SceneError
 from ._library import LIBRARY, library_names
@@ -157,6 +157,11 @@ class Scene:
     driver: DriverConfig = field(default_factory=DriverConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
     """What may differ between real runs (`roachplan choose` draws its rollouts from it)."""
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    """The simulated robot: the nominal roach, or a real one's fitted parameters (a robot
+    file named by `robot.file`; its friction is then the scene's sim.friction)."""
+    robot_file: Path | None = None
+    """The robot file the scene names, if any."""
     seed: int = s(0, seed_number())
     """Seed of the first trial; trial k uses seed + k."""
 
@@ -494,7 +499,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
         raise ctx.fail(
             "terrain", "expected a list of terrain objects (it may be empty only with a ground)"
         )
-    robot = ctx.mapping(data.get("robot") or {}, "robot", ("start",))
+    robot = ctx.mapping(data.get("robot") or {}, "robot", ("start", "file"))
     routes = data.get("routes") or {}
     if not isinstance(routes, dict):
         raise ctx.fail(
@@ -524,6 +529,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
         ),
         seed=seed,
     )
+    if robot.get("file") is not None:
+        scene = _with_robot_file(ctx, scene, robot["file"], data.get("sim") or {})
     if (scene.start is None) != (scene.goal is None):
         given = "robot.start" if scene.start is not None else "goal"
         raise ctx.fail(given, "give both robot.start and goal, or neither (both then picked)")
@@ -534,3 +541,25 @@ def load_scene(name_or_path: str | Path) -> Scene:
                 label, f"({pose[0]}, {pose[1]}) lies outside bounds {list(lo)}..{list(hi)}"
             )
     return scene
+
+
+def _with_robot_file(ctx: YamlFields, scene: Scene, name: Any, sim: Any) -> Scene:
+    """The scene with the robot file `name` (relative to the scene) applied: its motors and
+    body mass to the robot, its friction to sim.friction (which the scene may not also set)."""
+    from ._robot_file import load_robot_file
+
+    if not isinstance(name, str):
+        raise ctx.fail("robot.file", f"expected a robot file name (.yaml), got {short_repr(name)}")
+    path = _existing_file(ctx, name, "robot.file")
+    if isinstance(sim, dict) and "friction" in sim:
+        raise ctx.fail(
+            "sim.friction",
+            f"the robot file {path.name} gives the friction; give it in one place only",
+        )
+    robot_file = load_robot_file(path)
+    return replace(
+        scene,
+        robot=robot_file.robot(),
+        robot_file=path,
+        sim=replace(scene.sim, friction=robot_file.friction),
+    )

@@ -351,7 +351,7 @@ def build_world(
     terrain: the scene's terrain if already built (build_terrain), not to build it twice; its
     notes (who rendered each OpenSCAD model) come first in the world's. on_capture: told of
     each capture's reconstruction as the terrain is built (OnCapture)."""
-    robot = robot or RobotConfig()
+    robot = robot or scene.robot
     terrain = build_terrain(scene, on_capture=on_capture) if terrain is None else terrain
     mesh = terrain.mesh
     notes = list(terrain.notes)

@@ -27,7 +27,12 @@ _getattr, __dir__, __all__ = lazy_exports(
         "DriverConfig": "._config",
         "SimConfig": "._config",
         "DriveResult": "._driver",
+        "Follower": "._driver",
         "Frame": "._driver",
+        "ReferenceFollower": "._driver",
+        "TrackingFollower": "._driver",
+        "make_follower": "._driver",
+        "omega_limit": "._driver",
         "Outcome": "._driver",
         "drive_path": "._driver",
         "heading_error": "._driver",
@@ -62,12 +67,17 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._config import DriverConfig as DriverConfig
     from ._config import SimConfig as SimConfig
     from ._driver import DriveResult as DriveResult
+    from ._driver import Follower as Follower
     from ._driver import Frame as Frame
     from ._driver import Outcome as Outcome
+    from ._driver import ReferenceFollower as ReferenceFollower
+    from ._driver import TrackingFollower as TrackingFollower
     from ._driver import drive_path as drive_path
     from ._driver import heading_error as heading_error
+    from ._driver import make_follower as make_follower
     from ._driver import motor_speeds as motor_speeds
     from ._driver import next_waypoint as next_waypoint
+    from ._driver import omega_limit as omega_limit
     from ._driver import quat_to_matrix as quat_to_matrix
     from ._errors import SimError as SimError
     from ._robot import LEG_NAMES as LEG_NAMES

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -169,14 +169,10 @@ def drive_path(
     simulation steps with nothing of ours but the leg targets and the energy meter.
     """
     path = np.asarray(path_xyz, dtype=float)
-    if path.ndim != 2 or path.shape[1] != 3 or len(path) < 1:
-        raise ValueError(f"path must be (N>=1, 3), got {path.shape}")
-    spins = check_spins(spins, len(path))
-    if len(path) == 1:  # a path to stand on: its goal is its start (both followers need two)
-        path = np.vstack([path, path])
+    follower = make_follower(path, cfg, spins)
+    path = follower.path
     steps_per_control = max(1, round(cfg.control_period / sim.cfg.timestep))
-    omega_max = min(sim.robot.max_motor_speed, cfg.max_ratio * cfg.omega0)
-    follower = _Reference(path, cfg) if cfg.kind == "reference" else _Tracking(path, cfg, spins)
+    omega_max = omega_limit(sim.robot.max_motor_speed, cfg)
     standing = sim.robot.standing_height
     trajectory: list[tuple[float, float, float, float]] = []
     next_frame = 0.0
@@ -233,10 +229,60 @@ def drive_path(
     )
 
 
-class _Reference:
+class Follower(Protocol):
+    """A path follower: what turns the robot's pose into motor speeds along a path, the same
+    for the simulated robot (drive_path) and a real one (roachplan.robot's loop). Made by
+    make_follower; stateful (its progress along the path), one per drive."""
+
+    path: np.ndarray
+    """(N >= 2, 3) the path it follows, world frame [m]."""
+    advanced: bool
+    """The last update moved the progress on (reference: to its next waypoint)."""
+    gap: float
+    """What is left to go [m] (reference: to its waypoint; tracking: along the path)."""
+
+    def update(self, pos, quat) -> tuple[Outcome, str] | None:
+        """Advance the progress from the body position pos (x, y, z) [m] and orientation quat
+        (xyzw); (outcome, reason) when the drive has ended ("success", or the tracking
+        driver's "missed"), else None."""
+        ...
+
+    def speeds(self, pos, quat, omega_max: float) -> tuple[float, float]:
+        """(left, right) motor speeds [rad/s] for the pose, each at most omega_max [rad/s]."""
+        ...
+
+    def where(self) -> str:
+        """Where along the path the robot is, for a message."""
+        ...
+
+
+def make_follower(path_xyz, cfg: DriverConfig, spins=()) -> Follower:
+    """The follower cfg.kind names ("tracking" or "reference") for path_xyz ((N >= 1, 3) world
+    frame [m]; one waypoint: stand at it) and the plan's spins ((waypoint index, heading [rad])
+    each; the reference follower ignores them). ValueError for a path of another shape or a
+    spin that names no waypoint."""
+    path = np.asarray(path_xyz, dtype=float)
+    if path.ndim != 2 or path.shape[1] != 3 or len(path) < 1:
+        raise ValueError(f"path must be (N>=1, 3), got {path.shape}")
+    spins = check_spins(spins, len(path))
+    if len(path) == 1:  # a path to stand on: its goal is its start (both followers need two)
+        path = np.vstack([path, path])
+    if cfg.kind == "reference":
+        return ReferenceFollower(path, cfg)
+    return TrackingFollower(path, cfg, spins)
+
+
+def omega_limit(robot_max_speed: float, cfg: DriverConfig) -> float:
+    """The fastest a follower may run a motor [rad/s]: the motor's limit, or the driver's
+    max_ratio x omega0, whichever is lower."""
+    return min(robot_max_speed, cfg.max_ratio * cfg.omega0)
+
+
+class ReferenceFollower:
     """Algorithms 1 and 2 of Tong 2018, as the report gives them."""
 
     def __init__(self, path: np.ndarray, cfg: DriverConfig) -> None:
+        self.path = path
         self.path_xy = [tuple(q) for q in path[:, :2].tolist()]
         self.cfg = cfg
         self.i = 1
@@ -263,11 +309,12 @@ class _Reference:
         return motor_speeds(theta, self.cfg.omega0, self.cfg.gain, omega_max)
 
 
-class _Tracking:
+class TrackingFollower:
     """Pure pursuit on the path's arc length, stopping to turn on the spot at the plan's spins
     (see the module docstring)."""
 
     def __init__(self, path: np.ndarray, cfg: DriverConfig, spins: tuple[Spin, ...] = ()) -> None:
+        self.path = path
         self.xy = path[:, :2]
         seg = np.diff(self.xy, axis=0)
         self.seg_len = np.linalg.norm(seg, axis=1)

@@ -59,6 +59,10 @@ class RobotConfig:
     """Moment of inertia of a leg with its share of motor rotor and gearbox, about the hip
     [kg m^2]. A 1 g leg alone has ~2e-7; the geared motor's reflected inertia dominates (an
     estimate: not published for the VelociRoACH)."""
+    motor_gain: tuple[float, float] = (1.0, 1.0)
+    """(left, right) each motor's speed / its command [-]: 1 on the nominal robot; a robot
+    file (scenes/_robot_file.py, fitted to a real robot's runs by roachplan.robot.fit) sets
+    what that robot's motors do."""
     stance_sweep: float = 1.2
     """Angle a leg sweeps while its tripod is in stance [rad]. The motor phase maps to the leg
     angle through a Buehler clock: the stance arc takes half of every motor revolution and the

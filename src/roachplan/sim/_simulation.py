@@ -104,7 +104,7 @@ class Simulation:
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
         self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
-        self._motor_gain = (1.0, 1.0)  # each side's speed / its command (perturb) [-]
+        self._motor_gain = robot.motor_gain  # each side's speed / its command [-]
         self._base_inertia: tuple[float, float, float] | None = None  # nominal, for perturb
         self.time = 0.0
         self.energy_per_leg = np.zeros(6)
@@ -186,10 +186,20 @@ class Simulation:
             z = self.surface_height(x, y, surface + 0.1)
         return z
 
-    def reset(self, x: float, y: float, yaw: float, surface: float | None = None) -> None:
+    def reset(
+        self,
+        x: float,
+        y: float,
+        yaw: float,
+        surface: float | None = None,
+        *,
+        phase: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
         """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle.
         surface: the height the planner stands it on there [m]; the ground is then looked for
-        just above it (under a table, the floor the plan is on, not the table top)."""
+        just above it (under a table, the floor the plan is on, not the table top). phase: the
+        (left, right) motors' phase to stand at [rad] (0: the tripod stance; a robot caught
+        mid-stride, as a logged run's re-simulation from one of its poses starts it)."""
         bc, r = self._bc, self.robot
         # Park the robot out of the ray's way before looking for the ground under the start.
         bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
@@ -209,9 +219,9 @@ class Simulation:
             position, quat = tilted
         bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
         bc.resetBaseVelocity(self.robot_id, (0, 0, 0), (0, 0, 0))
-        self._phase[:] = 0.0
+        self._phase[:] = phase
         self._omega[:] = 0.0
-        q0, _ = r.leg_angle(self._offsets)
+        q0, _ = r.leg_angle(self._phase[self._sides] + self._offsets)
         for j in self._joints:
             bc.resetJointState(self.robot_id, j, float(q0[j]), 0.0)
         self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
@@ -254,7 +264,8 @@ class Simulation:
     ) -> None:
         """Set this world's physical uncertainty for the next drives (choose's rollouts):
         the Coulomb friction of terrain, ground and robot [-], the body's mass as a multiple
-        of its nominal one [-], and the (left, right) motors' speed gains [-].
+        of the robot's [-], and the (left, right) motors' speed gains [-] as multiples of the
+        robot's own (RobotConfig.motor_gain, 1 on the nominal robot).
         perturb(friction=cfg.friction, mass_scale=1, motor_gain=(1, 1)) is the nominal world."""
         bc, r = self._bc, self.robot
         for body in (self.terrain_id, self.ground_id):
@@ -273,7 +284,8 @@ class Simulation:
             -1,
             localInertiaDiagonal=tuple(v * mass_scale for v in self._base_inertia),
         )
-        self._motor_gain = (float(motor_gain[0]), float(motor_gain[1]))
+        own = self.robot.motor_gain
+        self._motor_gain = (float(motor_gain[0]) * own[0], float(motor_gain[1]) * own[1])
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""

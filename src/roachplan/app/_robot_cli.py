@@ -1,0 +1,370 @@
+"""`roachplan twin`, `robot`, `compare` and `fit`: a real robot (or its stand-in) in the loop.
+
+Every flag that sets a setting is checked by that setting's validator before any work
+(app/_flags.py FLAGS); the addresses (HOST:PORT) and the transform are read here, each refused
+in one line naming the flag.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import select
+import sys
+import time
+from pathlib import Path
+
+from roachplan.experiments import check_output_file
+
+from ._flags import UsageError, clip, numbers, pose, refused, setting_flag
+
+
+def _address(text: str | None, flag: str):
+    """'HOST:PORT' (or 'PORT') -> (host, port), each checked by the robot's validators."""
+    if text is None:
+        return None
+    from roachplan.robot._checks import parse_address
+
+    try:
+        return parse_address(text)
+    except ValueError as exc:
+        shown = repr(text) if str(exc).startswith("expected HOST") else text
+        raise UsageError(f"{flag} {clip(shown, 80)}: {exc}") from None
+
+
+def _transform(text: str | None, flag: str):
+    """'X,Y,Z,YAW_DEG' -> a FrameTransform (None: none given)."""
+    values = numbers(text, flag, (4,))
+    if values is None:
+        return None
+    from roachplan.robot import FrameTransform
+
+    x, y, z, yaw = values
+    return FrameTransform.from_xyz_yaw(x, y, z, math.radians(yaw))
+
+
+# -- twin -----------------------------------------------------------------------------------------
+
+
+def twin_config(args: argparse.Namespace):
+    """The TwinConfig of `roachplan twin`'s flags (each checked by check_flags before)."""
+    from roachplan.robot import FrameTransform, TwinConfig
+
+    if args.pose == "udp-json" and args.pose_target is None:
+        raise UsageError("--pose udp-json sends the poses to --pose-target HOST:PORT; give it")
+    if args.pose != "udp-json" and args.pose_target is not None:
+        raise UsageError("--pose-target is where --pose udp-json sends poses; add --pose udp-json")
+    return TwinConfig(
+        scene=args.scene,
+        start=pose(args.start, "--start"),
+        friction=args.twin_friction,
+        motor_gain=args.twin_motor_gain,
+        motor_mismatch=args.twin_motor_mismatch,
+        mass_scale=args.twin_mass_scale,
+        pose=args.pose,
+        natnet_port=args.twin_natnet_port,
+        rigid_body=(args.twin_rigid_body, "roach"),
+        pose_target=_address(args.pose_target, "--pose-target"),
+        pose_rate=args.twin_pose_rate,
+        latency=args.twin_latency,
+        noise=args.twin_noise,
+        noise_angle=args.twin_noise_angle,
+        drop=args.twin_drop,
+        seed=0 if args.seed is None else args.seed,
+        mocap=_transform(args.mocap, "--mocap") or FrameTransform(),
+        command=args.command,
+        command_port=args.twin_command_port,
+        serial=args.serial,
+        command_timeout=args.twin_command_timeout,
+        host=args.twin_host,
+    )
+
+
+def cmd_twin(args: argparse.Namespace) -> int:
+    from roachplan.robot import run_twin
+
+    return run_twin(twin_config(args))
+
+
+# -- robot ----------------------------------------------------------------------------------------
+
+RUN_LOG_MARK = b"roachplan.robot-run"
+"""In the head of every run log roachplan writes (its MCAP profile): `robot -o` replaces such a
+file without --force."""
+
+
+def _run_log_written(head: bytes) -> bool:
+    return head.startswith(b"\x89MCAP0\r\n") and RUN_LOG_MARK in head
+
+
+def robot_settings(args: argparse.Namespace, log: Path | None):
+    """The RobotSettings of `roachplan robot`'s flags."""
+    from roachplan.robot import LoopConfig, RobotSettings, SafetyConfig
+
+    if args.source == "natnet":
+        from roachplan import setting_problem
+        from roachplan.robot import NatNetSettings
+
+        rigid = int(args.rigid_body) if args.rigid_body.isdigit() else args.rigid_body
+        if (expected := setting_problem(NatNetSettings, "rigid_body", rigid)) is not None:
+            raise refused("--rigid-body", args.rigid_body, expected)
+        source_settings: dict = {
+            "server": args.natnet_server,
+            "local": args.natnet_local,
+            "command_port": args.robot_natnet_port,
+            "rigid_body": rigid,
+            "up_axis": args.up_axis,
+        }
+        stray = [f for f, v in (("--pose-port", args.robot_pose_port),) if v is not None]
+    else:
+        source_settings = {"host": args.pose_host, "port": args.robot_pose_port or 9871}
+        stray = [
+            f
+            for f, v in (
+                ("--natnet-server", args.natnet_server != "127.0.0.1"),
+                ("--natnet-port", args.robot_natnet_port != 1510),
+            )
+            if v
+        ]
+    if stray:
+        raise UsageError(f"{stray[0]} is a setting of another --source than {args.source}")
+    if args.link == "udp":
+        if args.serial_device is not None:
+            raise UsageError("--serial is the device of --link serial; add --link serial")
+        host, port = _address(args.robot_address, "--robot") or ("127.0.0.1", 9870)
+        link_settings: dict = {"host": host, "port": port}
+    else:
+        if args.serial_device is None:
+            raise UsageError("--link serial needs --serial DEVICE (e.g. /dev/ttyUSB0)")
+        if args.robot_address is not None:
+            raise UsageError(
+                "--robot HOST:PORT is where --link udp sends; drop it with --link serial"
+            )
+        link_settings = {"port": args.serial_device, "baudrate": args.robot_baudrate}
+    safety = {
+        k: getattr(args, f"robot_{k}")
+        for k in ("max_pose_age", "max_deviation", "area_margin", "standable_margin", "stop_hold")
+        if getattr(args, f"robot_{k}") is not None
+    }
+    loop = LoopConfig(rate=args.robot_rate, safety=SafetyConfig(**safety))
+    return RobotSettings(
+        source=args.source,
+        source_settings=source_settings,
+        link=args.link,
+        link_settings=link_settings,
+        transform=_transform(args.transform, "--transform"),
+        seed=args.seed,
+        loop=loop,
+        log=log,
+        predict=not args.no_predict,
+        first_pose_timeout=args.robot_first_pose_timeout,
+    )
+
+
+def _ask_go(loop) -> bool:
+    """The CLI's Go: Enter on stdin; Ctrl-C, SIGTERM or the end of stdin: no Go."""
+    print(
+        "roachplan: the robot is held (stop frames); press Enter to Go, Ctrl-C to stop",
+        file=sys.stderr,
+        flush=True,
+    )
+    while not loop.stopping:
+        try:
+            readable, _, _ = select.select([sys.stdin], [], [], 0.1)
+        except (OSError, ValueError):  # no stdin to read
+            return False
+        if readable:
+            return sys.stdin.readline() != ""
+    return False
+
+
+def cmd_robot(args: argparse.Namespace) -> int:
+    robot_settings(args, None)  # (every flag refused before the scene loads)
+    from roachplan.robot import drive_robot
+    from roachplan.scenes import build_world, load_scene
+
+    from ._scene_cli import scene_inputs
+
+    scene = load_scene(args.scene)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = check_output_file(
+        args.output or f"{scene.name}-robot-{stamp}.mcap",
+        suffixes=(".mcap",),
+        inputs=scene_inputs(scene),
+        replaceable=_run_log_written,
+        kind="a robot run log roachplan wrote",
+        force=args.force,
+    )
+    settings = robot_settings(args, out)
+    world = build_world(scene)
+    for note in world.notes:
+        print(f"roachplan: {note}", file=sys.stderr)
+
+    def ready(loop) -> bool:
+        path = loop.path
+        length = float(sum(math.dist(a[:2], b[:2]) for a, b in zip(path, path[1:], strict=False)))
+        x, y, yaw = _here(loop)
+        print(
+            f"roachplan: the robot stands at ({x:.3f}, {y:.3f}) m, {math.degrees(yaw):.0f} deg; "
+            f"planned {len(path)} waypoints, {length:.2f} m to the goal",
+            file=sys.stderr,
+            flush=True,
+        )
+        return True if args.go else _ask_go(loop)
+
+    run = drive_robot(world, settings, ready=ready)
+    r = run.result
+    summary = {
+        "scene": scene.name,
+        "reason": r.reason,
+        "detail": r.detail,
+        "success": r.success,
+        "drive_time": None if r.t_go is None else r.t_stop - r.t_go,
+        "start": r.start,
+        "end": r.end,
+        "periods": r.periods,
+        "late": r.late,
+        "prediction": None
+        if run.prediction is None
+        else {k: run.prediction[k] for k in ("outcome", "reason", "drive_time")},
+        "log": None if run.log is None else str(run.log),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        drove = "" if summary["drive_time"] is None else f" after {summary['drive_time']:.2f} s"
+        late = f"{r.late} of {r.periods} control periods late" if r.periods else "never drove"
+        print(f"{r.reason}{drove}: {r.detail}\n{late}")
+        if run.prediction is not None:
+            p = run.prediction
+            print(
+                f"the simulation predicted: {p['outcome']} ({p['reason']}) in {p['drive_time']:.2f} s"
+            )
+        print(f"wrote {run.log}")
+    if r.success:
+        return 0
+    return 130 if r.reason == "signal" else 1
+
+
+def _here(loop) -> tuple[float, float, float]:
+    world = loop.latest_world
+    if world is None:
+        return (math.nan, math.nan, math.nan)
+    from roachplan.robot._transform import yaw_of
+
+    (x, y, _), q = world
+    return (x, y, yaw_of(q))
+
+
+# -- compare and fit ------------------------------------------------------------------------------
+
+
+def _fit_config(args: argparse.Namespace):
+    """The FitConfig of `fit`'s flags (the numbers checked by check_flags; --parameters here,
+    by the same validator)."""
+    from roachplan import SettingError
+    from roachplan.robot import FitConfig
+
+    names = tuple(p.strip() for p in args.parameters.split(",")) if args.parameters else None
+    values = {
+        "parameters": names,
+        "latency": args.latency,
+        "max_evaluations": args.evaluations,
+        "rounds": args.rounds,
+        "starts": args.starts,
+        "horizon": args.horizon,
+    }
+    try:
+        return FitConfig(**{k: v for k, v in values.items() if v is not None})
+    except SettingError as exc:
+        raise setting_flag(exc, {"parameters": ("--parameters", args.parameters)}) from None
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from roachplan.robot import compare, log_world, params_of_robot_file, read_run
+
+    log = read_run(args.log)
+    world = log_world(log, args.scene)
+    params = params_of_robot_file(args.robot_file) if args.robot_file else None
+    c = compare(log, world, params=params, latency=args.latency or 0.0)
+    if args.json:
+        print(json.dumps(c.to_json()))
+        return 0
+    p = c.params
+    print(
+        f"{log.path.name}: scene {world.scene.name}; simulated with friction {p.friction:.3f}, "
+        f"motor gain {p.motor_gain:.3f}, mismatch {p.motor_mismatch:+.3f}, mass x{p.mass_scale:.2f}"
+    )
+    print(
+        f"{'t [s]':>6} {'open-loop [m]':>14} {'heading [deg]':>13} {'closed-loop [m]':>16} {'heading [deg]':>13}"
+    )
+    t = c.open_loop.t
+    for k in _every(t, 1.0):
+        print(
+            f"{t[k]:6.1f} {c.open_loop.position[k]:14.3f} {math.degrees(c.open_loop.heading[k]):13.1f} "
+            f"{c.closed_loop.position[k]:16.3f} {math.degrees(c.closed_loop.heading[k]):13.1f}"
+        )
+    print(
+        f"end error: open loop {c.open_loop.end:.3f} m, closed loop {c.closed_loop.end:.3f} m; "
+        f"rms: open loop {c.open_loop.rms:.3f} m, closed loop {c.closed_loop.rms:.3f} m\n"
+        f"windows ({len(c.windows.t)} of 1 s, each from the robot's own pose and leg phase): "
+        f"error {c.windows.error():.3f} m (position rms "
+        f"{float(np.sqrt(np.mean(c.windows.position**2))):.3f} m, turn rms "
+        f"{math.degrees(float(np.sqrt(np.mean(c.windows.heading**2)))):.1f} deg)\n"
+        f"outcome: the robot {c.robot_outcome}, the simulation {c.sim_outcome}: "
+        f"{'they agree' if c.outcome_agrees else 'they DISAGREE'}"
+    )
+    return 0
+
+
+def _every(t, step: float) -> list[int]:
+    """Indices of t about `step` apart [s], and the last."""
+    out, next_t = [], -math.inf
+    for k, tk in enumerate(t):
+        if tk >= next_t:
+            out.append(k)
+            next_t = tk + step
+    if out and out[-1] != len(t) - 1:
+        out.append(len(t) - 1)
+    return out
+
+
+def _robot_file_written(head: bytes) -> bool:
+    from roachplan.scenes._robot_file import HEADER
+
+    return head.startswith(HEADER.encode())
+
+
+def cmd_fit(args: argparse.Namespace) -> int:
+    from roachplan.robot import fit, log_world, read_run
+
+    out = check_output_file(
+        args.output,
+        suffixes=(".yaml", ".yml"),
+        inputs=args.logs,
+        replaceable=_robot_file_written,
+        kind="a robot file roachplan wrote",
+        force=args.force,
+    )
+    cfg = _fit_config(args)
+    logs = [read_run(p) for p in args.logs]
+    world = log_world(logs[0], args.scene)
+    result = fit(logs, world, cfg=cfg, out=out)
+    if args.json:
+        print(json.dumps({**result.to_json(), "output": str(out)}))
+        return 0
+    p, b = result.params, result.before
+    print(
+        f"fitted {', '.join(result.fitted)} to {len(logs)} run(s) ({result.evaluations} simulations)"
+    )
+    for name in result.fitted:
+        print(f"  {name:15s} {getattr(b, name):8.4f} -> {getattr(p, name):8.4f}")
+    print(
+        f"open-loop error (whole runs, mean over the logs): {result.error_before:.4f} m before, "
+        f"{result.error_after:.4f} m after\nwrote {out} (a scene names it: robot: {{file: "
+        f"{out.name}}})"
+    )
+    return 0

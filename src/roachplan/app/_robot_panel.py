@@ -1,0 +1,558 @@
+"""The page's Robot folder: a real robot (or a twin) in the loop.
+
+Its settings - where the pose comes from (NatNet from Motive, or a UDP/JSON stream), where the
+motor commands go (UDP, or a serial line), the mocap-to-world transform (measured with the
+robot placed at the start marker, or typed) - and three buttons, each a command on the app's
+loop (its callbacks only put them):
+
+- **Route from robot**: connect, take the robot's pose, plan from where it stands to the goal
+  marker (drawn black: Drive can simulate it too) and simulate the plan from there (the
+  prediction, blue); the robot is then held (stop frames) until Go. Pressed again after a run
+  (or before Go), it re-plans from where the robot is now.
+- **Go**: drive the robot along the plan (robot/_loop.py RobotLoop, in a thread of its own);
+  the page follows it like a drive: the robot drawn at its live pose, where it went in green,
+  its deviation from the path over time, and the run recorded (MCAP) beside the app's uploads.
+- **Stop**: at once, even while Go runs (as Cancel at the top does): zero commands, repeated.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roachplan.experiments import TrialResult
+from roachplan.planning import PlanningError, PlanResult
+
+from ._commands import RobotGoCmd, RobotPlanCmd, RobotStopCmd
+
+if TYPE_CHECKING:
+    from roachplan.robot import FrameTransform, RobotLoop, RunRecorder
+
+    from ._app import App
+
+SOURCES = ("natnet", "udp-json")
+SINKS = ("udp", "serial")
+MEASURE = "measure at start"
+"""The transform box's value that measures T_world_mocap from the first pose."""
+DEVIATION_POINTS = 2000
+"""The live track and the deviation plot are drawn with at most about this many points."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotForm:
+    """The Robot folder's settings, read and checked (RobotPanel.form)."""
+
+    source: str
+    source_settings: dict[str, Any]
+    link: str
+    link_settings: dict[str, Any]
+    transform: FrameTransform | None
+    """None: measured from the first pose, the robot placed at the start marker."""
+
+
+class RobotPanel:
+    """The Robot folder's controls."""
+
+    def __init__(self, gui, put) -> None:
+        with gui.add_folder("Robot"):
+            self.source = gui.add_dropdown(
+                "Pose source",
+                SOURCES,
+                initial_value="natnet",
+                hint="natnet: OptiTrack Motive (unicast); udp-json: one JSON datagram per pose",
+            )
+            self.source_address = gui.add_text(
+                "Source address",
+                "127.0.0.1:1510",
+                hint="natnet: Motive's address and command port; udp-json: HOST:PORT to receive on",
+            )
+            self.rigid_body = gui.add_text(
+                "Rigid body", "1", hint="natnet: the robot's streaming id or its name in Motive"
+            )
+            self.sink = gui.add_dropdown(
+                "Command sink", SINKS, initial_value="udp", hint="Where the motor commands go"
+            )
+            self.sink_address = gui.add_text(
+                "Sink address",
+                "127.0.0.1:9870",
+                hint="udp: the robot's HOST:PORT; serial: the device, e.g. /dev/ttyUSB0",
+            )
+            self.transform = gui.add_text(
+                "Frame transform",
+                MEASURE,
+                hint=f"T_world_mocap as x,y,z,yaw_deg, or '{MEASURE}' (the robot placed at "
+                f"the start marker)",
+            )
+            self.plan_button = gui.add_button(
+                "Route from robot", hint="Plan from where the robot stands; it is held until Go"
+            )
+            self.go_button = gui.add_button("Go", color="green", disabled=True)
+            self.stop_button = gui.add_button(
+                "Stop", color="red", hint="Stop the robot now: zero commands, repeated"
+            )
+            self.report = gui.add_markdown("No robot connected.")
+            self.deviation = gui.add_uplot(
+                (np.zeros(1), np.zeros(1)),
+                (
+                    {"label": "t [s]"},
+                    {"label": "deviation [cm]", "stroke": "rgb(0, 170, 90)", "width": 2},
+                ),
+                title="Deviation from the path",
+                aspect=1.6,
+                visible=False,
+            )
+        self.plan_button.on_click(lambda ev: put(RobotPlanCmd(ev.client_id)))
+        self.go_button.on_click(lambda ev: put(RobotGoCmd(ev.client_id)))
+        self.stop_button.on_click(lambda ev: put(RobotStopCmd(ev.client_id)))
+
+    def form(self) -> RobotForm:
+        """The settings as typed, checked by the robot's validators; RobotError naming the box
+        and what it accepts."""
+        from roachplan import SettingError
+        from roachplan.robot import FrameTransform, NatNetSettings, RobotError
+        from roachplan.robot._checks import parse_address
+
+        def address(box, name: str) -> tuple[str, int]:
+            try:
+                return parse_address(box.value)
+            except ValueError as exc:
+                raise RobotError(f"{name} {box.value!r}: {exc}") from None
+
+        source, link = self.source.value, self.sink.value
+        if source == "natnet":
+            host, port = address(self.source_address, "Source address")
+            text = self.rigid_body.value.strip()
+            rigid: int | str = int(text) if text.isdigit() else text
+            try:
+                NatNetSettings(server=host, command_port=port, rigid_body=rigid)
+            except SettingError as exc:
+                raise RobotError(f"Rigid body {text!r}: {exc.expected}") from None
+            source_settings: dict[str, Any] = {
+                "server": host,
+                "command_port": port,
+                "rigid_body": rigid,
+            }
+        else:
+            host, port = address(self.source_address, "Source address")
+            source_settings = {"host": host, "port": port}
+        if link == "udp":
+            host, port = address(self.sink_address, "Sink address")
+            link_settings: dict[str, Any] = {"host": host, "port": port}
+        else:
+            device = self.sink_address.value.strip()
+            if not device:
+                raise RobotError("Sink address: give the serial device, e.g. /dev/ttyUSB0")
+            link_settings = {"port": device}
+        transform = None
+        text = self.transform.value.strip()
+        if text and text != MEASURE:
+            try:
+                x, y, z, yaw = (float(v) for v in text.split(","))
+                transform = FrameTransform.from_xyz_yaw(x, y, z, math.radians(yaw))
+            except (ValueError, RobotError):
+                raise RobotError(
+                    f"Frame transform {text!r}: expected x,y,z,yaw_deg (4 finite numbers) or "
+                    f"'{MEASURE}'"
+                ) from None
+        return RobotForm(
+            source=source,
+            source_settings=source_settings,
+            link=link,
+            link_settings=link_settings,
+            transform=transform,
+        )
+
+    def show_transform(self, transform: FrameTransform) -> None:
+        """The transform in use, in the box (x,y,z,yaw_deg)."""
+        from roachplan.robot._transform import yaw_of
+
+        x, y, z = transform.translation
+        self.transform.value = f"{x:.4f},{y:.4f},{z:.4f},{math.degrees(yaw_of(transform.quat)):.2f}"
+
+    def plot(self, t: np.ndarray, deviation_m: np.ndarray) -> None:
+        self.deviation.data = (np.asarray(t, dtype=float), 100.0 * np.asarray(deviation_m))
+        self.deviation.visible = True
+
+
+@dataclass(eq=False)
+class RobotSession:
+    """A connected robot, its plan and its loop (App.robot)."""
+
+    source: Any
+    link: Any
+    transform: FrameTransform
+    path: np.ndarray
+    spins: tuple
+    loop: RobotLoop
+    recorder: RunRecorder | None
+    log: Path
+    events: queue.Queue = field(default_factory=queue.Queue)
+    """What the loop tells (its listener puts every event here)."""
+    went: bool = False
+
+    def close(self) -> None:
+        """Stop the robot (if it moves), end the loop, close the log, the link and the source."""
+        self.loop.close()
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
+        for closable in (self.link, self.source):
+            try:
+                closable.close()
+            except OSError:
+                pass
+
+
+class _Followed:
+    """A RobotLoop as the command loop follows a job: its events, Cancel as a stop."""
+
+    def __init__(self, session: RobotSession) -> None:
+        self.session = session
+        self.started = time.monotonic()
+
+    def poll(self, timeout: float = 0.0) -> list:
+        out, deadline = [], time.monotonic() + timeout
+        while True:
+            try:
+                out.append(self.session.events.get(timeout=max(deadline - time.monotonic(), 0)))
+            except queue.Empty:
+                return out
+            if time.monotonic() >= deadline:
+                while not self.session.events.empty():
+                    out.append(self.session.events.get_nowait())
+                return out
+
+    def cancel(self) -> None:
+        self.session.loop.stop("cancel", "Cancel pressed in the page")
+
+    @property
+    def elapsed(self) -> float:
+        return time.monotonic() - self.started
+
+
+def _close_session(app: App) -> None:
+    if app.robot is not None:
+        app.robot.close()
+        app.robot = None
+
+
+def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
+    """Connect, locate the robot, plan from where it stands, predict, and hold it until Go."""
+    from roachplan.robot import (
+        LoopConfig,
+        RobotLoop,
+        SafetyMap,
+        measure_transform,
+        open_link,
+        open_pose_source,
+    )
+    from roachplan.robot._run import start_height, wait_first_pose
+    from roachplan.robot._transform import yaw_of
+
+    panel = app.page.robot_panel
+    form = panel.form()
+    _close_session(app)  # (a robot still held or driven stops first)
+    start, goal = app.page.markers.valid_poses(app.world)
+    app.page.set_status("Robot: connecting to the pose source ...")
+    source = open_pose_source(form.source, **form.source_settings)
+    try:
+        link = open_link(form.link, **form.link_settings)
+    except Exception:
+        source.close()
+        raise
+    try:
+        sample = wait_first_pose(source, 5.0)
+        transform = form.transform or measure_transform(
+            sample.position, sample.quat, start, start_height(app.world, start)
+        )
+        panel.show_transform(transform)
+        p, q = transform.apply(sample.position, sample.quat)
+        here = (p[0], p[1], yaw_of(q))
+        plan = _plan_from(app, here, goal)
+        prediction = _predict(app, plan, here, goal)
+        path = np.asarray(plan.path_xyz, dtype=float)
+        log, recorder = _recorder(
+            app, form, transform=transform, plan=plan, here=here, goal=goal, prediction=prediction
+        )
+        events: queue.Queue = queue.Queue()
+        loop = RobotLoop(
+            path_xyz=path,
+            spins=tuple(plan.spins),
+            source=source,
+            link=link,
+            transform=transform,
+            safety_map=SafetyMap.from_world(app.world),
+            driver=app.world.scene.driver,
+            max_motor_speed=app.world.robot.max_motor_speed,
+            cfg=LoopConfig(),
+            recorder=recorder,
+            listeners=[events.put],
+        )
+        # The control loop's thread shares this process's GIL with viser and the command loop:
+        # a thread waiting for it waits up to the switch interval (5 ms by default, a quarter
+        # of a control period); 1 ms keeps its periods on time while the page is drawn.
+        sys.setswitchinterval(min(sys.getswitchinterval(), 0.001))
+        loop.start()  # (held: stop frames until Go)
+    except BaseException:
+        link.close()
+        source.close()
+        raise
+    app.robot = RobotSession(
+        source=source,
+        link=link,
+        transform=transform,
+        path=path,
+        spins=tuple(plan.spins),
+        loop=loop,
+        recorder=recorder,
+        log=log,
+        events=events,
+    )
+    said = (
+        f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
+        if prediction is not None
+        else "the simulation of the plan failed"
+    )
+    panel.go_button.disabled = False
+    text = (
+        f"Robot at ({here[0]:.3f}, {here[1]:.3f}) m, {math.degrees(here[2]):.0f} deg: planned "
+        f"{len(path)} waypoints (black); {said} (blue). The robot is held: press **Go**."
+    )
+    panel.report.content = text
+    app.page.set_status(text)
+
+
+def _plan_from(app: App, here, goal) -> PlanResult:
+    """A plan from the robot's pose to the goal marker (a plan job, followed; Cancel stops
+    it), drawn black as the app's plan."""
+    from ._jobs import _plan_job, failure
+
+    planner = app.planner(app.page.plan_settings())
+    deadline = time.monotonic() + planner.time_limit
+    request = dict(seed=app.next_seed, start=here, goal=goal, planner=planner)
+    app.page.view.clear("/trajectories")
+    app.page.view.remove("/live")
+    job = app.world_job(_plan_job, 1, request, deadline)
+    found: list = []
+
+    def planning(events: list) -> bool:
+        found.extend(a.plan for a in events if a.plan is not None)
+        app.loop.progress(
+            job.elapsed / planner.time_limit,
+            f"Robot: planning from where it stands ({here[0]:.3f}, {here[1]:.3f}), "
+            f"{job.elapsed:.1f} s",
+        )
+        return job.done
+
+    end = app.loop.follow(job, "Route from robot", planning, hard_stop=deadline + 0.8)
+    app.next_seed += 1
+    if end == "cancelled" or not found:
+        why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
+        raise PlanningError(f"no plan from where the robot stands: {why}")
+    app.plan_endpoints = (here, goal)
+    app.set_plans([found[0]])  # (black; Drive simulates it too)
+    return found[0].plan
+
+
+def _predict(app: App, plan: PlanResult, here, goal) -> TrialResult | None:
+    """The simulation of the plan from the robot's pose (a drive job, followed), drawn blue."""
+    from roachplan.processes import Returned
+
+    from ._draw import BLUE
+    from ._jobs import _drive_job
+
+    drive = app.world_job(_drive_job, plan, here, goal)
+
+    def predicting(events: list) -> bool:
+        app.loop.progress(None, f"Robot: simulating the plan from the robot, {drive.elapsed:.1f} s")
+        return drive.done
+
+    app.loop.follow(drive, "Route from robot", predicting)
+    outcome = drive.outcome
+    if not isinstance(outcome, Returned) or not isinstance(outcome.value, TrialResult):
+        return None
+    prediction = outcome.value
+    app.page.view.draw("/trajectories/prediction", [r[1:] for r in prediction.trajectory], BLUE)
+    return prediction
+
+
+def _recorder(app: App, form: RobotForm, *, transform, plan: PlanResult, here, goal, prediction):
+    """(the log's path, its RunRecorder) with the scene, the settings, the plan and the
+    prediction written: beside the app's uploads, in robot-runs/."""
+    from roachplan.robot import RunRecorder
+    from roachplan.robot._record import scene_record
+
+    log_dir = app.upload_dir / "robot-runs"
+    log_dir.mkdir(exist_ok=True)
+    log = log_dir / f"{app.world.scene.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+    recorder = RunRecorder(log)
+    t = time.monotonic()
+    scene_path = Path(app.world.scene.path)
+    scene_file = scene_path if scene_path.is_file() else None
+    recorder.write("/scene", t, scene_record(scene_file, app.world.scene.name))
+    settings = {
+        "source": form.source,
+        "source_settings": form.source_settings,
+        "link": form.link,
+        "link_settings": form.link_settings,
+        "transform": transform.to_json(),
+        "transform_measured": form.transform is None,
+        "page": True,
+    }
+    recorder.write("/settings", t, settings)
+    recorder.write(
+        "/plan",
+        t,
+        {
+            "path": np.asarray(plan.path_xyz).tolist(),
+            "spins": [list(s) for s in plan.spins],
+            "planner": plan.planner,
+            "seed": plan.seed,
+            "start": list(here),
+            "goal": list(goal),
+        },
+    )
+    if prediction is not None:
+        frames = [[r[0], r[1], r[2], r[3], here[2]] for r in prediction.trajectory]
+        recorder.write(
+            "/prediction",
+            t,
+            {
+                "start": list(here),
+                "outcome": prediction.outcome,
+                "reason": prediction.reason,
+                "drive_time": prediction.drive_time,
+                "trajectory": frames,
+            },
+        )
+    return log, recorder
+
+
+class _Live:
+    """What Go shows as the robot drives: its pose (legs at the phase of the commands sent),
+    where it went (green), its deviation from the path over time, the progress."""
+
+    def __init__(self, app: App, session: RobotSession) -> None:
+        self.app, self.session = app, session
+        self.robot = app.world.robot
+        self.path_xy = session.path[:, :2]
+        self.track: list[tuple[float, float, float]] = []
+        self.t: list[float] = []
+        self.deviation: list[float] = []
+        self.phase = np.zeros(2)
+        self.last_command = None
+        self.result = None
+        self.t0 = time.monotonic()
+        self.shown = self.drawn = 0.0
+
+    def step(self, events: list) -> bool:
+        """Take the loop's events in; redraw at most 15 (the robot) and 2 (the rest) times a
+        second (each redraw holds the GIL the control loop's thread needs on time); True once
+        the loop has finished."""
+        from roachplan.robot import CommandEvent, FinishedEvent, PoseEvent, distance_to_path
+
+        from ._draw import wxyz_from_xyzw
+
+        latest = None
+        for ev in events:
+            if isinstance(ev, PoseEvent):
+                latest = ev
+                self.track.append(ev.position)
+                self.t.append(ev.sample.t_receive - self.t0)
+                self.deviation.append(distance_to_path(ev.position, self.path_xy))
+            elif isinstance(ev, CommandEvent):
+                if self.last_command is not None:
+                    f, dt = self.last_command.frame, ev.t - self.last_command.t
+                    self.phase += dt * np.array([f.left, f.right]) * self.robot.motor_gain
+                self.last_command = ev
+            elif isinstance(ev, FinishedEvent):
+                self.result = ev.result
+        now = time.monotonic()
+        if latest is not None and now - self.shown > 1 / 15:
+            self.shown = now
+            sides = self.phase[np.asarray(self.robot.leg_sides)]
+            legs, _ = self.robot.leg_angle(sides + np.asarray(self.robot.leg_phase_offsets))
+            self.app.page.show_robot_pose(latest.position, wxyz_from_xyzw(latest.quat), legs)
+        if now - self.drawn > 0.5 and self.track:
+            self.drawn = now
+            self.draw()
+            from ._draw import path_fraction
+
+            done = path_fraction(self.path_xy, self.track[-1])
+            text = (
+                f"Robot: {100 * done:.0f} % of the path, {now - self.t0:.1f} s; deviation "
+                f"{100 * self.deviation[-1]:.1f} cm (max {100 * max(self.deviation):.1f} cm)"
+            )
+            self.app.page.robot_panel.report.content = text
+            self.app.loop.progress(done, text)
+        return self.result is not None
+
+    def draw(self) -> None:
+        from ._draw import LIVE
+
+        if self.track:
+            every = max(1, len(self.track) // DEVIATION_POINTS)  # (at most ~2000 points each)
+            self.app.page.view.draw("/live/track", self.track[::every] + self.track[-1:], LIVE)
+            self.app.page.robot_panel.plot(
+                np.asarray(self.t[::every]), np.asarray(self.deviation[::every])
+            )
+
+
+def do_robot_go(app: App, cmd: RobotGoCmd) -> None:
+    """Drive the robot along the plan; followed until it stops (goal, safety, Stop, Cancel)."""
+    session = app.robot
+    panel = app.page.robot_panel
+    if session is None or session.went or not session.loop.running:
+        app.page.notify(
+            cmd.client_id, "Nothing to drive", "Press Route from robot first.", error=True
+        )
+        return
+    session.went = True
+    panel.go_button.disabled = True
+    live = _Live(app, session)
+    session.loop.go()
+    try:
+        app.loop.follow(_Followed(session), "Robot", live.step)
+    except BaseException as exc:  # (the page failed to follow: the robot stops)
+        session.loop.stop("error", f"the page failed to follow the robot: {exc}")
+        session.loop.wait(5.0)
+        session.close()
+        raise
+    result = session.loop.wait(5.0)
+    live.draw()
+    if session.recorder is not None and result is not None:
+        session.recorder.write("/result", time.monotonic(), result.to_json())
+    session.close()
+    if result is None:
+        text = "Robot: the loop did not end in time; it was told to stop"
+    else:
+        late = f"{result.late} of {result.periods} control periods late"
+        worst = f", max deviation {100 * max(live.deviation):.1f} cm" if live.deviation else ""
+        text = (
+            f"Robot stopped: **{result.reason}** ({result.detail}); {late}{worst}. "
+            f"Log: {session.log.name}. **Route from robot** re-plans from where it is."
+        )
+    panel.report.content = text
+    app.page.set_status(text)
+
+
+def do_robot_stop(app: App, cmd: RobotStopCmd) -> None:
+    """Stop the robot now (while Go runs too): zero commands, repeated."""
+    session = app.robot
+    if session is None or not session.loop.running:
+        app.page.notify(cmd.client_id, "Nothing to stop", "No robot is held or driven.")
+        return
+    session.loop.stop("stop", "Stop pressed in the page")
+    if not session.went:  # held before Go: the session ends here
+        session.loop.wait(2.0)
+        _close_session(app)
+        app.page.robot_panel.go_button.disabled = True
+        app.page.robot_panel.report.content = "Robot stopped before Go."
+        app.page.set_status("Robot stopped before Go.")

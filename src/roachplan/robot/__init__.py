@@ -1,0 +1,164 @@
+"""The robot in the loop: drive a real robot with the same planner and driver as the
+simulation, record every run, and measure how well the simulation predicted it.
+
+Pose in (NatNet from OptiTrack Motive, unicast; a UDP/JSON stream; or a registered source),
+motor commands out (a documented binary frame over UDP or a serial line; or a registered
+link), safety stops as values, a page-independent loop with events, MCAP run logs, a twin
+that stands in for the robot on the same protocols (`python -m roachplan.robot.twin`), and
+compare/fit of the simulation against logged runs.
+"""
+
+from typing import TYPE_CHECKING
+
+from roachplan._lazy import lazy_exports
+
+# Public names, imported on first use (roachplan._lazy): the command line answers at once.
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "RobotError": "._errors",
+        "CommandFrame": "._frames",
+        "FRAME_SIZE": "._frames",
+        "FrameReader": "._frames",
+        "decode_command": "._frames",
+        "encode_command": "._frames",
+        "CommandLink": "._links",
+        "LINKS": "._links",
+        "SerialCommandLink": "._links",
+        "SerialLinkSettings": "._links",
+        "UdpCommandLink": "._links",
+        "UdpLinkSettings": "._links",
+        "UdpCommandReceiver": "._links",
+        "FdCommandReceiver": "._links",
+        "open_link": "._links",
+        "register_link": "._links",
+        "PoseSample": "._pose",
+        "PoseSource": "._pose",
+        "POSE_SOURCES": "._pose",
+        "UdpJsonPoseSource": "._pose",
+        "UdpJsonSettings": "._pose",
+        "open_pose_source": "._pose",
+        "register_pose_source": "._pose",
+        "parse_pose_json": "._pose",
+        "pose_json": "._pose",
+        "NatNetPoseSource": "._natnet",
+        "NatNetServer": "._natnet",
+        "NatNetSettings": "._natnet",
+        "RigidBodyFrame": "._natnet",
+        "RigidBodyModel": "._natnet",
+        "frame_packet": "._natnet",
+        "model_def_packet": "._natnet",
+        "server_info_packet": "._natnet",
+        "NATNET_VERSION": "._natnet",
+        "FrameTransform": "._transform",
+        "measure_transform": "._transform",
+        "SafetyConfig": "._safety",
+        "SafetyMap": "._safety",
+        "Stop": "._safety",
+        "StopReason": "._safety",
+        "check_pose": "._safety",
+        "distance_to_path": "._safety",
+        "LoopConfig": "._config",
+        "RobotLoop": "._loop",
+        "RunResult": "._loop",
+        "LoopEvent": "._loop",
+        "PoseEvent": "._loop",
+        "CommandEvent": "._loop",
+        "StopEvent": "._loop",
+        "FinishedEvent": "._loop",
+        "RunRecorder": "._record",
+        "RunLog": "._record",
+        "read_run": "._record",
+        "RobotSettings": "._config",
+        "RobotRun": "._run",
+        "drive_robot": "._run",
+        "predict": "._run",
+        "Comparison": "._compare",
+        "FitConfig": "._compare",
+        "FitResult": "._compare",
+        "SimParams": "._compare",
+        "Windows": "._compare",
+        "compare": "._compare",
+        "fit": "._compare",
+        "log_world": "._compare",
+        "motor_phase": "._compare",
+        "nominal_params": "._compare",
+        "params_of_robot_file": "._compare",
+        "replay_windows": "._compare",
+        "TwinConfig": "._twin",
+        "run_twin": "._twin",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._compare import Comparison as Comparison
+    from ._compare import FitConfig as FitConfig
+    from ._compare import FitResult as FitResult
+    from ._compare import SimParams as SimParams
+    from ._compare import Windows as Windows
+    from ._compare import compare as compare
+    from ._compare import fit as fit
+    from ._compare import log_world as log_world
+    from ._compare import motor_phase as motor_phase
+    from ._compare import nominal_params as nominal_params
+    from ._compare import params_of_robot_file as params_of_robot_file
+    from ._compare import replay_windows as replay_windows
+    from ._config import LoopConfig as LoopConfig
+    from ._config import RobotSettings as RobotSettings
+    from ._errors import RobotError as RobotError
+    from ._frames import FRAME_SIZE as FRAME_SIZE
+    from ._frames import CommandFrame as CommandFrame
+    from ._frames import FrameReader as FrameReader
+    from ._frames import decode_command as decode_command
+    from ._frames import encode_command as encode_command
+    from ._links import LINKS as LINKS
+    from ._links import CommandLink as CommandLink
+    from ._links import FdCommandReceiver as FdCommandReceiver
+    from ._links import SerialCommandLink as SerialCommandLink
+    from ._links import SerialLinkSettings as SerialLinkSettings
+    from ._links import UdpCommandLink as UdpCommandLink
+    from ._links import UdpCommandReceiver as UdpCommandReceiver
+    from ._links import UdpLinkSettings as UdpLinkSettings
+    from ._links import open_link as open_link
+    from ._links import register_link as register_link
+    from ._loop import CommandEvent as CommandEvent
+    from ._loop import FinishedEvent as FinishedEvent
+    from ._loop import LoopEvent as LoopEvent
+    from ._loop import PoseEvent as PoseEvent
+    from ._loop import RobotLoop as RobotLoop
+    from ._loop import RunResult as RunResult
+    from ._loop import StopEvent as StopEvent
+    from ._natnet import NATNET_VERSION as NATNET_VERSION
+    from ._natnet import NatNetPoseSource as NatNetPoseSource
+    from ._natnet import NatNetServer as NatNetServer
+    from ._natnet import NatNetSettings as NatNetSettings
+    from ._natnet import RigidBodyFrame as RigidBodyFrame
+    from ._natnet import RigidBodyModel as RigidBodyModel
+    from ._natnet import frame_packet as frame_packet
+    from ._natnet import model_def_packet as model_def_packet
+    from ._natnet import server_info_packet as server_info_packet
+    from ._pose import POSE_SOURCES as POSE_SOURCES
+    from ._pose import PoseSample as PoseSample
+    from ._pose import PoseSource as PoseSource
+    from ._pose import UdpJsonPoseSource as UdpJsonPoseSource
+    from ._pose import UdpJsonSettings as UdpJsonSettings
+    from ._pose import open_pose_source as open_pose_source
+    from ._pose import parse_pose_json as parse_pose_json
+    from ._pose import pose_json as pose_json
+    from ._pose import register_pose_source as register_pose_source
+    from ._record import RunLog as RunLog
+    from ._record import RunRecorder as RunRecorder
+    from ._record import read_run as read_run
+    from ._run import RobotRun as RobotRun
+    from ._run import drive_robot as drive_robot
+    from ._run import predict as predict
+    from ._safety import SafetyConfig as SafetyConfig
+    from ._safety import SafetyMap as SafetyMap
+    from ._safety import Stop as Stop
+    from ._safety import StopReason as StopReason
+    from ._safety import check_pose as check_pose
+    from ._safety import distance_to_path as distance_to_path
+    from ._transform import FrameTransform as FrameTransform
+    from ._transform import measure_transform as measure_transform
+    from ._twin import TwinConfig as TwinConfig
+    from ._twin import run_twin as run_twin

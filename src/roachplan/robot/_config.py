@@ -1,0 +1,57 @@
+"""The robot loop's settings and a drive's (light: the command line checks its flags with
+their validators before anything heavy loads)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from roachplan._settings import between, check_settings, optional, positive, seed
+from roachplan._settings import setting as s
+
+from ._safety import SafetyConfig
+from ._transform import FrameTransform
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoopConfig:
+    """How the loop runs."""
+
+    rate: float = s(50.0, between(1.0, 1000.0, "Hz"))
+    """Control rate [Hz]."""
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    late_tolerance: float = s(0.25, between(0.0, 1.0, "-"))
+    """A period whose command leaves more than this share of a period after its instant is
+    late (counted, and recorded) [-]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSettings:
+    """One drive of a real robot (the `roachplan robot` command's settings)."""
+
+    source: str = "natnet"
+    """The pose source's name (robot.POSE_SOURCES)."""
+    source_settings: dict[str, Any] = field(default_factory=dict)
+    """Its settings (e.g. natnet: server, local, command_port, rigid_body, up_axis)."""
+    link: str = "udp"
+    """The command link's name (robot.LINKS)."""
+    link_settings: dict[str, Any] = field(default_factory=dict)
+    """Its settings (udp: host, port; serial: port, baudrate)."""
+    transform: FrameTransform | None = None
+    """T_world_mocap; None: measured from the first pose, the robot placed at the start."""
+    seed: int | None = s(None, optional(seed()))
+    """The plan's seed (None: the scene's)."""
+    loop: LoopConfig = field(default_factory=LoopConfig)
+    log: Path | None = None
+    """The run's MCAP file (None: not recorded)."""
+    predict: bool = True
+    """Record the simulation's prediction of the plan from the robot's actual start."""
+    first_pose_timeout: float = s(5.0, positive("s", 600.0))
+    """How long to wait for the robot's first pose [s]."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)

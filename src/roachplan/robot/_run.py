@@ -1,0 +1,236 @@
+"""What `roachplan robot` does without a page: plan (or take a plan), Go, drive to the goal,
+stop, and record it all (drive_robot); and the simulation's prediction of the same plan from
+the robot's actual start (predict)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ._config import RobotSettings
+from ._errors import RobotError
+from ._links import CommandLink, open_link
+from ._loop import LoopEvent, RobotLoop, RunResult
+from ._pose import PoseSample, PoseSource, open_pose_source
+from ._record import RunRecorder, scene_record
+from ._safety import SafetyMap
+from ._transform import FrameTransform, measure_transform, yaw_of
+
+if TYPE_CHECKING:
+    from roachplan.planning import PlanResult
+    from roachplan.scenes import World
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class RobotRun:
+    """What drive_robot did."""
+
+    result: RunResult
+    transform: FrameTransform
+    path_xyz: np.ndarray
+    spins: tuple[tuple[int, float], ...]
+    log: Path | None
+    prediction: dict | None
+
+
+def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
+    deadline = time.monotonic() + timeout
+    while (sample := source.latest()) is None:
+        if time.monotonic() > deadline:
+            raise RobotError(
+                f"no pose of the robot within {timeout:g} s: is it tracked (Motive: the rigid "
+                f"body visible and streamed), and are the source's settings right?"
+            )
+        time.sleep(0.01)
+    return sample
+
+
+def start_height(world: World, xy) -> float:
+    """Height of the robot's body centre standing at xy [m] (the planner's surface there plus
+    the robot's standing height) [m]."""
+    return float(world.heightfield.sample(np.asarray(xy[:2]))) + world.robot.standing_height
+
+
+def predict(world: World, path_xyz: np.ndarray, spins, start: tuple[float, float, float]) -> dict:
+    """The simulation of the plan from start (x, y [m], yaw [rad]) with the world's own
+    parameters: outcome, reason, drive_time [s], trajectory [[t, x, y, z, yaw]...]."""
+    from roachplan.experiments import drive
+
+    frames: list[list[float]] = []
+
+    def on_frame(f) -> None:
+        frames.append([f.t, *f.p_world_body, yaw_of(f.quat_world_body)])
+
+    driven = drive(world, path_xyz, start=start, on_frame=on_frame, spins=spins)
+    return {
+        "start": list(start),
+        "outcome": driven.outcome,
+        "reason": driven.reason,
+        "drive_time": driven.drive_time,
+        "trajectory": frames,
+    }
+
+
+def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
+    world: World,
+    settings: RobotSettings,
+    *,
+    plan: PlanResult | None = None,
+    source: PoseSource | None = None,
+    link: CommandLink | None = None,
+    listeners: Sequence[Callable[[LoopEvent], None]] = (),
+    on_loop: Callable[[RobotLoop], None] | None = None,
+    ready: Callable[[RobotLoop], bool] | None = None,
+) -> RobotRun:
+    """Plan from where the robot stands (or take `plan`), Go, drive until the goal or a stop,
+    and record it. source/link: already open ones (default: opened from the settings and
+    closed at the end). on_loop(loop) is called once the loop runs (a caller's Stop button).
+    ready(loop): the user's Go - called once the loop runs (sending stop frames: nothing
+    moves) with the plan made (loop.path), it returns True to drive, False not to (the run
+    then ends as "cancel"); None: go at once. Ctrl-C and SIGTERM stop the robot, while it
+    waits for Go too (when called from the main thread)."""
+    own_source = source is None
+    own_link = link is None
+    source = source or open_pose_source(settings.source, **settings.source_settings)
+    recorder: RunRecorder | None = None
+    try:
+        link = link or open_link(settings.link, **settings.link_settings)
+        scene = world.scene
+        assert scene.start is not None and scene.goal is not None  # build_world sets them
+        sample = wait_first_pose(source, settings.first_pose_timeout)
+        transform = settings.transform or measure_transform(
+            sample.position, sample.quat, scene.start, start_height(world, scene.start)
+        )
+        p, q = transform.apply(sample.position, sample.quat)
+        here = (p[0], p[1], yaw_of(q))
+        if plan is None:
+            from roachplan.experiments import plan as plan_trial
+
+            seed = scene.seed if settings.seed is None else settings.seed
+            plan = plan_trial(world, seed=seed, start=here)
+            if not plan.found:
+                raise RobotError(
+                    f"no plan from where the robot stands ({here[0]:.3f}, {here[1]:.3f}, "
+                    f"{math.degrees(here[2]):.0f} deg): {plan.message}"
+                )
+        path, spins = np.asarray(plan.path_xyz, dtype=float), tuple(plan.spins)
+        if settings.log is not None:
+            recorder = RunRecorder(settings.log)
+            t = time.monotonic()
+            recorder.write("/scene", t, scene_record(_scene_file(scene), scene.name))
+            recorder.write("/settings", t, _settings_record(world, settings, transform))
+            recorder.write(
+                "/plan",
+                t,
+                {
+                    "path": path.tolist(),
+                    "spins": [list(s) for s in spins],
+                    "planner": plan.planner,
+                    "seed": plan.seed,
+                    "start": list(here),
+                    "goal": list(scene.goal),
+                },
+            )
+        loop = RobotLoop(
+            path_xyz=path,
+            spins=spins,
+            source=source,
+            link=link,
+            transform=transform,
+            safety_map=SafetyMap.from_world(world),
+            driver=scene.driver,
+            max_motor_speed=world.robot.max_motor_speed,
+            cfg=settings.loop,
+            recorder=recorder,
+            listeners=listeners,
+        )
+        restore = _stop_on_signals(loop)
+        try:
+            loop.start()
+            if on_loop is not None:
+                on_loop(loop)
+            if ready is None or ready(loop):
+                loop.go()
+            else:
+                loop.stop("cancel", "not started: Go was not given")
+            while (result := loop.wait(0.1)) is None:
+                pass
+        finally:
+            restore()
+        prediction = None
+        if settings.predict and result.start is not None:
+            prediction = predict(world, path, spins, result.start)
+        if recorder is not None:
+            t = time.monotonic()
+            if prediction is not None:
+                recorder.write("/prediction", t, prediction)
+            recorder.write("/result", t, result.to_json())
+            log = recorder.close()
+            recorder = None
+        else:
+            log = None
+        return RobotRun(
+            result=result,
+            transform=transform,
+            path_xyz=path,
+            spins=spins,
+            log=log,
+            prediction=prediction,
+        )
+    finally:
+        if recorder is not None:
+            recorder.abandon()
+        if own_link and link is not None:
+            link.close()
+        if own_source:
+            source.close()
+
+
+def _scene_file(scene) -> Path | None:
+    path = Path(scene.path)
+    return path if path.is_file() else None
+
+
+def _settings_record(world: World, settings: RobotSettings, transform: FrameTransform) -> dict:
+    scene = world.scene
+    return {
+        "source": settings.source,
+        "source_settings": {k: v for k, v in settings.source_settings.items()},
+        "link": settings.link,
+        "link_settings": {k: v for k, v in settings.link_settings.items()},
+        "transform": transform.to_json(),
+        "transform_measured": settings.transform is None,
+        "loop": dataclasses.asdict(settings.loop),
+        "driver": dataclasses.asdict(scene.driver),
+        "sim": dataclasses.asdict(scene.sim),
+        "robot": dataclasses.asdict(world.robot),
+        "bounds": [list(b) for b in scene.bounds] if scene.bounds else None,
+    }
+
+
+def _stop_on_signals(loop: RobotLoop) -> Callable[[], None]:
+    """Ctrl-C and SIGTERM stop the robot (as Stop does) while it drives; the handlers before
+    are put back by the function returned. Outside the main thread signals cannot be
+    handled: nothing is installed."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum, _frame) -> None:
+        loop.stop("signal", f"{signal.Signals(signum).name} received")
+
+    before = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for signum, h in before.items():
+            signal.signal(signum, h)
+
+    return restore

@@ -1,0 +1,82 @@
+"""The page's Robot folder in headless Chromium, against a twin this test starts (127.0.0.1
+only): Route from robot plans from where the twin stands and holds it, Go drives it with its
+live pose drawn and its deviation plotted, Stop stops it (zero commands, repeated), and the run
+is logged."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+from conftest import free_port
+from test_app import CHROMIUM, browser_pages
+from test_robot_cli import MOCAP, twin
+
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+
+
+def type_into(page, label: str, value: str) -> None:
+    """Type into the text box of the GUI row labelled `label`."""
+    row = page.locator(f"xpath=//label[text()='{label}']/ancestor::div[.//input][1]")
+    box = row.locator("input").last
+    box.fill(value)
+    box.press("Enter")
+
+
+def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifacts):
+    from roachplan.app._server import RoachApp
+    from roachplan.robot import read_run
+    from roachplan.scenes import build_world, load_scene
+
+    with twin(*MOCAP) as (ready, control):
+        app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
+        try:
+            with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
+                type_into(page, "Source address", f"127.0.0.1:{ready['natnet_port']}")
+                type_into(page, "Sink address", f"127.0.0.1:{ready['command_port']}")
+                page.get_by_role("button", name="Route from robot").click()
+                page.get_by_text(re.compile(r"The robot is held: press")).first.wait_for(
+                    timeout=120_000
+                )
+                assert app.core.robot is not None and app.core.robot.loop.running
+                held = control("commands")["commands"]
+                assert held and all(c[4] for c in held)  # nothing moves before Go
+                page.screenshot(path=artifacts / "robot-01-held.png")
+                node = app.view.robot_node
+                assert node is not None
+                start = tuple(node.position)
+                page.get_by_role("button", name="Go", exact=True).click()
+                page.get_by_text(re.compile(r"Robot: \d+ % of the path")).first.wait_for(
+                    timeout=30_000
+                )
+                time.sleep(4.0)
+                moved = tuple(node.position)
+                page.screenshot(path=artifacts / "robot-02-driving.png")
+                assert page.get_by_text(re.compile(r"deviation \d+\.\d cm")).count() >= 1
+                t_stop = time.monotonic()
+                page.get_by_role("button", name="Stop", exact=True).click()
+                page.get_by_text(re.compile(r"Robot stopped:")).first.wait_for(timeout=30_000)
+                page.screenshot(path=artifacts / "robot-03-stopped.png")
+                report = page.get_by_text(re.compile(r"control periods late")).first.inner_text()
+            commands = control("commands")["commands"]
+            state = control("state")
+        finally:
+            app.stop()
+    assert sum(abs(a - b) for a, b in zip(start, moved, strict=True)) > 0.05  # the live pose
+    moving = [c for c in commands if not c[4]]
+    assert moving and moving[-1][0] < t_stop + 1.0
+    after = [c for c in commands if c[0] > moving[-1][0]]
+    assert len(after) >= 10 and all(c[2] == c[3] == 0.0 for c in after)
+    assert state["speeds"] == [0.0, 0.0]
+    said = re.search(r"(\d+) of (\d+) control periods late", report)
+    assert said is not None, report
+    late, periods = map(int, said.groups())
+    print(f"page open: {late} of {periods} control periods late ({100 * late / periods:.1f} %)")
+    assert periods > 100 and late < 0.5 * periods  # (the 10 % goal: benchmarks/bench_robot.py)
+    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
+    assert len(logs) == 1
+    run = read_run(logs[0])
+    assert run.complete and run.result is not None and run.result["reason"] == "stop"
+    assert run.prediction is not None and len(run.poses["t_receive"]) > 100

@@ -1,0 +1,299 @@
+"""`roachplan twin`, `robot`, `compare`, `fit` and `replay LOG.mcap` through the real command
+line, against a twin each test starts and stops (127.0.0.1 only; the serial line a
+pseudo-terminal): nothing moves before Go, Ctrl-C and SIGTERM stop the robot with zero
+commands repeated, and every bad flag is one line naming it."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from conftest import ROACHPLAN, ROOT, roachplan
+
+MOCAP = ["--latency", "0.04", "--noise", "0.002", "--seed", "3", "--mocap", "0.4,-0.3,0,25"]
+
+
+@contextlib.contextmanager
+def twin(*args: str):
+    """`roachplan twin` on double_bridge; yields its ready line and a control function."""
+    proc = subprocess.Popen(
+        [*ROACHPLAN, "twin", "--scene", "double_bridge", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.settimeout(5)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line, proc.stderr.read() if proc.stderr else "the twin ended"
+        ready = json.loads(line)
+
+        def control(op: str, **kw) -> dict:
+            sock.sendto(json.dumps({"op": op, **kw}).encode(), ("127.0.0.1", ready["control_port"]))
+            return json.loads(sock.recv(1 << 22))
+
+        yield ready, control
+    finally:
+        sock.close()
+        proc.terminate()
+        assert proc.wait(timeout=20) == 0  # (SIGTERM: the twin's own clean end)
+
+
+def robot(ready: dict, *args: str, **popen) -> subprocess.Popen:
+    """`roachplan robot` against a twin's NatNet and UDP ports."""
+    return subprocess.Popen(
+        [
+            *ROACHPLAN,
+            "robot",
+            "--scene",
+            "double_bridge",
+            "--natnet-port",
+            str(ready["natnet_port"]),
+            "--max-pose-age",
+            "0.6",  # (two busy cores have delayed a pose past 200 ms: not this test's subject)
+            *args,
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **popen,
+    )
+
+
+def wait_for(stream, text: str, timeout: float) -> str:
+    """The stream's lines up to one holding text (within timeout [s]), read by a thread (a
+    text stream's buffer hides lines from select)."""
+    lines: queue.Queue[str] = queue.Queue()
+
+    def read() -> None:
+        for line in iter(stream.readline, ""):
+            lines.put(line)
+            if text in line:
+                return
+        lines.put("")
+
+    threading.Thread(target=read, daemon=True).start()
+    seen, deadline = "", time.monotonic() + timeout
+    while True:
+        try:
+            line = lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+        except queue.Empty:
+            break
+        seen += line
+        if not line or text in line:
+            break
+    if text not in seen:
+        raise AssertionError(f"{text!r} not seen within {timeout} s; saw:\n{seen}")
+    return seen
+
+
+# -- bad flags --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["twin", "--latency", "-1"], "--latency -1: expected a number from 0 to 5 [s]"),
+        (["twin", "--friction", "9"], "--friction 9: expected a number from 0.05 to 5 [-]"),
+        (["twin", "--drop", "1"], "--drop 1: expected a number from 0 to below 1 [-]"),
+        (["twin", "--natnet-port", "70000"], "--natnet-port 70000: expected a port number"),
+        (["twin", "--pose", "udp-json"], "--pose udp-json sends the poses to --pose-target"),
+        (["twin", "--pose-target", "127.0.0.1:9"], "--pose-target is where --pose udp-json"),
+        (["twin", "--mocap", "1,2"], "--mocap '1,2': expected 4 comma-separated numbers, got 2"),
+        (["twin", "--start", "1,x,3"], "--start '1,x,3': expected x,y,yaw_deg"),
+        (["twin", "--host", "a b"], "--host a b: expected an IP address or host name"),
+        (["robot", "--rate", "0"], "--rate 0: expected a number from 1 to 1000 [Hz]"),
+        (["robot", "--max-deviation", "-1"], "--max-deviation -1: expected a number above 0"),
+        (["robot", "--robot", "x:y"], "--robot 'x:y': expected HOST:PORT (or PORT)"),
+        (["robot", "--robot", "1.2.3.4:0"], "--robot 1.2.3.4:0: expected a port number"),
+        (["robot", "--link", "serial"], "--link serial needs --serial DEVICE"),
+        (["robot", "--serial", "/dev/ttyUSB0"], "--serial is the device of --link serial"),
+        (["robot", "--rigid-body", "0"], "--rigid-body 0: expected a rigid body's streaming id"),
+        (["robot", "--transform", "1,2,3"], "--transform '1,2,3': expected 4 comma-separated"),
+        (["robot", "--baudrate", "10"], "--baudrate 10: expected a line speed [bit/s]"),
+        (["robot", "--seed", "-1"], "--seed -1: expected a non-negative integer"),
+        (["robot", "-o", "run.txt"], "-o run.txt: the output must end in one of .mcap"),
+        (["compare", "x.mcap", "--latency", "3"], "--latency 3: expected a number from 0 to 1"),
+        (["compare", "missing.mcap"], "run log missing.mcap: cannot read it"),
+        (["fit", "a.mcap", "-o", "r.yaml", "--parameters", "foo"], "--parameters foo: expected"),
+        (["fit", "a.mcap", "-o", "r.yaml", "--evaluations", "0"], "--evaluations 0: expected"),
+        (["fit", "a.mcap", "-o", "r.txt"], "-o r.txt: the output must end in one of .yaml"),
+        (["replay", "x.mcap", "-o", "r.html", "--trial", "2"], "--trial 2:"),
+    ],
+)
+def test_every_bad_flag_is_one_line_naming_it(argv, message, capsys, tmp_path, monkeypatch):
+    from roachplan.app.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    if argv[0] == "replay":
+        (tmp_path / "x.mcap").write_bytes(b"")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("roachplan: error: "), err
+    assert message in err
+
+
+def test_a_file_that_is_no_run_log_is_refused(tmp_path):
+    (tmp_path / "x.mcap").write_bytes(b"not mcap at all")
+    r = roachplan("compare", str(tmp_path / "x.mcap"))
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr and r.stderr.count("\n") == 1
+
+
+# -- the twin, and the robot against it ---------------------------------------------------------------
+
+
+def test_nothing_moves_before_go_and_ctrl_c_then_stops_it(tmp_path):
+    with twin(*MOCAP) as (ready, control):
+        proc = robot(
+            ready,
+            "--robot",
+            f"127.0.0.1:{ready['command_port']}",
+            "-o",
+            str(tmp_path / "held.mcap"),
+            "--json",
+            stdin=subprocess.PIPE,
+        )
+        try:
+            assert proc.stderr is not None
+            seen = wait_for(proc.stderr, "press Enter to Go", timeout=120)
+            assert "planned" in seen and "waypoints" in seen
+            time.sleep(1.0)  # held: stop frames only
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        commands = control("commands")["commands"]
+        state = control("state")
+    assert proc.returncode == 130, err  # interrupted
+    result = json.loads(out)
+    assert result["reason"] == "signal" and result["drive_time"] is None
+    assert len(commands) > 20 and all(c[4] and c[2] == c[3] == 0.0 for c in commands)
+    assert state["speeds"] == [0.0, 0.0]
+
+
+def test_go_then_sigterm_stops_with_zero_commands_repeated_and_the_log_compares_fits_and_replays(
+    tmp_path,
+):
+    log = tmp_path / "run.mcap"
+    with twin(*MOCAP, "--friction", "0.75", "--motor-mismatch", "0.02") as (ready, control):
+        proc = robot(
+            ready,
+            "--robot",
+            str(ready["command_port"]),
+            "-o",
+            str(log),
+            stdin=subprocess.PIPE,
+        )
+        try:
+            assert proc.stdin is not None and proc.stderr is not None
+            wait_for(proc.stderr, "press Enter to Go", timeout=120)
+            proc.stdin.write("\n")
+            proc.stdin.flush()
+            time.sleep(5.0)
+            t_signal = time.monotonic()
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        commands = control("commands")["commands"]
+        state = control("state")
+    assert proc.returncode == 130, err
+    assert out.startswith("signal after "), out
+    assert "SIGTERM received" in out and f"wrote {log}" in out
+    moving = [c for c in commands if not c[4]]
+    assert moving, "it drove after Enter"
+    after = [c for c in commands if c[0] >= moving[-1][0]][1:]
+    assert moving[-1][0] < t_signal + 0.5  # (nothing moves after the signal)
+    assert len(after) >= 10 and all(c[4] and c[2] == c[3] == 0.0 for c in after)
+    assert state["speeds"] == [0.0, 0.0]
+    _compare_fit_replay(log, tmp_path)
+
+
+def _compare_fit_replay(log, tmp_path) -> None:
+    """The run's log through compare, fit and replay."""
+    r = roachplan("compare", str(log), "--latency", "0.04", "--json")
+    assert r.returncode == 0, r.stderr
+    c = json.loads(r.stdout)
+    assert c["robot_outcome"] == "signal" and len(c["windows"]["t"]) >= 2
+    assert c["open_loop"]["end_m"] < 1.0 and c["closed_loop"]["end_m"] >= 0
+    r = roachplan("compare", str(log), "--latency", "0.04")
+    assert r.returncode == 0 and "end error: open loop" in r.stdout, r.stderr
+    out_file = tmp_path / "roach.yaml"
+    r = roachplan(
+        "fit", str(log), "-o", str(out_file), "--latency", "0.04", "--evaluations", "4",
+        "--rounds", "1", "--starts", "2", "--parameters", "friction",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert out_file.read_text().startswith("# written by roachplan (robot fit)")
+    r = roachplan("fit", str(log), "-o", str(out_file), "--evaluations", "1", "--json")
+    assert r.returncode == 0, r.stderr  # (its own robot file: replaced without --force)
+    assert json.loads(r.stdout)["evaluations"] <= 2
+    r = roachplan("compare", str(log), "--robot-file", str(out_file), "--json")
+    assert r.returncode == 0, r.stderr
+    page = tmp_path / "run.html"
+    r = roachplan("replay", str(log), "-o", str(page))
+    assert r.returncode == 0, r.stderr
+    text = page.read_text()
+    assert "written by roachplan: a replay" in text and "robot green" in text
+    assert "SIGTERM received" in text
+    r = roachplan("replay", str(log), "-o", str(tmp_path / "again.html"), "--scene", "heightmap")
+    assert r.returncode == 0, r.stderr  # (a scene given: shown on it)
+
+
+def test_go_over_a_serial_line_and_a_deviation_stop_ends_in_status_1(tmp_path):
+    with twin("--command", "serial", "--motor-mismatch", "0.35", *MOCAP) as (ready, control):
+        proc = robot(
+            ready,
+            "--link",
+            "serial",
+            "--serial",
+            ready["serial"],
+            "--max-deviation",
+            "0.05",
+            "--go",
+            "--no-predict",
+            "--json",
+            "-o",
+            str(tmp_path / "off.mcap"),
+        )
+        out, err = proc.communicate(timeout=180)
+        state = control("state")
+    assert proc.returncode == 1, err
+    result = json.loads(out)
+    assert result["reason"] in ("deviation", "off_standable"), result
+    assert result["prediction"] is None and os.path.exists(result["log"])
+    assert state["speeds"] == [0.0, 0.0] and state["bad_commands"] == 0
+
+
+def test_a_robot_commands_bad_flag_loads_nothing_heavy():
+    """Refused before OMPL, trimesh, PyBullet, scipy, the NatNet client or mcap load."""
+    code = (
+        "import sys; from roachplan.app.cli import main\n"
+        "for argv in ([ 'robot', '--rigid-body', '0'], ['robot', '--transform', '1,2,3,x'],\n"
+        "             ['twin', '--noise', '-1'], ['fit', 'a.mcap', '-o', 'r.yaml', '--rounds', '0'],\n"
+        "             ['compare', 'a.mcap', '--latency', '2']):\n"
+        "    assert main(argv) == 2\n"
+        "print([m for m in ('ompl', 'trimesh', 'pybullet', 'scipy', 'natnet', 'mcap') "
+        "if m in sys.modules])"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "[]", (done.stdout, done.stderr)
+    assert len(done.stderr.strip().splitlines()) == 5
