@@ -123,7 +123,7 @@ def _race(truths, on_event=None, **cfg):
 
     return race(
         racers,
-        ChooseConfig(candidates=len(truths), budget_s=None, **cfg),
+        ChooseConfig(candidates=len(truths), budget_s=None, **{"procedure": "race", **cfg}),
         run,
         mass=1.0,
         on_event=on_event,
@@ -177,7 +177,7 @@ def test_rollouts_go_where_they_can_settle_the_decision():
     # A newcomer first gets its first round; with the zone off every candidate is driven.
     fresh = _drawn(2, 0, 1.0, 1.0, 0.05)
     assert [c.index for c in to_sample([leader, rival, fresh], conf, cfg)] == [2]
-    off = ChooseConfig(candidates=2, batch=4, indifference=(0.0, 0.0))
+    off = ChooseConfig(candidates=2, batch=4, indifference=(0.0, 0.0), procedure="race")
     assert len(to_sample([leader, rival], conf, off)) == 2
 
     # A race spends its rollouts where they decide: it stops in the zone, the first-ranked
@@ -550,6 +550,8 @@ def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
         "1",
         "--seed",
         "1",
+        "--procedure",
+        "race",  # (its worlds are the race's stream: issue 25's certify drives fresh ones)
         "--json",
         "--out",
         str(out),

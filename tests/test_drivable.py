@@ -111,11 +111,10 @@ def test_a_goal_passed_too_wide_is_missed_not_circled(tmp_path):
 def test_progress_at_the_very_end_of_the_path_still_projects():
     """The robot abreast of the goal but wider than r_end: its progress is the path's length,
     and the projection window must still hold the last segment (it was empty)."""
-    from roachplan.sim import DriverConfig
-    from roachplan.sim._driver import _Tracking
+    from roachplan.sim import DriverConfig, TrackingFollower
 
     path = np.column_stack([np.linspace(0, 1, 21), np.zeros(21), np.zeros(21)])
-    t = _Tracking(path, DriverConfig())
+    t = TrackingFollower(path, DriverConfig())
     t.s = t.total
     assert t.update((1.0, 0.07, 0.0)) is None  # abreast, 7 cm off: not yet decided
     assert t.s == pytest.approx(t.total)

@@ -185,7 +185,13 @@ def test_the_folder_shows_a_race_from_its_events_as_values():
         ranking_markdown,
         ranking_row,
     )
-    from roachplan.experiments import CandidatesPlanned, Decided, Knockout, RoundDone
+    from roachplan.experiments import (
+        CandidatesPlanned,
+        ChooseConfig,
+        Decided,
+        Knockout,
+        RoundDone,
+    )
     from test_choose import _race
 
     events: list = []
@@ -212,7 +218,7 @@ def test_the_folder_shows_a_race_from_its_events_as_values():
     decided = events[-1]
     assert isinstance(decided, Decided) and view.decided is decided and view.failed is None
     assert view.standings is decided.standings  # best first once decided
-    table = ranking_markdown(view.standings, decided.chosen, 0.95)
+    table = ranking_markdown(view.standings, decided.chosen, ChooseConfig(procedure="race"))
     rows = [line for line in table.splitlines() if line.startswith("| **")]
     assert rows[0].startswith("| **1** r **chosen** |")
     assert sum("chosen" in r for r in rows) == 1

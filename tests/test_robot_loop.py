@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-import roachplan
+import roachplan.scenes
 from roachplan.robot import (
     LoopConfig,
     RobotSettings,

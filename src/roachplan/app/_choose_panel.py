@@ -21,8 +21,11 @@ from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
 
 import numpy as np
+from viser import LineSegmentsHandle
 
 from roachplan.experiments import (
+    DEFAULT_MODE,
+    QUICK_MODE,
     CandidatePlan,
     CandidatesPlanned,
     ChooseConfig,
@@ -35,13 +38,15 @@ from roachplan.experiments import (
     choose,
 )
 from roachplan.planning import PlanResult
-from roachplan.planning._isolated import limit_child_memory
+from roachplan.processes import limit_memory
 
 from ._app import App
 from ._commands import CancelCmd, ChooseCmd
 from ._draw import segments
 from ._jobs import Job
 
+MODES = {"Default": DEFAULT_MODE, "Quick": QUICK_MODE}
+"""The Choose mode dropdown's choices: their (eps_P, eps_E) (ChooseConfig.indifference)."""
 UNTRIED = (150, 150, 150)
 """Colour of a candidate without rollouts yet."""
 LIFT = 0.006
@@ -94,15 +99,19 @@ def ranking_row(s: Standing, chosen: int | None) -> str:
     )
 
 
-def ranking_markdown(standings: tuple[Standing, ...], chosen: int | None, confidence: float) -> str:
+def ranking_markdown(standings: tuple[Standing, ...], chosen: int | None, cfg: ChooseConfig) -> str:
     """The ranking table, a row per standing in the order given, the chosen one marked."""
-    k = max(len(standings), 1)
+    k, confidence = max(len(standings), 1), cfg.confidence
     # Four columns: the panel is about 300 px wide, and a wider table hides its right part.
     head = "| path | P(success) (n) | energy; time | failures |\n|---|---|---|---|\n"
     rows = [ranking_row(s, chosen) for s in standings]
+    each = (
+        f"valid at every look, at {1 - (1 - confidence) / 4 / k:.2%} each"
+        if cfg.procedure == "certify"
+        else f"at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} jointly over {k})"
+    )
     note = (
-        f"Best first. Intervals at {1 - (1 - confidence) / k:.2%} each ({confidence:.0%} "
-        f"jointly over {k}); n: rollouts; energy: mean over the successes, × a straight walk "
+        f"Best first. Intervals {each}; n: rollouts; energy: mean over the successes, × a straight walk "
         f"on the floor; time: their mean drive time; out: left the race, beaten. Lines: red "
         f"(P = 0) to green (P = 1), grey before their first rollouts; the chosen one thick."
     )
@@ -169,6 +178,15 @@ class ChoosePanel:
                 hint="Wall time for planning the candidates and racing them",
             )
             self.confidence = gui.add_number("Confidence", 0.95, min=0.5, max=0.99, step=0.01)
+            self.mode = gui.add_dropdown(
+                "Choose mode",
+                tuple(MODES),
+                initial_value="Default",
+                hint="Default: the chosen path succeeds at least 95 % of the time and is within "
+                "5 % of the lowest energy among the paths that safe; Quick: 90 % and 10 %, in "
+                "about a quarter of the rollouts. Either is certified on fresh rollouts at the "
+                "confidence above",
+            )
             self.button = gui.add_button(
                 "Choose path",
                 hint="Drive each candidate many times in worlds drawn from the uncertainty "
@@ -188,7 +206,7 @@ class ChoosePanel:
             self.table = gui.add_markdown("")
         self.button.on_click(lambda ev: put(ChooseCmd(ev.client_id)))
         self.cancel.on_click(lambda ev: put(CancelCmd(ev.client_id)))
-        self.lines: dict[int, object] = {}
+        self.lines: dict[int, LineSegmentsHandle] = {}
         """Candidate index -> its line segments handle (recoloured as rollouts come in)."""
 
     def clear(self) -> None:
@@ -200,7 +218,7 @@ class ChoosePanel:
 def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
     """choose() on the page's world, each of its events sent as it happens; a Failed
     instead of the rest when it fails."""
-    limit_child_memory()
+    limit_memory()
     # The job's child is a daemon (it dies with the server) and multiprocessing refuses a
     # daemon children; the rollout workers die with this process (PR_SET_PDEATHSIG) and
     # Cancel kills them with it (kill_tree), so none is left behind either way.
@@ -215,9 +233,9 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
 def _at_scene_poses(app: App) -> None:
     """ChooseError unless the markers are at the scene's start and goal (the rollouts start
     there: their workers rebuild the scene from its file)."""
-    scene = app.world.scene
-    for which, pose in zip(("start", "goal"), app.page.markers.valid_poses(app.world), strict=True):
-        want = scene.start if which == "start" else scene.goal
+    world = app.world
+    for which, pose in zip(("start", "goal"), app.page.markers.valid_poses(world), strict=True):
+        want = world.start if which == "start" else world.goal
         turn = abs((pose[2] - want[2] + math.pi) % (2 * math.pi) - math.pi)
         if math.dist(pose[:2], want[:2]) > 0.005 or turn > math.radians(0.6):
             raise ChooseError(
@@ -232,10 +250,12 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
     """Race K candidates in a child followed by the loop; then Drive takes the chosen one."""
     panel = app.page.choose_panel
     _at_scene_poses(app)
+    budget = float(panel.budget.value)
     cfg = ChooseConfig(
         candidates=int(panel.candidates.value),
-        budget_s=float(panel.budget.value),
+        budget_s=budget,
         confidence=float(panel.confidence.value),
+        indifference=MODES.get(str(panel.mode.value), DEFAULT_MODE),
         seed=app.next_seed,
     )
     app.next_seed += 1  # (a second click draws fresh candidates and rollouts)
@@ -259,13 +279,13 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
                     _draw_candidates(app, panel, event.candidates)
                 case RoundDone():
                     _recolour(panel, event.standings)
-                    panel.table.content = ranking_markdown(event.standings, None, cfg.confidence)
+                    panel.table.content = ranking_markdown(event.standings, None, cfg)
                 case Decided():
                     took = job.elapsed
         t = job.elapsed
-        text = f"Choose path: {view.message}; {t:.1f} s of the {cfg.budget_s:g} s budget"
-        app.loop.progress(t / cfg.budget_s, f"{text} ({workers} workers)")
-        value = round(100.0 * min(t / cfg.budget_s, 1.0), 1)
+        text = f"Choose path: {view.message}; {t:.1f} s of the {budget:g} s budget"
+        app.loop.progress(t / budget, f"{text} ({workers} workers)")
+        value = round(100.0 * min(t / budget, 1.0), 1)
         if panel.progress.value != value:
             panel.progress.value = value
         if panel.summary.content != text:
@@ -274,9 +294,7 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
 
     panel.progress.value, panel.progress.visible, panel.cancel.visible = 0.0, True, True
     try:
-        end = app.loop.follow(
-            job, "Choose path", step, hard_stop=time.monotonic() + cfg.budget_s + GRACE
-        )
+        end = app.loop.follow(job, "Choose path", step, hard_stop=time.monotonic() + budget + GRACE)
     finally:
         panel.progress.visible = panel.cancel.visible = False
     if view.failed is not None:
@@ -318,7 +336,8 @@ def _recolour(panel: ChoosePanel, standings: tuple[Standing, ...]) -> None:
         handle = panel.lines.get(s.candidate)
         if handle is not None:
             n = len(handle.points)
-            handle.colors = np.broadcast_to(np.uint8(p_colour(s.p_success)), (n, 2, 3)).copy()
+            rgb = np.array(p_colour(s.p_success), dtype=np.uint8)
+            handle.colors = np.broadcast_to(rgb, (n, 2, 3)).copy()
 
 
 def _show_choice(
@@ -333,16 +352,17 @@ def _show_choice(
     """The ranking; the candidates become the plan's paths, the chosen one marked for Drive.
     took: the wall time to the decision [s]."""
     ranking, chosen, scene = decided.standings, decided.chosen, app.world.scene
-    panel.table.content = ranking_markdown(ranking, chosen, cfg.confidence)
+    panel.table.content = ranking_markdown(ranking, chosen, cfg)
     again = (
         f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
-        f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}`"
+        f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}"
+        f"{' --quick' if cfg.indifference == QUICK_MODE else ''}`"
     )
     ran = f"{decided.rollouts} rollouts in {took:.1f} s ({decided.stopped})"
     # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
     # marked for Drive (thick, "Drive") and every one keeping its P(success) colour.
     app.page.view.scene.remove_by_name("/plans/choose")
-    app.plan_endpoints = (scene.start, scene.goal)
+    app.plan_endpoints = (app.world.start, app.world.goal)
     app.set_plans([_labelled(scene, c) for c in paths])  # (in index order)
     if chosen is not None:
         app.select_path(chosen)
@@ -366,6 +386,13 @@ def _show_choice(
         f"{_f(row.p_success)} [{_f(row.p_low)}, {_f(row.p_high)}], energy "
         f"{_f(row.relative_energy)} × a straight walk; {ran}."
     )
+    g = decided.guarantee
+    if g is not None:  # (path k of the page is candidate k - 1)
+        text += (
+            f"  \n**Guarantee**: {g.sentence(chosen, noun='path', first=1)}. Bayesian posterior "
+            f"probability (flat priors, not a confidence) that it meets the claim: "
+            f"{g.posterior:.2f}."
+        )
     app.page.set_status(text + " **Drive** drives it (*Drive path* picks another).")
     panel.summary.content = f"{text}  \nSame race from the command line: {again}"
 
@@ -384,5 +411,6 @@ def _labelled(scene, c: CandidatePlan) -> LabelledPlan:
             plan_time=0.0,
             message="chosen by simulation",
             turning_radius=planner.turning_radius,
+            spins=c.spins,
         ),
     )

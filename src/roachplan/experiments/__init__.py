@@ -20,6 +20,9 @@ _getattr, __dir__, __all__ = lazy_exports(
         "OutReason": "._choose_candidate",
         "Standing": "._choose_candidate",
         "ChooseConfig": "._choose_config",
+        "DEFAULT_MODE": "._choose_config",
+        "QUICK_MODE": "._choose_config",
+        "Guarantee": "._choose_certify",
         "CandidatesPlanned": "._choose_events",
         "ChooseEvent": "._choose_events",
         "Decided": "._choose_events",
@@ -85,6 +88,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._choose_candidate import Knockout as Knockout
     from ._choose_candidate import OutReason as OutReason
     from ._choose_candidate import Standing as Standing
+    from ._choose_certify import Guarantee as Guarantee
+    from ._choose_config import DEFAULT_MODE as DEFAULT_MODE
+    from ._choose_config import QUICK_MODE as QUICK_MODE
     from ._choose_config import ChooseConfig as ChooseConfig
     from ._choose_events import CandidatesPlanned as CandidatesPlanned
     from ._choose_events import ChooseEvent as ChooseEvent

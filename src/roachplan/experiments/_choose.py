@@ -3,7 +3,9 @@ confidence, by racing rollouts under an uncertainty model (`roachplan choose`, t
 Choose path).
 
 choose() plans K distinct candidates (experiments/_choose_planning.py: each route the scene
-names gets candidates in turn), then races them (experiments/_choose_race.py): each round gives
+names gets candidates in turn), then screens them and certifies the one it picks on fresh
+rollouts, with a guarantee valid at every look (experiments/_choose_certify.py, the default),
+or, with procedure="race", races them as issue 17 did (experiments/_choose_race.py): each round gives
 `batch` more rollouts (experiments/_uncertainty.py: each its own seed) on the worker pool to
 the candidates whose intervals stand between the race and a decision, and after each round a
 candidate leaves the race when it is clearly beaten (experiments/_choose_policy.py).
@@ -30,9 +32,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import replace as dataclass_replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._choose_certify import certify_race
 from ._choose_config import ChooseConfig
 from ._choose_events import CandidatesPlanned, ChooseEvent
 from ._choose_planning import plan_candidates
@@ -40,13 +44,16 @@ from ._choose_race import Choice, race
 from ._errors import ChooseError
 from ._uncertainty import rollout_seed
 
+if TYPE_CHECKING:
+    from ._runner import Backend
+
 
 def choose(
     world,
     cfg: ChooseConfig,
     *,
     workers: int | None = 1,
-    backend: str = "local",
+    backend: Backend = "local",
     address: str | None = None,
     validate_repeats: int = 0,
     on_event: Callable[[ChooseEvent], None] | None = None,
@@ -61,8 +68,8 @@ def choose(
     from ._spec import ExperimentSpec
 
     scene = world.scene
-    if cfg.uncertainty is None:
-        cfg = dataclass_replace(cfg, uncertainty=scene.uncertainty)
+    uncertainty = scene.uncertainty if cfg.uncertainty is None else cfg.uncertainty
+    cfg = dataclass_replace(cfg, uncertainty=uncertainty)
     t0 = time.monotonic()
     candidates = plan_candidates(world, cfg, budget=cfg.budget_s)
     if not candidates:
@@ -76,20 +83,18 @@ def choose(
         planner=scene.planner,
         sim=scene.sim,
         driver=scene.driver,
-        uncertainty=cfg.uncertainty,
+        uncertainty=uncertainty,
     )
     pool = _make_pool(spec, workers, backend, address)
 
     spins = {c.index: c.spins for c in candidates}
 
     def run_rollouts(calls: list[tuple]) -> list[dict]:
-        return list(
-            pool.run(("rollout", (*c, cfg.uncertainty), {"spins": spins[c[0]]}) for c in calls)
-        )
+        return list(pool.run(("rollout", (*c, uncertainty), {"spins": spins[c[0]]}) for c in calls))
 
     try:
         left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)
-        choice = race(
+        choice = (race if cfg.procedure == "race" else certify_race)(
             candidates,
             dataclass_replace(cfg, budget_s=left),
             run_rollouts,

@@ -102,6 +102,9 @@ class Standing:
     """Where the first (at most 10) failed rollouts ended, world frame [m], to the mm."""
     knocked_out: Knockout | None
     """Why it left the race; None while it races."""
+    fresh_rollouts: int = 0
+    """Of `rollouts`, those in the certifying worlds (experiments/_choose_certify.py) [-]."""
+    fresh_successes: int = 0
 
     @property
     def state(self) -> Literal["racing", "out"]:
@@ -134,6 +137,8 @@ class Standing:
             "failures": dict(self.failures),
             "failed_at": [list(end) for end in self.failed_at],
             "out": "" if self.knocked_out is None else self.knocked_out.sentence,
+            "fresh_rollouts": self.fresh_rollouts,
+            "fresh_successes": self.fresh_successes,
         }
 
 

@@ -5,7 +5,7 @@ flags against them before it loads anything."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from roachplan._settings import (
     SettingError,
@@ -14,11 +14,17 @@ from roachplan._settings import (
     integer,
     is_number,
     non_negative,
+    one_of,
     optional,
 )
 from roachplan._settings import seed as seed_number
 from roachplan._settings import setting as s
 from roachplan.sim import UncertaintyConfig
+
+QUICK_MODE = (0.10, 0.10)
+"""The quick mode's (eps_P, eps_E): a wider zone, decided in about a quarter of the rollouts."""
+DEFAULT_MODE = (0.05, 0.05)
+"""The default mode's (eps_P, eps_E)."""
 
 MAX_CANDIDATES = 64
 """Most candidate paths a race takes [-]."""
@@ -58,16 +64,29 @@ class ChooseConfig:
     max_per_candidate: int = s(200, integer(1))
     """A candidate gets at most this many rollouts [-]."""
     seed: int = s(0, seed_number())
-    indifference: tuple[float, float] = s((0.05, 0.05), _indifference)
+    indifference: tuple[float, float] = s(DEFAULT_MODE, _indifference)
     """(DP, DE): differences too small to matter, DP in P(success) [-] and DE in mean relative
     energy [fraction, 0.05 = 5 %]; the race stops once the first-ranked candidate is within
     them of the best (module docstring). (0, 0): off, stop only on separation."""
     uncertainty: UncertaintyConfig | None = None
     """What each rollout's world is drawn from; None: the scene's (its `uncertainty:` key,
     else the defaults of experiments/_uncertainty.py)."""
+    procedure: Literal["certify", "race"] = s("certify", one_of(("certify", "race")))
+    """"certify": screen, then certify the chosen path on fresh rollouts, with a guarantee
+    valid at every look (experiments/_choose_certify.py; indifference is then (eps_P, eps_E):
+    the chosen path succeeds at least 1 - eps_P of the time, or min_success, and is within
+    eps_E of the lowest energy among the paths that safe); "race": issue 17's race
+    (experiments/_choose_race.py)."""
 
     def __post_init__(self) -> None:
         check_settings(self)
+        if self.procedure == "certify" and self.min_success is None and self.indifference[0] <= 0:
+            raise SettingError(
+                "indifference",
+                self.indifference,
+                "DP above 0 (the chosen path is certified to succeed at least 1 - DP of the "
+                "time), or a min_success",
+            )
         if self.rollouts is not None and self.rollouts < self.candidates:
             expected = f"at least one rollout per candidate ({self.candidates})"
             raise SettingError("rollouts", self.rollouts, expected)

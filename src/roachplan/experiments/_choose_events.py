@@ -13,9 +13,12 @@ picklable: the page receives them through a pipe from the child that runs the ra
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from ._choose_candidate import CandidatePlan, Knockout, Standing
+
+if TYPE_CHECKING:
+    from ._choose_certify import Guarantee
 
 StopReason = Literal[
     "separated",
@@ -26,8 +29,14 @@ StopReason = Literal[
     "max_per_candidate",
     "cancelled",
     "no_candidates",
+    "certified",
+    "chosen_unsafe",
+    "rival_cheaper",
 ]
-"""Why a race stopped: decided ("separated": one candidate left in the race; "one_qualifies":
+"""Why a race stopped: certified (screen then certify, experiments/_choose_certify.py: the
+claim holds at the confidence) or ended short of it ("chosen_unsafe": the chosen path is shown
+less safe than the level; "rival_cheaper": a rival is shown as safe and cheaper beyond the
+margin); for issue 17's race, decided ("separated": one candidate left in the race; "one_qualifies":
 with min_success, one alone clears it; "indifference_zone": the first-ranked is within the zone
 at the requested confidence), cut short before a decision ("rollout_cap", "time_budget",
 "max_per_candidate": every candidate in the race has its maximum), or neither ("cancelled",
@@ -75,6 +84,9 @@ class RoundDone:
     standings: tuple[Standing, ...]
     """Every candidate's standing after the round, in index order (those out of the race
     too)."""
+    phase: Literal["race", "screen", "certify"] = "race"
+    """Which part of the choice the round belongs to: issue 17's race, or the screening or
+    the certifying of experiments/_choose_certify.py."""
 
     @property
     def racing(self) -> int:
@@ -84,6 +96,13 @@ class RoundDone:
     @property
     def message(self) -> str:
         """One line of progress."""
+        if self.phase == "screen":
+            return f"screening: {self.rollouts} rollouts over {len(self.standings)} candidates"
+        if self.phase == "certify":
+            return (
+                f"certifying on fresh worlds: {self.rollouts} rollouts, {len(self.driven)} "
+                f"path{'s' * (len(self.driven) != 1)} driven"
+            )
         return (
             f"{self.rollouts} rollouts, {self.racing} of {len(self.standings)} candidates in "
             f"the race"
@@ -111,6 +130,8 @@ class Decided:
     """The ranking, best first."""
     wall_time_s: float
     """The race's wall time, planning not included [s]."""
+    guarantee: Guarantee | None = None
+    """What the choice is shown to be (screen then certify); None for issue 17's race."""
 
     @property
     def cut_short(self) -> bool:

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from ._choose_candidate import Candidate, Standing
 from ._choose_config import ChooseConfig
@@ -26,6 +27,9 @@ from ._choose_events import (
 )
 from ._choose_policy import confidence_reached, decision, eliminate, rank, to_sample
 from ._uncertainty import rollout_seed
+
+if TYPE_CHECKING:
+    from ._choose_certify import Guarantee
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,6 +52,10 @@ class Choice:
     """When the race ended on its budget or cap short of a decision: the highest joint
     confidence (from 0.5) at which the ranking's first is within the indifference zone on the
     rollouts it had, to 0.01; None when it decided, or not even at 0.5."""
+    guarantee: Guarantee | None = None
+    """What the choice is shown to be (screen then certify); None for issue 17's race."""
+    fresh: dict[int, list[dict]] = field(default_factory=dict)
+    """The certifying rollouts' records by candidate (screen then certify)."""
 
     @property
     def ranking(self) -> list[dict]:
@@ -198,6 +206,7 @@ def _tell_round(
 ) -> None:
     """A round's events: a KnockedOut for each candidate it beat, then its RoundDone."""
     for c in beaten:
+        assert c.knocked_out is not None  # (beaten: eliminate() set why)
         on_event(KnockedOut(candidate=c.index, round=round_no, why=c.knocked_out))
     on_event(
         RoundDone(
@@ -235,6 +244,8 @@ def _stopped(stop: StopReason, cfg: ChooseConfig, reached: float | None, *, lone
             words = f"rollout cap of {cfg.rollouts} reached"
         case "time_budget":
             words = f"time budget of {cfg.budget_s:.1f} s spent"
+        case _:  # (the certify procedure's own stops)
+            words = stop
     if stop not in CUT_SHORT or lone:
         return words
     if reached is not None:

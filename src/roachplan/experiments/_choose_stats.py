@@ -35,7 +35,7 @@ def mean_interval(values: list[float], confidence: float) -> tuple[float, float,
     m = float(np.mean(values))
     if len(values) < 2:
         return m, -math.inf, math.inf
-    half = stats.t.ppf(1 - (1 - confidence) / 2, len(values) - 1) * (
+    half = float(stats.t.ppf(1 - (1 - confidence) / 2, len(values) - 1)) * (
         float(np.std(values, ddof=1)) / math.sqrt(len(values))
     )
     return m, m - half, m + half
