@@ -1,4 +1,4 @@
-"""Choose by simulation (issue 17), measured side by side in one run.
+"""Choose by simulation (issues 17 and 25), measured side by side in one run.
 
     make bench        (or: .venv/bin/python benchmarks/bench_choose.py [--quick] [--parts 1,3]
                        [--bank N] [--races N] [--fresh N] [--scenes A,B]: fewer counts on a
@@ -16,8 +16,10 @@ spent, no decision (uncapped: decided in 88.8 s, 280 rollouts); part 2 10/20 the
 brute force's own choice firm in 133 of 200 resamples; part 2 took 509 s; part 3 97 % vs 81 %
 (double_bridge_rough), 95 % vs 93 % (kinect_bridge).
 
-1. Decision time: `double_bridge_rough`, K = 8, 95 % confidence, 60 s budget, 2 workers; the wall
-   time as a ratio to the report's minute per trial and to the robot's own traverse time.
+1. Decision time: `double_bridge_rough`, K = 8, 95 % confidence, 60 s budget, 2 workers, by issue
+   17's race and by screen-and-certify (issue 25) in its default and quick modes, in that order
+   in one run: the wall time as a ratio to the report's minute per trial and to the robot's own
+   traverse time, and rollouts per second as a ratio to the race's.
 2. Racing against brute force: every candidate driven N_full times once (the bank); then 20 races
    with different seeds replayed from the bank (each race draws its rollouts from a candidate's
    bank in its own seeded order): how often the race picks brute force's choice (and how often
@@ -36,12 +38,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import time
 from collections import Counter
 
 import numpy as np
 
-from roachplan.experiments import ChooseConfig, choose
+from roachplan.experiments import DEFAULT_MODE, QUICK_MODE, ChooseConfig, choose
 from roachplan.experiments._choose_candidate import Candidate
 from roachplan.experiments._choose_planning import plan_candidates
 from roachplan.experiments._choose_policy import rank
@@ -90,23 +93,47 @@ def _drive_all(
 
 
 def decision_time(quick: bool, args) -> None:
+    """Issue 17's race, then screen-and-certify in the default and the quick mode, one after
+    the other in this run (the same machine, the same load): wall time to a decision with its
+    guarantee, rollouts, and rollouts per second against the race's."""
     scene = load_scene("double_bridge_rough")
-    cfg = ChooseConfig(
-        candidates=4 if quick else 8, budget_s=60.0, seed=0, indifference=args.indifference
+    world = build_world(scene)
+    runs = (
+        ("race (issue 17)", "race", args.indifference),
+        ("certify, default", "certify", DEFAULT_MODE),
+        ("certify, --quick", "certify", QUICK_MODE),
     )
-    choice, _ = choose(build_world(scene), cfg, workers=2)
-    row = next(r for r in choice.ranking if r["candidate"] == choice.chosen)
-    print(
-        f"1. double_bridge_rough, K={cfg.candidates}, indifference {cfg.indifference}: "
-        f"{choice.wall_time:.1f} s wall, "
-        f"{choice.rollouts} rollouts, {choice.stopped}; chosen {choice.chosen} "
-        f"({row['route']}, P {row['p_success']:.2f} [{row['p_low']:.2f}, {row['p_high']:.2f}])"
-    )
-    print(
-        f"   ratio to the report's minute per trial: {choice.wall_time / 60:.2f}; to the "
-        f"robot's traverse ({row['drive_time_s']:.1f} s simulated): "
-        f"{choice.wall_time / row['drive_time_s']:.2f}"
-    )
+    rate17 = None
+    for label, procedure, zone in runs:
+        cfg = ChooseConfig(
+            candidates=4 if quick else 8,
+            budget_s=60.0,
+            seed=0,
+            indifference=zone,
+            procedure=procedure,
+        )
+        choice, _ = choose(world, cfg, workers=2)
+        row = next((r for r in choice.ranking if r["candidate"] == choice.chosen), None)
+        drives = [r for c in choice.candidates for r in c.rollouts]
+        drives += [r for recs in choice.fresh.values() for r in recs]
+        rollout_s = sum(r.get("wall_time", math.nan) for r in drives) / max(len(drives), 1)
+        rate = choice.rollouts / choice.wall_time
+        rate17 = rate17 or rate
+        print(
+            f"1. {label}: double_bridge_rough, K={cfg.candidates}, zone {cfg.indifference}: "
+            f"{choice.wall_time:.1f} s wall, {choice.rollouts} rollouts ({rate:.2f}/s, "
+            f"{rate / rate17:.2f}x the race's; {rollout_s:.2f} s per rollout in a worker), "
+            f"{choice.stopped}; chosen {choice.chosen}"
+            + (f" ({row['route']}, P {row['p_success']:.2f})" if row else "")
+        )
+        if choice.guarantee is not None and choice.chosen is not None:
+            print(f"   guarantee: {choice.guarantee.sentence(choice.chosen)}")
+        if row:
+            print(
+                f"   ratio to the report's minute per trial: {choice.wall_time / 60:.2f}; to "
+                f"the robot's traverse ({row['drive_time_s']:.1f} s simulated): "
+                f"{choice.wall_time / row['drive_time_s']:.2f}"
+            )
 
 
 def racing_vs_bank(quick: bool, args) -> None:

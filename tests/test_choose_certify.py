@@ -23,25 +23,9 @@ from roachplan.experiments._choose_bounds import (
 )
 from roachplan.experiments._choose_candidate import Candidate
 from roachplan.experiments._choose_certify import certify_race
+from test_choose import _rollout  # (a known truth's rollout, no simulation)
 
 pytestmark = pytest.mark.slow
-
-
-def _rollout(i: int, seed: int, p: float, energy: float, sd: float) -> dict:
-    """Candidate i's rollout in world `seed`: success with probability p, energy ~ N(energy,
-    sd), both drawn from the seed (a known truth, no simulation)."""
-    rng = np.random.default_rng([seed, i])
-    ok = rng.random() < p
-    e = float(rng.normal(energy, sd))
-    return {
-        "candidate": i,
-        "seed": seed,
-        "outcome": "success" if ok else "fell",
-        "relative_energy": e,
-        "energy": e,
-        "drive_time": 1.0,
-        "end": [0, 0],
-    }
 
 
 def _certify(truths, *, sleep: float = 0.0, **cfg):

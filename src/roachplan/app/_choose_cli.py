@@ -72,7 +72,7 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         choices=("certify", "race"),
         default="certify",
         help="certify (default): screen, then certify the chosen path on fresh rollouts; "
-        "race: the race of issue 17 (intervals at each look, no certificate)",
+        "race: the race without a certificate (intervals at each look)",
     )
     p.add_argument(
         "--seed", type=int, default=None, help="seed of every draw (default: the scene's)"
@@ -166,7 +166,7 @@ def _indifference(text: str) -> Any:
 
 def _guarantee_json(choice, cfg) -> dict | None:
     """The guarantee reached for the choice, with its epsilons and confidence (None for the
-    race of issue 17, which states none)."""
+    race, which states none)."""
     g = choice.guarantee
     if g is None or choice.chosen is None:
         return None

@@ -5,8 +5,8 @@ Choose path).
 choose() plans K distinct candidates (experiments/_choose_planning.py: each route the scene
 names gets candidates in turn), then screens them and certifies the one it picks on fresh
 rollouts, with a guarantee valid at every look (experiments/_choose_certify.py, the default),
-or, with procedure="race", races them as issue 17 did (experiments/_choose_race.py): each round gives
-`batch` more rollouts (experiments/_uncertainty.py: each its own seed) on the worker pool to
+or, with procedure="race", races them without a certificate (experiments/_choose_race.py):
+each round gives `batch` more rollouts (experiments/_uncertainty.py: each its own seed) on the worker pool to
 the candidates whose intervals stand between the race and a decision, and after each round a
 candidate leaves the race when it is clearly beaten (experiments/_choose_policy.py).
 

@@ -35,7 +35,7 @@ values and 3.5 % for right-skewed ones (lognormal, sigma 0.3; 5.7 % at sigma 0.5
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -76,8 +76,15 @@ def log_evidence_below(s: int, f: int, p0: float) -> float:
     """log of the evidence against "p >= p0" after S successes and F failures; 0 < p0 < 1."""
     a, b = UPPER_BETA
     mixed = special.betaln(a + s, b + f) - special.betaln(a, b)
-    below = stats.beta.logcdf(p0, a + s, b + f) - stats.beta.logcdf(p0, a, b)
+    below = _log_beta_cdf(p0, a + s, b + f) - _log_beta_cdf(p0, a, b)
     return float(mixed + below) - _log_lr_null(s, f, p0)
+
+
+def _log_beta_cdf(x: float, a: float, b: float) -> float:
+    """log of the Beta(a, b) distribution function at x: the regularized incomplete beta
+    function (fast, scalar), scipy's logcdf where it underflows."""
+    cdf = float(special.betainc(a, b, x))
+    return math.log(cdf) if cdf > 1e-300 else float(stats.beta.logcdf(x, a, b))
 
 
 def shows_at_least(s: int, f: int, p0: float, delta: float) -> bool:
@@ -92,25 +99,25 @@ def shows_below(s: int, f: int, p0: float, delta: float) -> bool:
 
 def p_lower(s: int, f: int, delta: float) -> float:
     """Anytime-valid lower confidence bound on P(success) [-] at error delta: the p0 below
-    which "p <= p0" is rejected (bisection to 1e-4; the evidence falls as p0 rises)."""
-    if s == 0:
-        return 0.0
-    lo, hi = 0.0, 1.0
-    for _ in range(14):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if shows_at_least(s, f, mid, delta) else (lo, mid)
-    return lo
+    which "p <= p0" is rejected."""
+    return 0.0 if s == 0 else _edge(lambda p0: shows_at_least(s, f, p0, delta))[0]
 
 
 def p_upper(s: int, f: int, delta: float) -> float:
-    """Anytime-valid upper confidence bound on P(success) [-] at error delta."""
-    if f == 0:
-        return 1.0
+    """Anytime-valid upper confidence bound on P(success) [-] at error delta: the p0 above
+    which "p >= p0" is rejected."""
+    return 1.0 if f == 0 else _edge(lambda p0: not shows_below(s, f, p0, delta))[1]
+
+
+def _edge(below: Callable[[float], bool]) -> tuple[float, float]:
+    """(lo, hi): an interval of width 1e-4 in [0, 1] holding the p0 where below(p0) turns
+    from True to False, by bisection (a lower bound takes lo, an upper one hi: never tighter
+    than shown)."""
     lo, hi = 0.0, 1.0
     for _ in range(14):
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if shows_below(s, f, mid, delta) else (mid, hi)
-    return hi
+        lo, hi = (mid, hi) if below(mid) else (lo, mid)
+    return lo, hi
 
 
 def _radius(sd: float, n: int, alpha: float) -> float:

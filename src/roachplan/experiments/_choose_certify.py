@@ -10,7 +10,7 @@ That is, in words: "path c succeeds at least 95 % of the time and is within 5 % 
 energy among the paths that safe".
 
 1. Screen (any rule may choose; it only decides what is certified): rounds of `batch`
-   rollouts in common worlds (stream 0, as the race of issue 17), given to the candidates a
+   rollouts in common worlds (stream 0, as the race's), given to the candidates a
    Bayesian posterior (flat Beta priors on P, normal posteriors on the mean energy; draws from
    the race's seed) still calls contenders. Screening ends when the leader is plausibly safe
    (posterior P(P_c >= p*) >= 0.5) and, if safe, within eps_E of the cheapest safe candidate
@@ -69,7 +69,7 @@ SCREEN_SURE = 0.9
 FRESH_STREAM = 5
 """The seed stream of the certifying worlds (0: the screening, 1: --validate, 2-4: the
 benchmark's)."""
-POSTERIOR_DRAWS = 4000
+POSTERIOR_DRAWS = 2000
 """Monte Carlo draws of the posterior per look [-]."""
 
 

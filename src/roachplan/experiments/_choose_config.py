@@ -75,7 +75,7 @@ class ChooseConfig:
     """"certify": screen, then certify the chosen path on fresh rollouts, with a guarantee
     valid at every look (experiments/_choose_certify.py; indifference is then (eps_P, eps_E):
     the chosen path succeeds at least 1 - eps_P of the time, or min_success, and is within
-    eps_E of the lowest energy among the paths that safe); "race": issue 17's race
+    eps_E of the lowest energy among the paths that safe); "race": the race without a certificate
     (experiments/_choose_race.py)."""
 
     def __post_init__(self) -> None:

@@ -36,7 +36,7 @@ StopReason = Literal[
 """Why a race stopped: certified (screen then certify, experiments/_choose_certify.py: the
 claim holds at the confidence) or ended short of it ("chosen_unsafe": the chosen path is shown
 less safe than the level; "rival_cheaper": a rival is shown as safe and cheaper beyond the
-margin); for issue 17's race, decided ("separated": one candidate left in the race; "one_qualifies":
+margin); for the race, decided ("separated": one candidate left in the race; "one_qualifies":
 with min_success, one alone clears it; "indifference_zone": the first-ranked is within the zone
 at the requested confidence), cut short before a decision ("rollout_cap", "time_budget",
 "max_per_candidate": every candidate in the race has its maximum), or neither ("cancelled",
@@ -85,7 +85,7 @@ class RoundDone:
     """Every candidate's standing after the round, in index order (those out of the race
     too)."""
     phase: Literal["race", "screen", "certify"] = "race"
-    """Which part of the choice the round belongs to: issue 17's race, or the screening or
+    """Which part of the choice the round belongs to: the race (procedure "race"), or the screening or
     the certifying of experiments/_choose_certify.py."""
 
     @property
@@ -131,7 +131,7 @@ class Decided:
     wall_time_s: float
     """The race's wall time, planning not included [s]."""
     guarantee: Guarantee | None = None
-    """What the choice is shown to be (screen then certify); None for issue 17's race."""
+    """What the choice is shown to be (screen then certify); None for the race (procedure "race")."""
 
     @property
     def cut_short(self) -> bool:

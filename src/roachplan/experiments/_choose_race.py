@@ -53,7 +53,7 @@ class Choice:
     confidence (from 0.5) at which the ranking's first is within the indifference zone on the
     rollouts it had, to 0.01; None when it decided, or not even at 0.5."""
     guarantee: Guarantee | None = None
-    """What the choice is shown to be (screen then certify); None for issue 17's race."""
+    """What the choice is shown to be (screen then certify); None for the race (procedure "race")."""
     fresh: dict[int, list[dict]] = field(default_factory=dict)
     """The certifying rollouts' records by candidate (screen then certify)."""
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Iterable, Iterator
 
 import numpy as np
@@ -89,6 +90,7 @@ class TrialWorker:
         """One of `choose`'s rollouts: drive candidate `candidate`'s path (and its turns on the
         spot, `spins`) in the world drawn from `uncertainty` with `seed`
         (experiments/_uncertainty.py); a rollout record."""
+        t0 = time.perf_counter()
         scene = self.world.scene
         w = draw(uncertainty, seed)
         x, y, yaw = (float(a + b) for a, b in zip(self.world.start, w.start_offset, strict=True))
@@ -128,6 +130,7 @@ class TrialWorker:
             "energy": driven.energy,
             "relative_energy": driven.energy / reference_energy(self.world, start, self.world.goal),
             "end": list(driven.trajectory[-1][1:3]),
+            "wall_time": time.perf_counter() - t0,  # (in this worker: world built, driven) [s]
         }
 
     def close(self) -> None:
