@@ -33,33 +33,6 @@ ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
 ROACHPLAN = [sys.executable, "-m", "roachplan"]
 
-# The slow tests of two files being rewritten on another branch, marked here (`make test-fast`
-# leaves them out) until those files carry their own @pytest.mark.slow. None: every test.
-_SLOW_ELSEWHERE: dict[str, frozenset[str] | None] = {
-    "test_page_choose.py": None,  # the Choose path panel in a browser
-    "test_choose.py": frozenset(
-        {
-            "test_the_safe_route_wins_and_the_same_seed_gives_the_same_ranking",
-            "test_validate_agrees_with_the_prediction_within_its_intervals",
-            "test_a_race_chooses_wrongly_no_more_often_than_its_confidence_allows",
-            "test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts",
-            "test_a_bad_uncertainty_is_refused_naming_file_key_and_range",
-            "test_choose_tells_the_candidates_it_planned_then_its_race",
-            "test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts",
-        }
-    ),
-}
-
-
-@pytest.hookimpl(tryfirst=True)  # (before -m "not slow" deselects by marker)
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.path.name not in _SLOW_ELSEWHERE:
-            continue
-        names = _SLOW_ELSEWHERE[item.path.name]
-        if names is None or getattr(item, "originalname", item.name) in names:
-            item.add_marker(pytest.mark.slow)
-
 
 def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run the `roachplan` command line from the repository root; never raises on failure."""

@@ -200,6 +200,7 @@ def test_rollouts_go_where_they_can_settle_the_decision():
     ],
     ids=["energy-edge", "safety-edge"],
 )
+@pytest.mark.slow
 def test_a_race_chooses_wrongly_no_more_often_than_its_confidence_allows(truths):
     # Candidate 0 is the only right choice; the others lie just outside the zone (0.05, 5 %),
     # where a decision at 95 % confidence may be wrong at most 5 % of the time. Measured: 4
@@ -448,6 +449,7 @@ def _choose(scene, *extra):
     return json.loads(proc.stdout)
 
 
+@pytest.mark.slow
 def test_the_safe_route_wins_and_the_same_seed_gives_the_same_ranking(two_bridges):
     first = _choose(two_bridges)
     routes = {r["route"] for r in first["ranking"]}
@@ -471,6 +473,7 @@ def test_the_safe_route_wins_and_the_same_seed_gives_the_same_ranking(two_bridge
     assert key(again) == key(first)
 
 
+@pytest.mark.slow
 def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, tmp_path):
     out = tmp_path / "choice"
     result = _choose(two_bridges, "--validate", "8", "--out", str(out))
@@ -489,6 +492,7 @@ def test_validate_agrees_with_the_prediction_within_its_intervals(two_bridges, t
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
+@pytest.mark.slow
 def test_choose_tells_the_candidates_it_planned_then_its_race(two_bridges):
     """choose() through the real planner and PyBullet: its events, in order, agree with the
     choice it returns, from the candidates' paths to the decision."""
@@ -518,6 +522,7 @@ FLAT = (
 )
 
 
+@pytest.mark.slow
 def test_a_scene_s_uncertainty_changes_the_draws_of_its_rollouts(tmp_path):
     from roachplan.scenes import load_scene
 
@@ -603,6 +608,7 @@ def test_a_spec_s_uncertainty_overrides_its_scene_s_field_by_field(tmp_path):
         ("uncertainty: 0.2\n", "uncertainty: expected a mapping with keys start_xy"),
     ],
 )
+@pytest.mark.slow
 def test_a_bad_uncertainty_is_refused_naming_file_key_and_range(tmp_path, body, message):
     scene = tmp_path / "bad.yaml"
     scene.write_text(FLAT + body)
@@ -634,6 +640,7 @@ def test_address_is_for_the_ray_backend():
     assert "--address RAY_ADDRESS" in helped.stdout
 
 
+@pytest.mark.slow
 def test_choose_on_a_ray_cluster_by_address_drives_the_same_rollouts(tmp_path, monkeypatch):
     """A Ray instance started by another process (as a cluster would be), reached with
     --address: the same seed and cap give the same ranking as local workers."""

@@ -25,8 +25,6 @@ from roachplan.experiments._choose_candidate import Candidate
 from roachplan.experiments._choose_certify import certify_race
 from test_choose import _rollout  # (a known truth's rollout, no simulation)
 
-pytestmark = pytest.mark.slow
-
 
 def _certify(truths, *, sleep: float = 0.0, **cfg):
     """certify_race over hand-made candidates whose rollouts come from truths[i] = (p, mean
@@ -115,6 +113,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("case", "mode"),
     [("energy-edge", "default"), ("safety-edge", "default"), ("at-level", "default"),
@@ -187,6 +186,7 @@ FLAT = (
 )
 
 
+@pytest.mark.slow
 def test_choose_json_gives_each_candidate_s_bounds_and_the_guarantee(tmp_path):
     """`roachplan choose --quick --json`: per candidate its rollouts, successes, P bounds and
     energy bounds; for the choice the guarantee reached with its epsilons and confidence."""

@@ -13,8 +13,12 @@ import pytest
 
 from conftest import free_port
 from test_app import CHROMIUM, browser_pages, set_value
+from test_page_view import dropdown
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 
 def _app(scene: str):
@@ -60,6 +64,19 @@ def _descendants(pid: int) -> set[int]:
     return descendants(pid)
 
 
+def _check_guarantee(said: str, again: str, chosen: int) -> None:
+    """The quick mode's choice: its guarantee in words, at the quick mode's level, the path
+    named as in the page, the Bayesian posterior beside it labelled as not a confidence, and
+    the same race's command with --quick."""
+    assert again.rstrip().endswith("--quick"), again
+    assert re.search(
+        rf"Guarantee: path {chosen}( \(not certified\))?: at 95% confidence it succeeds at least",
+        said,
+    ), said
+    assert "90%" in said or "(not certified)" in said, said
+    assert re.search(r"Bayesian posterior probability .*not a confidence", said), said
+
+
 def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
     from roachplan.app._choose_panel import p_colour
 
@@ -70,6 +87,7 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
             set_value(page, "Candidates (K)", str(k))
             set_value(page, "Choose budget [s]", "10")
             set_value(page, "Playback speed [x real time]", "10")
+            dropdown(page, "Choose mode", "Quick")
             page.get_by_role("button", name="Choose path", exact=True).last.click()
             # In the panel: progress, Cancel, then the candidates drawn (grey until driven).
             racing = page.get_by_text(re.compile(r"Choose path: \d candidates planned; racing"))
@@ -100,9 +118,11 @@ def test_choose_path_races_colours_ranks_and_drive_takes_the_chosen(artifacts):
                 assert tuple(nodes[path - 1].colors[0, 0]) == p_colour(p), r
                 assert nodes[path - 1].thickness == (7.0 if path == chosen else 3.0)
             assert app.drive_path == chosen - 1
-            assert "Same race from the command line: roachplan choose --scene double_bridge" in (
-                page.get_by_text(re.compile(r"Same race from the command line")).inner_text()
+            again = page.get_by_text(re.compile(r"Same race from the command line")).inner_text()
+            assert (
+                "Same race from the command line: roachplan choose --scene double_bridge" in again
             )
+            _check_guarantee(done.inner_text(), again, chosen)
             page.screenshot(path=artifacts / "choose-02-ranked.png")
 
             page.get_by_role("button", name="Drive", exact=True).click()
