@@ -41,6 +41,7 @@ import dataclasses
 import math
 import time
 from collections import Counter
+from typing import Literal
 
 import numpy as np
 
@@ -98,7 +99,7 @@ def decision_time(quick: bool, args) -> None:
     guarantee, rollouts, and rollouts per second against the race's."""
     scene = load_scene("double_bridge_rough")
     world = build_world(scene)
-    runs = (
+    runs: tuple[tuple[str, Literal["certify", "race"], tuple[float, float]], ...] = (
         ("race (issue 17)", "race", args.indifference),
         ("certify, default", "certify", DEFAULT_MODE),
         ("certify, --quick", "certify", QUICK_MODE),
