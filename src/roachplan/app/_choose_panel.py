@@ -19,9 +19,9 @@ import os
 import time
 from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-from viser import LineSegmentsHandle
 
 from roachplan.experiments import (
     DEFAULT_MODE,
@@ -44,6 +44,9 @@ from ._app import App
 from ._commands import CancelCmd, ChooseCmd
 from ._draw import segments
 from ._jobs import Job
+
+if TYPE_CHECKING:  # (the loop and the handlers import no viser: tests/test_loop.py)
+    from viser import LineSegmentsHandle
 
 MODES = {"Default": DEFAULT_MODE, "Quick": QUICK_MODE}
 """The Choose mode dropdown's choices: their (eps_P, eps_E) (ChooseConfig.indifference)."""
