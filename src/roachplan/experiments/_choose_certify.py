@@ -116,7 +116,9 @@ class Guarantee:
             energy = (
                 f"is within {self.energy_margin:.0%} of the lowest energy among the paths that safe"
                 if self.compared
-                else "every other path is shown less safe"
+                else f"every other {noun} is shown less safe"
+                if self.unsafe
+                else f"it is the only {noun}"
             )
             return (
                 f"{name}: {conf} it succeeds at least {self.p_level:.0%} of the time and "
@@ -125,7 +127,9 @@ class Guarantee:
             )
         words = [f"{name} (not certified): {conf} it succeeds at least "]
         words.append(f"{math.floor(self.p_lower * 1000) / 10:g}% of the time")
-        if math.isfinite(self.energy_reached):
+        if not self.compared:
+            pass  # (no rival to compare with: the only one, or every other shown less safe)
+        elif math.isfinite(self.energy_reached):
             words.append(
                 f" and is within {math.ceil(self.energy_reached * 1000) / 10:g}% of the lowest "
                 f"energy among the paths that succeed at least {self.p_level:.0%} of the time"
@@ -356,14 +360,15 @@ class _Certifier:
             if sure and all(c.n >= 2 * cfg.batch for c in self.candidates):
                 return None
             targets = self.screen_targets(good, safe)
+            # (a first round for every candidate, whatever the share: a choice needs it)
+            share = 1.0 if any(c.n == 0 for c in targets) else SCREEN_SHARE
+            each = self.clock.worlds(len(targets), share, cfg.batch)
             calls = [
                 (c.index, c.path_xyz.tolist(), world_seed(cfg.seed, c.n + j))
                 for c in targets
-                for j in range(cfg.batch)
+                for j in range(each)
             ]
-            # (a first round for every candidate, whatever the share: a choice needs it)
-            share = 1.0 if any(c.n == 0 for c in targets) else SCREEN_SHARE
-            if not targets or not self.clock.room(len(calls), share):
+            if not calls or not self.clock.room(len(calls), share):
                 return None
             for rec in self.clock.run(self.run_rollouts, calls):
                 self.candidates[rec["candidate"]].rollouts.append(rec)
@@ -429,18 +434,18 @@ class _Certifier:
                 open_rivals,
                 shown=s + f > 0 and shows_at_least(s, f, self.p_level, self.errors.chosen),
             )
-            first = self.fresh.worlds
+            first, worlds = self.fresh.worlds, self.clock.worlds(len(todo), 1.0, cfg.batch)
             calls = [
                 (i, self.candidates[i].path_xyz.tolist(), fresh_seed(cfg.seed, first + w))
-                for w in range(cfg.batch)
+                for w in range(worlds)
                 for i in todo
             ]
-            if not self.clock.room(len(calls), 1.0):
+            if not calls or not self.clock.room(len(calls), 1.0):
                 return self.clock.limit
-            seeds = {fresh_seed(cfg.seed, first + w): first + w for w in range(cfg.batch)}
+            seeds = {fresh_seed(cfg.seed, first + w): first + w for w in range(worlds)}
             for rec in self.clock.run(self.run_rollouts, calls):
                 self.fresh.records.setdefault(rec["candidate"], {})[seeds[rec["seed"]]] = rec
-            self.fresh.worlds += cfg.batch
+            self.fresh.worlds += worlds
             self.rounds += 1
             self.tell("certify", todo)
 
@@ -566,6 +571,18 @@ class _Clock:
         if self.cfg.rollouts:
             return self.used / self.cfg.rollouts
         return (time.monotonic() - self.t0) / (self.cfg.budget_s or 1)
+
+    def worlds(self, per_world: int, share: float, most: int) -> int:
+        """How many worlds of per_world rollouts each, up to `most`, the rollout cap's `share`
+        still holds (a last round smaller than a batch; 0: none)."""
+        cap = self.cfg.rollouts
+        if cap is None:
+            return most
+        left = math.floor(share * cap) - self.used
+        fit = max(min(most, left // max(per_world, 1)), 0)
+        if fit == 0:
+            self.limit = "rollout_cap"
+        return fit
 
     def room(self, n: int, share: float) -> bool:
         """Whether n more rollouts fit in `share` of the cap and of the budget (a rollout
