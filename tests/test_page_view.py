@@ -203,8 +203,9 @@ def test_k_paths_told_apart_drive_takes_the_chosen_one_robot_seen(app, artifacts
         assert [h.thickness for h in lines] == [7.0, 3.0, 3.0], "path 1 is marked for Drive"
 
         dropdown(page, "Drive path", "2")
+        # (the loop sets the path to drive, then redraws the lines: wait for both)
         wait_until(lambda: app.drive_path == 1, 10)
-        assert [h.thickness for h in lines] == [3.0, 7.0, 3.0]
+        wait_until(lambda: [h.thickness for h in lines] == [3.0, 7.0, 3.0], 10)
         page.screenshot(path=artifacts / "view-06-three-paths-second-marked.png")
 
         # Follow the robot through the drive; look halfway.
