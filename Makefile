@@ -66,8 +66,9 @@ $(DOCS_STAMP): $(STAMP)
 	$(BIN)/pip install -q -e '.[test,docs]'
 	touch $(DOCS_STAMP)
 
+# (the docs' tools too: pyright checks scripts/griffe_lazy_exports.py, which imports Griffe)
 $(LINT_STAMP): $(STAMP)
-	$(BIN)/pip install -q -e '.[test,lint]'
+	$(BIN)/pip install -q -e '.[test,lint,docs]'
 	touch $(LINT_STAMP)
 
 # The documentation site (mkdocs.yml, docs/) into site/, warnings as errors. The variable
