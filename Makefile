@@ -30,11 +30,13 @@ run: setup
 	$(BIN)/roachplan serve --scene $(SCENE) --host $(HOST) --port $(PORT)
 
 # Every test, in TEST_WORKERS processes (pytest-xdist; a test file stays in one, in its order);
-# the 25 slowest are listed at the end. TEST_WORKERS=0 runs them in this process.
+# the 25 slowest are listed at the end. TEST_WORKERS=0 runs them in this process. Then, with
+# the machine to themselves, the tests marked alone (they measure real time).
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	@scripts/install-system-deps.sh $(TEST_DEBS)
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=25
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile -m "not alone" --durations=25
+	$(BIN)/python -m pytest -m alone --durations=5
 
 # The edit-test loop: every test not marked slow (no browser, batch, real capture or hostile
 # corpus), under 3 minutes on 2 cores.

@@ -14,7 +14,10 @@ from conftest import free_port
 from test_app import CHROMIUM, browser_pages
 from test_robot_cli import MOCAP, twin
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed")
+pytestmark = [
+    pytest.mark.alone,  # (the control loop keeps real time, counted late or not)
+    pytest.mark.skipif(CHROMIUM is None, reason="Debian chromium not installed"),
+]
 
 
 def type_into(page, label: str, value: str) -> None:

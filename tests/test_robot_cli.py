@@ -20,6 +20,8 @@ import pytest
 
 from conftest import ROACHPLAN, ROOT, roachplan
 
+pytestmark = pytest.mark.alone  # (the control loop keeps real time)
+
 MOCAP = ["--latency", "0.04", "--noise", "0.002", "--seed", "3", "--mocap", "0.4,-0.3,0,25"]
 
 

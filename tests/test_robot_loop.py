@@ -25,7 +25,7 @@ from roachplan.robot import (
     read_run,
 )
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.alone]  # (the control loop keeps real time)
 
 HIDDEN = ["--friction", "0.75", "--motor-mismatch", "0.02", "--motor-gain", "0.97"]
 MOCAP = ["--latency", "0.04", "--noise", "0.002", "--seed", "3", "--mocap", "0.4,-0.3,0.0,25"]
