@@ -198,9 +198,7 @@ class _Fresh:
 
     def tally(self, i: int, since: int = 0) -> tuple[int, int]:
         """(successes, failures) of candidate i's fresh rollouts since world `since`."""
-        recs = self.of(i, since)
-        s = sum(r["outcome"] == "success" for r in recs)
-        return s, len(recs) - s
+        return _count(self.of(i, since))
 
     def pairs(self, c: int, j: int, since: int) -> tuple[np.ndarray, np.ndarray]:
         """c's and j's relative energies in the fresh worlds since `since` both succeeded in."""
@@ -223,7 +221,11 @@ def _all_rollouts(c: Candidate, fresh: _Fresh) -> list[dict]:
 
 def _tally(c: Candidate, fresh: _Fresh) -> tuple[int, int]:
     """(successes, failures) over all of candidate c's rollouts, screening and fresh."""
-    recs = _all_rollouts(c, fresh)
+    return _count(_all_rollouts(c, fresh))
+
+
+def _count(recs: list[dict]) -> tuple[int, int]:
+    """(successes, failures) of rollout records."""
     s = sum(r["outcome"] == "success" for r in recs)
     return s, len(recs) - s
 
