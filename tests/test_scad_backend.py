@@ -524,6 +524,57 @@ def test_a_syntax_error_is_shown_with_its_line(tmp_path):
     assert f"Syntax error in {src} at line 2" in text  # the jail's /model turned back
 
 
+REPEATED_COMMAS = """// Commas repeated in vectors and calls, which OpenSCAD 2021.01 reads (a public model has them).
+cube([4,, 3, 2,,]);
+translate([0, 0,, 2]) cube([1, 1, 1],, center = false);
+echo(v = [,]);
+"""
+
+
+@needs_jail
+def test_repeated_commas_are_read_as_the_binary_reads_them(tmp_path):
+    src = _model(tmp_path, REPEATED_COMMAS)
+    reference = trimesh.load_mesh(render_scad(src, backend="cgal"))
+    fast = trimesh.load_mesh(render_scad(src, backend="manifold"))
+    assert np.allclose(reference.bounds, [[0, 0, 0], [4, 3, 3]])
+    assert disagreement(reference, fast)["hausdorff"] <= AGREE
+
+
+@needs_jail
+def test_a_used_files_repeated_commas_keep_its_part(tmp_path):
+    """A public model staircase had `,,` in the file holding its steps: the evaluator dropped
+    the file, and with it the steps, without a word."""
+    src = _model(tmp_path, "use <step.scad>\ncube([10, 10, 1]);\nstep();\n")
+    (src.parent / "step.scad").write_text("module step() translate([0,, 0, 1]) cube([10, 2, 5]);\n")
+    for backend in ("manifold", "cgal"):
+        mesh = trimesh.load_mesh(render_scad(src, backend=backend))
+        assert np.allclose(mesh.bounds, [[0, 0, 0], [10, 10, 6]]), backend
+
+
+@needs_jail
+def test_a_used_file_that_cannot_be_parsed_is_not_left_out_silently(tmp_path):
+    """manifold refuses it; auto goes to the binary, which renders without the file's modules
+    (as OpenSCAD does) and the note carries its messages, so the user learns the part is gone."""
+    src = _model(tmp_path, "use <step.scad>\ncube([10, 10, 1]);\nstep();\n")
+    (src.parent / "step.scad").write_text(
+        "module step() translate([0, 0, 1]) cube([10, 2, 5]);\nx = [1;\n"
+    )
+    with pytest.raises(
+        SceneError,
+        match=r"Syntax error in \S*step\.scad at line 2, column \d+: backend manifold could not parse it",
+    ):
+        render_scad(src, backend="manifold")
+    auto = render_scad_result(src)
+    assert auto.backend == "cgal" and "could not parse it" in auto.why
+    assert np.allclose(trimesh.load_mesh(auto.path).bounds, [[0, 0, 0], [10, 10, 1]])
+    note = auto.note()
+    assert "parts of the model may be missing" in note
+    assert "syntax error in file step.scad, line 2" in note
+    assert "Ignoring unknown module 'step'" in note
+    again = render_scad_result(src)  # the cached render says it too
+    assert again.cached and again.warnings == auto.warnings
+
+
 @pytest.mark.slow
 @needs_jail
 def test_the_time_limit_stops_the_evaluator(tmp_path):

@@ -5,7 +5,15 @@ scenes/_scad_manifold.py, inside the render jail: it imports nothing of roachpla
 the evaluator's site-packages folder on sys.path, and hands the rest of its arguments to the
 evaluator's command line.
 
-Three changes to the evaluator. First, seeded `rands(min, max, n, seed)` draws the numbers OpenSCAD
+Four changes to the evaluator. First, its parser (_patch_parser) reads what OpenSCAD 2021.01's
+reads: commas repeated between a vector's elements or a call's arguments, and after a vector's
+last element (`[a,, b]`, `[a, b,,]`, `cube(1,, center=true)`; checked against Debian's binary),
+which the evaluator refuses as a syntax error; and a file it cannot parse stops the render as a
+refusal. The evaluator reports a syntax error in a file the model uses (`use <step.scad>`) and
+goes on without its modules, so the render "succeeded" with parts of the model missing (seen:
+a public model staircase rendered as its two side supports, without its steps).
+
+Second, seeded `rands(min, max, n, seed)` draws the numbers OpenSCAD
 2021.01 draws, so a model's seeded bumps (double_bridge_rough) land where the reference binary
 puts them. The evaluator draws from Python's `random` seeded with int(seed), a different
 sequence (measured: rands(0, 1, 4, 0) gives 0.844, 0.758, ... against OpenSCAD's 0.593, 0.844,
@@ -16,7 +24,7 @@ number (libstdc++'s generate_canonical<double, 53>); checked against Debian's bi
 out), so it is refused with a message that names backend cgal. Unseeded rands() is random in
 OpenSCAD too and is left as the evaluator has it.
 
-Then two, so that text() and a polyhedron wound the other way render as the binary renders
+Then the last two, so that text() and a polyhedron wound the other way render as the binary renders
 them (each checked against Debian's binary by tests/test_scad_backend.py):
 
 - text() (_patch_text): the font is the one fontconfig gives OpenSCAD for the same request
@@ -38,6 +46,8 @@ them (each checked against Debian's binary by tests/test_scad_backend.py):
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -78,6 +88,61 @@ def openscad_rands(lo: float, hi: float, n: int, seed: int) -> list[float]:
             u = math.nextafter(1.0, 0.0)
         out.append(u * (b - a) + a)
     return out
+
+
+OPENSCAD_COMMAS = (
+    # (the evaluator's rule, as OpenSCAD 2021.01's parser.y reads it: optional_commas)
+    ('vector_elements: vector_element ("," vector_element)* ","?',
+     'vector_elements: vector_element (","+ vector_element)* ","*'),
+    ('vector_expr: "[" vector_elements "]"\n    | "[" "]"',
+     'vector_expr: "[" vector_elements "]"\n    | "[" ","* "]"'),
+    ('arguments: (argument ("," argument)* ","?)?',
+     'arguments: (argument (","+ argument)* ","?)?'),
+)  # fmt: skip
+"""The evaluator's grammar rules that OpenSCAD 2021.01 reads more loosely, and how it reads them."""
+
+
+def _patch_parser() -> None:
+    import openscad_lalr_parser as parser_module
+    from lark import Lark
+
+    grammar = parser_module._GRAMMAR_PATH.read_text()
+    for rule, loose in OPENSCAD_COMMAS:
+        if rule not in grammar:
+            _refuse(f"backend manifold's parser has changed (no rule {rule!r})")
+        grammar = grammar.replace(rule, loose)
+    strict_rules = (
+        'assignments_expr: (assignment_expr ("," assignment_expr)* ","?)?',
+        'arguments: (argument (","+ argument)* ","?)?',
+    )
+    parsers: dict[bool, Lark] = {}
+
+    def get_parser() -> Lark:
+        strict = parser_module._STRICT_COMMAS.get()
+        if strict not in parsers:
+            text = grammar
+            if strict:  # (no comma after the last argument, as OpenSCAD 2021.01)
+                for rule in strict_rules:
+                    text = text.replace(rule, rule.replace(' ","?)?', ")?"))
+            parsers[strict] = Lark(
+                text, parser="lalr", propagate_positions=True, maybe_placeholders=False
+            )
+        return parsers[strict]
+
+    parse_ast = parser_module.parse_ast
+
+    def parse_or_refuse(code, origin="<string>", source_map=None):
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):  # (where parse_ast prints a syntax error)
+            nodes = parse_ast(code, origin=origin, source_map=source_map)
+        if nodes is None:
+            error = (printed.getvalue().strip().splitlines() or [f"Syntax error in {origin}"])[0]
+            _refuse(f"{error.rstrip(':')}: backend manifold could not parse it")
+        sys.stdout.write(printed.getvalue())
+        return nodes
+
+    parser_module._get_parser = get_parser
+    parser_module.parse_ast = parse_or_refuse
 
 
 def _patch_rands() -> None:
@@ -432,6 +497,7 @@ def main() -> int:
     # errors): the renderer keeps that stream's ends for its messages and drops the output one.
     os.dup2(2, 1)
     sys.path[:0] = json.loads(sys.argv[1])
+    _patch_parser()
     _patch_rands()
     _patch_text()
     _patch_polyhedron()

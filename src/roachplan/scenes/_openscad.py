@@ -58,6 +58,7 @@ from ._scad_sandbox import (
     limit_hit,
     memory_limit,
     render_failure,
+    render_warnings,
     run_confined,
     timeout_problem,
 )
@@ -175,6 +176,9 @@ class ScadRender:
     """Largest spread across its plane [model units] of a polyhedron face of more than four
     corners that is not flat, when manifold cut it into triangles (maybe otherwise than the
     binary: the two surfaces lie within it), else 0."""
+    warnings: tuple[str, ...] = ()
+    """The renderer's own ERROR and WARNING lines, when it made a mesh anyway (a used file it
+    could not parse, a module it does not know: the mesh lacks that part)."""
 
     @property
     def text_deviation(self) -> float:
@@ -190,8 +194,10 @@ class ScadRender:
         took += " (cached)" if self.cached else ""
         if self.backend == "cgal":
             why = self.why or ("backend: cgal asked for" if self.asked == "cgal" else "")
-            return f"{self.model.name}: rendered with the openscad binary{took}" + (
-                f": {why}" if why else ""
+            return (
+                f"{self.model.name}: rendered with the openscad binary{took}"
+                + (f": {why}" if why else "")
+                + self._warnings_text()
             )
         text = f"{self.model.name}: rendered with manifold ({manifold_version()}){took}"
         if self.text_size > 0:
@@ -207,7 +213,12 @@ class ScadRender:
                 f"model units out of its plane, may be cut into triangles otherwise than by "
                 f"OpenSCAD: up to {self.face_spread * scale * 1000:.2g} mm of terrain"
             )
-        return text
+        return text + self._warnings_text()
+
+    def _warnings_text(self) -> str:
+        if not self.warnings:
+            return ""
+        return "; it reported (parts of the model may be missing): " + " | ".join(self.warnings)
 
 
 def _seconds_text(seconds: float) -> str:
@@ -320,6 +331,7 @@ def _render_with(
                 )
         facts = _read_facts(mesh.with_name(mesh.name + FACTS_SUFFIX))
         facts["seconds"] = round(seconds, 3)
+        facts["warnings"] = list(render_warnings(run, jail=jail))
         # The facts first: a mesh under its final name always has them beside it.
         out.with_suffix(_FACTS).write_text(json.dumps(facts))
         mesh.replace(out)
@@ -339,20 +351,27 @@ def _read_facts(path: Path) -> dict:
 
 
 class _Found(TypedDict):
-    """ScadRender's fields of what the evaluator found."""
+    """ScadRender's fields of what the render found."""
 
     text_size: float
     face_spread: float
+    warnings: tuple[str, ...]
 
 
 def _found(facts: dict) -> _Found:
-    """ScadRender's fields from what the evaluator found (_manifold_main.FACTS)."""
+    """ScadRender's fields from what the render found (_manifold_main.FACTS, and the
+    renderer's warnings)."""
 
     def number(key: str) -> float:
         value = facts.get(key, 0.0)
         return float(value) if isinstance(value, int | float) and math.isfinite(value) else 0.0
 
-    return _Found(text_size=number("text_size"), face_spread=number("face_spread"))
+    warnings = facts.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        warnings = []
+    return _Found(
+        text_size=number("text_size"), face_spread=number("face_spread"), warnings=tuple(warnings)
+    )
 
 
 def _short_failure(stderr: str, why: str) -> str:

@@ -299,6 +299,29 @@ def render_failure(
     return f"OpenSCAD failed:\n{detail.strip() or _bounded(err.strip().splitlines()[-20:])}"
 
 
+MESH_WARNING = "2-manifold"
+"""OpenSCAD's warning that its mesh may need repair: roachplan's mesh cleaning repairs it, so it
+is not the model's own message."""
+
+
+def render_warnings(run: ProgramRun, *, jail: bool, count: int = 4) -> tuple[str, ...]:
+    """The ERROR and WARNING lines of a render that made a mesh, each once, at most `count`
+    (with a last "... and N more"), file names as the model's folder sees them. OpenSCAD goes
+    on past a used file it cannot parse or a module it does not know, leaving that part out:
+    these lines are how a user learns that the mesh lacks it."""
+    err = run.stderr.replace(f"{JAIL_MODEL}/", "") if jail else run.stderr
+    lines = [
+        line.strip()
+        for line in err.splitlines()
+        if line.lstrip().startswith(("ERROR:", "WARNING:")) and MESH_WARNING not in line
+    ]
+    unique = list(dict.fromkeys(lines))
+    shown = [line if len(line) <= 200 else line[:197] + "..." for line in unique[:count]]
+    if len(unique) > count:
+        shown.append(f"... and {len(unique) - count} more")
+    return tuple(shown)
+
+
 def _bounded(lines: list[str], count: int = 20, width: int = 300) -> str:
     """At most `count` lines of at most `width` characters: a model's echo() or a flood of
     warnings must not become megabytes of error text."""
