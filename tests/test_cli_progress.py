@@ -69,3 +69,24 @@ def test_no_bar_without_a_terminal_unless_asked(tmp_path):
     run = _run("mesh", str(capture), "-o", str(tmp_path / "b.ply"), progress=False)
     assert run.returncode == 0, run.stderr
     assert "meshing:" not in run.stderr
+
+
+@pytest.mark.slow
+def test_without_a_terminal_a_long_render_still_says_so_and_why_the_binary_had_it(tmp_path):
+    """A log (stderr not a terminal) gets a line while a render runs past 10 s; a render the
+    binary did not finish says why backend auto gave it to the binary."""
+    model = tmp_path / "slow.scad"
+    model.write_text(
+        'x = [for (i = [0:99999]) len([for (j = [0:9999]) j])];\nsurface(file = "h.dat");\n'
+    )
+    (tmp_path / "h.dat").write_text("0 1\n1 0\n")
+    run = _run(
+        "scene", "build", str(model), "-o", str(tmp_path / "o.stl"), "--scad-timeout", "12",
+        progress=False, cache=tmp_path / "cache",
+    )  # fmt: skip
+    assert run.returncode == 2, run.stderr
+    assert "roachplan: OpenSCAD slow.scad: rendering, 1" in run.stderr
+    assert "s of its 12 s limit\n" in run.stderr, run.stderr
+    assert "did not finish within its time limit of 12 s" in run.stderr
+    assert "(backend auto gave it to the binary because surface() (slow.scad, line 2)" in run.stderr
+    assert "Traceback" not in run.stderr and not (tmp_path / "o.stl").exists()

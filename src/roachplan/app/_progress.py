@@ -15,6 +15,12 @@ if TYPE_CHECKING:
     from tqdm import tqdm
 
 
+LOG_FIRST = 10.0
+"""Seconds a render runs before a log line says it is rendering (no bar: not a terminal)."""
+LOG_EVERY = 60.0
+"""Seconds between such lines."""
+
+
 def wanted() -> bool:
     """Whether to draw progress bars: on a terminal, or when asked for."""
     return os.environ.get("ROACHPLAN_PROGRESS") == "1" or sys.stderr.isatty()
@@ -44,11 +50,30 @@ def bar(
 @contextmanager
 def render_progress(enabled: bool | None = None) -> Iterator[None]:
     """While inside, every OpenSCAD render shows a bar: seconds elapsed of its time limit (the
-    Running events of roachplan.processes, from this process or a child it waits for)."""
-    if not (wanted() if enabled is None else enabled):
-        yield
-        return
+    Running events of roachplan.processes, from this process or a child it waits for).
+    Without a bar (stderr not a terminal: a log, a script) a render that takes long still
+    says so, in a line after LOG_FIRST seconds and every LOG_EVERY seconds after."""
     from roachplan.processes import Running, listening
+
+    if not (wanted() if enabled is None else enabled):
+        said: dict[str, float] = {}
+
+        def log(event: object) -> None:
+            if not isinstance(event, Running) or event.elapsed < LOG_FIRST:
+                return
+            last = said.get(event.what)
+            if last is None or event.elapsed - last >= LOG_EVERY:
+                said[event.what] = event.elapsed
+                print(
+                    f"roachplan: OpenSCAD {event.what}: rendering, {event.elapsed:.0f} s of "
+                    f"its {event.limit:.0f} s limit",
+                    file=sys.stderr,
+                    flush=True,
+                )
+
+        with listening(log):
+            yield
+        return
 
     bars: dict[str, tqdm[Any]] = {}
 

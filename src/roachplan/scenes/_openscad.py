@@ -464,7 +464,14 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
                 assert refused is not None  # (manifold was tried: its cache path was found)
                 _write_atomic(refused, why)
         timeout = max(timeout - (time.monotonic() - t0), 1.0)
-    return dataclasses.replace(_render_with("cgal", timeout=timeout, **job), asked="auto", why=why)
+    try:
+        binary = _render_with("cgal", timeout=timeout, **job)
+    except _BackendFailed as exc:
+        # Say why it was the binary's turn: backend manifold was tried first, or passed over.
+        raise SceneError(
+            f"{exc}\n(backend auto gave it to the binary because {why})"
+        ) from None
+    return dataclasses.replace(binary, asked="auto", why=why)
 
 
 def _write_atomic(path: Path, text: str) -> None:
