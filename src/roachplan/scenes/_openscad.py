@@ -468,9 +468,7 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
         binary = _render_with("cgal", timeout=timeout, **job)
     except _BackendFailed as exc:
         # Say why it was the binary's turn: backend manifold was tried first, or passed over.
-        raise SceneError(
-            f"{exc}\n(backend auto gave it to the binary because {why})"
-        ) from None
+        raise SceneError(f"{exc}\n(backend auto gave it to the binary because {why})") from None
     return dataclasses.replace(binary, asked="auto", why=why)
 
 
