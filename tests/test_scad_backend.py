@@ -41,7 +41,12 @@ from roachplan.scenes import (
 from roachplan.scenes._manifold_main import openscad_quad_diagonal, openscad_rands
 from roachplan.scenes._mesh import clean_terrain_mesh, disagreement, surface_distances
 from roachplan.scenes._scad_manifold import TEXT_DEVIATION, manifold_argv, manifold_version
-from roachplan.scenes._scad_sandbox import JAIL_OUT, confined, sandbox_available
+from roachplan.scenes._scad_sandbox import (
+    JAIL_OUT,
+    confined,
+    render_warnings,
+    sandbox_available,
+)
 
 AGREE = 1e-4
 """Largest surface distance between the two meshes [fraction of the bounding-box diagonal]."""
@@ -573,6 +578,32 @@ def test_a_used_file_that_cannot_be_parsed_is_not_left_out_silently(tmp_path):
     assert "Ignoring unknown module 'step'" in note
     again = render_scad_result(src)  # the cached render says it too
     assert again.cached and again.warnings == auto.warnings
+
+
+def test_the_note_keeps_the_models_messages_not_the_mesh_writers():
+    """What a user must read (a file not parsed, a module not known) is kept, each once and
+    at most 4; the renderers' notes on the mesh they write, which the cleaning repairs, not."""
+    from roachplan.processes import ProgramRun
+
+    err = "\n".join(
+        [
+            "ERROR: Parser error: syntax error in file /model/step.scad, line 2",
+            *["WARNING: Ignoring unknown module 'step' in file /model/m.scad, line 3"] * 3,
+            "TRACE: called by 'model'",
+            "WARNING: Object may not be a valid 2-manifold and may need repair!",
+            "WARNING: export: removed 10 zero-area face(s) before writing.",
+            *[f"WARNING: Ignoring unknown variable 'v{i}'" for i in range(4)],
+        ]
+    )
+    run = ProgramRun(status=0, stdout="", stderr=err, seconds=1.0, timed_out=False)
+    shown = render_warnings(run, jail=True)
+    assert shown == (
+        "ERROR: Parser error: syntax error in file step.scad, line 2",
+        "WARNING: Ignoring unknown module 'step' in file m.scad, line 3",
+        "WARNING: Ignoring unknown variable 'v0'",
+        "WARNING: Ignoring unknown variable 'v1'",
+        "... and 2 more",
+    )
 
 
 @pytest.mark.slow

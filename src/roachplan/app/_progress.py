@@ -62,6 +62,8 @@ def render_progress(enabled: bool | None = None) -> Iterator[None]:
             if not isinstance(event, Running) or event.elapsed < LOG_FIRST:
                 return
             last = said.get(event.what)
+            if last is not None and event.elapsed < last:
+                last = None  # a new render of the same model (auto's binary after manifold)
             if last is None or event.elapsed - last >= LOG_EVERY:
                 said[event.what] = event.elapsed
                 print(

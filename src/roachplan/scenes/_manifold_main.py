@@ -5,13 +5,16 @@ scenes/_scad_manifold.py, inside the render jail: it imports nothing of roachpla
 the evaluator's site-packages folder on sys.path, and hands the rest of its arguments to the
 evaluator's command line.
 
-Four changes to the evaluator. First, its parser (_patch_parser) reads what OpenSCAD 2021.01's
-reads: commas repeated between a vector's elements or a call's arguments, and after a vector's
-last element (`[a,, b]`, `[a, b,,]`, `cube(1,, center=true)`; checked against Debian's binary),
-which the evaluator refuses as a syntax error; and a file it cannot parse stops the render as a
-refusal. The evaluator reports a syntax error in a file the model uses (`use <step.scad>`) and
-goes on without its modules, so the render "succeeded" with parts of the model missing (seen:
-a public model staircase rendered as its two side supports, without its steps).
+Four changes to the evaluator. First, its parser (_patch_parser) reads commas repeated between a
+vector's elements or a call's arguments, and after a vector's last element, as OpenSCAD 2021.01
+does (`[a,, b]`, `[a, b,,]`, `cube(1,, center=true)`; checked against Debian's binary), where
+the evaluator saw a syntax error. The binary reads other loose commas too (`cube(, 1)`,
+`let(a = 1,, b = 2)`, in a module's parameters): those stay syntax errors here. And a file
+other than the model that it cannot parse stops the render as a refusal (auto: the binary
+renders it): the evaluator reported a syntax error in a file the model uses (`use <step.scad>`)
+and went on without its modules, so the render "succeeded" with parts of the model missing
+(seen: a public model staircase rendered as its two side supports, without its steps). A
+syntax error in the model itself fails the render as before.
 
 Second, seeded `rands(min, max, n, seed)` draws the numbers OpenSCAD
 2021.01 draws, so a model's seeded bumps (double_bridge_rough) land where the reference binary
@@ -52,6 +55,7 @@ import json
 import math
 import os
 import random
+import re
 import shutil
 import struct
 import subprocess
@@ -102,7 +106,9 @@ OPENSCAD_COMMAS = (
 """The evaluator's grammar rules that OpenSCAD 2021.01 reads more loosely, and how it reads them."""
 
 
-def _patch_parser() -> None:
+def _patch_parser(model: str) -> None:
+    """Parse as OpenSCAD 2021.01 reads commas (OPENSCAD_COMMAS), and refuse when a file other
+    than the model (its path: model) cannot be parsed."""
     import openscad_lalr_parser as parser_module
     from lark import Lark
 
@@ -123,6 +129,8 @@ def _patch_parser() -> None:
             text = grammar
             if strict:  # (no comma after the last argument, as OpenSCAD 2021.01)
                 for rule in strict_rules:
+                    if rule not in text:
+                        _refuse(f"backend manifold's parser has changed (no rule {rule!r})")
                     text = text.replace(rule, rule.replace(' ","?)?', ")?"))
             parsers[strict] = Lark(
                 text, parser="lalr", propagate_positions=True, maybe_placeholders=False
@@ -135,10 +143,14 @@ def _patch_parser() -> None:
         printed = io.StringIO()
         with contextlib.redirect_stdout(printed):  # (where parse_ast prints a syntax error)
             nodes = parse_ast(code, origin=origin, source_map=source_map)
-        if nodes is None:
-            error = (printed.getvalue().strip().splitlines() or [f"Syntax error in {origin}"])[0]
-            _refuse(f"{error.rstrip(':')}: backend manifold could not parse it")
-        sys.stdout.write(printed.getvalue())
+        text = printed.getvalue()
+        found = re.match(r"Syntax error in (.*) at line \d+, column \d+", text)
+        if nodes is None and found and os.path.abspath(found[1]) != model:
+            # A used or included file: the evaluator would go on without it.
+            _refuse(f"{found[0]}: backend manifold could not parse it")
+        # The model's own syntax error fails the render as the evaluator has it (with its
+        # line and caret): the binary would refuse it too.
+        sys.stdout.write(text)
         return nodes
 
     parser_module._get_parser = get_parser
@@ -497,7 +509,7 @@ def main() -> int:
     # errors): the renderer keeps that stream's ends for its messages and drops the output one.
     os.dup2(2, 1)
     sys.path[:0] = json.loads(sys.argv[1])
-    _patch_parser()
+    _patch_parser(os.path.abspath(sys.argv[2]))
     _patch_rands()
     _patch_text()
     _patch_polyhedron()

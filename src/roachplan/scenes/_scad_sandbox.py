@@ -299,9 +299,10 @@ def render_failure(
     return f"OpenSCAD failed:\n{detail.strip() or _bounded(err.strip().splitlines()[-20:])}"
 
 
-MESH_WARNING = "2-manifold"
-"""OpenSCAD's warning that its mesh may need repair: roachplan's mesh cleaning repairs it, so it
-is not the model's own message."""
+MESH_WARNINGS = ("2-manifold", "WARNING: export:")
+"""The renderers' warnings about the mesh they write (the binary's "may not be a valid
+2-manifold", the evaluator's "export: removed N zero-area faces"): roachplan's mesh cleaning
+repairs such meshes, so they are not the model's own messages."""
 
 
 def render_warnings(run: ProgramRun, *, jail: bool, count: int = 4) -> tuple[str, ...]:
@@ -313,7 +314,8 @@ def render_warnings(run: ProgramRun, *, jail: bool, count: int = 4) -> tuple[str
     lines = [
         line.strip()
         for line in err.splitlines()
-        if line.lstrip().startswith(("ERROR:", "WARNING:")) and MESH_WARNING not in line
+        if line.lstrip().startswith(("ERROR:", "WARNING:"))
+        and not any(mark in line for mark in MESH_WARNINGS)
     ]
     unique = list(dict.fromkeys(lines))
     shown = [line if len(line) <= 200 else line[:197] + "..." for line in unique[:count]]
