@@ -6,6 +6,7 @@ machine must not fail them); their goals are measured by benchmarks/bench_robot.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import socket
 import subprocess
@@ -68,7 +69,7 @@ BUSY = LoopConfig(safety=SafetyConfig(max_pose_age=0.6))
 a pose past the default 200 ms (measured: 212 ms), which stops the robot, as it should."""
 
 
-TRACK = LoopConfig(safety=SafetyConfig(max_pose_age=0.6, max_deviation=0.3))
+TRACK = LoopConfig(safety=dataclasses.replace(BUSY.safety, max_deviation=0.3))
 """BUSY, for the drive to the goal under the twin's hidden friction and motor mismatch: with
 the default 0.15 m the deviation stop ended 2 of 17 runs on the double bridge's turn (0.151 m
 off, measured): not what this test is about (test_robot_cli checks the deviation stop); the

@@ -602,7 +602,7 @@ def test_the_note_keeps_the_models_messages_not_the_mesh_writers():
         "WARNING: Ignoring unknown module 'step' in file m.scad, line 3",
         "WARNING: Ignoring unknown variable 'v0'",
         "WARNING: Ignoring unknown variable 'v1'",
-        "... and 2 more",
+        "... and 2 more lines",
     )
 
 

@@ -117,25 +117,11 @@ def _patch_parser(model: str) -> None:
         if rule not in grammar:
             _refuse(f"backend manifold's parser has changed (no rule {rule!r})")
         grammar = grammar.replace(rule, loose)
-    strict_rules = (
-        'assignments_expr: (assignment_expr ("," assignment_expr)* ","?)?',
-        'arguments: (argument (","+ argument)* ","?)?',
+    # The library's own cache of its parser for the standard comma mode, which the evaluator
+    # runs in here (no --strict-commas), filled with the parser it would build from this grammar.
+    parser_module._parser_cache["standard"] = Lark(
+        grammar, parser="lalr", propagate_positions=True, maybe_placeholders=False
     )
-    parsers: dict[bool, Lark] = {}
-
-    def get_parser() -> Lark:
-        strict = parser_module._STRICT_COMMAS.get()
-        if strict not in parsers:
-            text = grammar
-            if strict:  # (no comma after the last argument, as OpenSCAD 2021.01)
-                for rule in strict_rules:
-                    if rule not in text:
-                        _refuse(f"backend manifold's parser has changed (no rule {rule!r})")
-                    text = text.replace(rule, rule.replace(' ","?)?', ")?"))
-            parsers[strict] = Lark(
-                text, parser="lalr", propagate_positions=True, maybe_placeholders=False
-            )
-        return parsers[strict]
 
     parse_ast = parser_module.parse_ast
 
@@ -153,7 +139,6 @@ def _patch_parser(model: str) -> None:
         sys.stdout.write(text)
         return nodes
 
-    parser_module._get_parser = get_parser
     parser_module.parse_ast = parse_or_refuse
 
 

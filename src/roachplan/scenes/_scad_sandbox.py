@@ -307,7 +307,7 @@ repairs such meshes, so they are not the model's own messages."""
 
 def render_warnings(run: ProgramRun, *, jail: bool, count: int = 4) -> tuple[str, ...]:
     """The ERROR and WARNING lines of a render that made a mesh, each once, at most `count`
-    (with a last "... and N more"), file names as the model's folder sees them. OpenSCAD goes
+    (with a last "... and N more lines"), file names as the model's folder sees them. OpenSCAD goes
     on past a used file it cannot parse or a module it does not know, leaving that part out:
     these lines are how a user learns that the mesh lacks it."""
     err = run.stderr.replace(f"{JAIL_MODEL}/", "") if jail else run.stderr
@@ -317,17 +317,18 @@ def render_warnings(run: ProgramRun, *, jail: bool, count: int = 4) -> tuple[str
         if line.lstrip().startswith(("ERROR:", "WARNING:"))
         and not any(mark in line for mark in MESH_WARNINGS)
     ]
-    unique = list(dict.fromkeys(lines))
-    shown = [line if len(line) <= 200 else line[:197] + "..." for line in unique[:count]]
-    if len(unique) > count:
-        shown.append(f"... and {len(unique) - count} more")
-    return tuple(shown)
+    return tuple(_bounded_lines(list(dict.fromkeys(lines)), count, 200))
 
 
 def _bounded(lines: list[str], count: int = 20, width: int = 300) -> str:
-    """At most `count` lines of at most `width` characters: a model's echo() or a flood of
-    warnings must not become megabytes of error text."""
+    """_bounded_lines, one a line."""
+    return "\n".join(_bounded_lines(lines, count, width))
+
+
+def _bounded_lines(lines: list[str], count: int, width: int) -> list[str]:
+    """At most `count` lines of at most `width` characters, and how many more there were: a
+    model's echo() or a flood of warnings must not become megabytes of error text."""
     shown = [line if len(line) <= width else line[: width - 3] + "..." for line in lines[:count]]
     if len(lines) > count:
         shown.append(f"... and {len(lines) - count} more lines")
-    return "\n".join(shown)
+    return shown
