@@ -44,6 +44,7 @@ from ._app import App
 from ._commands import CancelCmd, ChooseCmd
 from ._draw import segments
 from ._jobs import Job
+from ._said import error_text, is_for_the_user, log_internal
 
 if TYPE_CHECKING:  # (the loop and the handlers import no viser: tests/test_loop.py)
     from viser import LineSegmentsHandle
@@ -228,8 +229,10 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
     multiprocessing.current_process().daemon = False
     try:
         choose(world, cfg, workers=workers, on_event=conn.send)
-    except Exception as exc:  # reported to the user as a notification
-        conn.send(Failed(error=f"{exc}"))
+    except Exception as exc:  # reported to the user as a notification, in the page's words
+        if not is_for_the_user(exc):
+            log_internal(exc, where="the Choose path process")
+        conn.send(Failed(error=error_text(exc)))
     conn.close()
 
 

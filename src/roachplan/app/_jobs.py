@@ -33,6 +33,7 @@ from roachplan.processes import (
 from roachplan.scenes import World, build_world, load_scene
 
 from ._relevel import CaptureView
+from ._said import INTERNAL_LEAD, log_internal, raised_text
 
 # -- work in child processes --------------------------------------------------------------------
 
@@ -98,11 +99,16 @@ def load_outcome(job: Job) -> tuple[tuple[World, CaptureView | None] | None, str
 
 
 def failure(job: Child) -> str | None:
-    """Why a finished job failed: its error's message, or how its process died; None when it
-    returned (or has not ended, or was cancelled: what cancelled it says so)."""
+    """Why a finished job failed, in the page's words: its error's message when that is written
+    for the user, else that an internal error happened (its traceback to the server's log:
+    app/_said.py), or how its process died; None when it returned (or has not ended, or was
+    cancelled: what cancelled it says so)."""
     outcome = job.outcome
     if isinstance(outcome, Raised):
-        return outcome.message
+        text = raised_text(outcome.error, outcome.message, outcome.traceback)
+        if text.startswith(INTERNAL_LEAD):
+            log_internal(outcome.error, outcome.traceback, where=f"the {job.task} process")
+        return text
     if isinstance(outcome, Died) and outcome.cause != "cancelled":
         return outcome.why
     return None

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, Literal, Protocol, TypeVar
 
 from ._commands import Cmd
+from ._said import error_text, is_for_the_user, log_internal
 
 if TYPE_CHECKING:
     from ._app import App
@@ -44,7 +45,7 @@ class Followed(Protocol):
 
 WhileBusy = Literal["run", "queue", "once"]
 """What a click does while another command runs: "run" at once, "queue" (wait its turn, said to
-whoever clicked), "once" (wait silently, one of its kind; kept when Cancel drops the rest)."""
+whoever clicked), "once" (wait silently, the latest of its kind; kept when Cancel drops the rest)."""
 FollowEnd = Literal["done", "cancelled", "stopped"]
 """How a followed job ended: it finished, Cancel killed it, or it ran past its hard stop."""
 
@@ -209,9 +210,15 @@ class CommandLoop:
         try:
             self._entry(cmd).handler(self._handed(), cmd)
         except Exception as exc:  # keep serving whatever went wrong in one command
-            text = self.shell.public(f"{exc}")
-            self.shell.notify(cmd.client_id, "Error", text, error=True)
-            self.shell.set_status(f"Error: {text}")
+            # The user reads a sentence: an exception's own text only where it was written for
+            # them (app/_said.py); a fault of the app is named, its traceback logged.
+            entry = self.registry.get(type(cmd))
+            name = entry.name if entry is not None else type(cmd).__name__
+            if not is_for_the_user(exc):
+                log_internal(exc, where=name)
+            text = self.shell.public(error_text(exc))
+            self.shell.notify(cmd.client_id, f"{name} failed", text, error=True)
+            self.shell.set_status(f"{name} failed: {text}")
         finally:
             self.shell.command_done()
 
@@ -232,8 +239,11 @@ class CommandLoop:
                 how = how(self._handed(), cmd)
             if how == "run":
                 self._run(cmd)
-            elif how == "once":
-                if not any(type(c) is type(cmd) for c in self.waiting):
+            elif how == "once":  # (the latest of its kind, in the first one's place)
+                same = [k for k, c in enumerate(self.waiting) if type(c) is type(cmd)]
+                if same:
+                    self.waiting[same[0]] = cmd
+                else:
                     self.waiting.append(cmd)
             else:
                 self.waiting.append(cmd)
