@@ -285,8 +285,12 @@ class App:
         """The paths Drive can take (none: nothing drawn), drawn with the first marked for
         Drive. drawn: the page shows these paths already, in this order (Page.show_plans)."""
         self.plans, self.drive_path = list(plans), 0
-        self.page.list_plans(len(self.plans))
-        self.page.show_plans(self.plans, 0, drawn=drawn)
+        try:
+            self.page.list_plans(len(self.plans))
+            self.page.show_plans(self.plans, 0, drawn=drawn)
+        except BaseException:
+            self.plans = []  # (what failed to be shown is not left for Drive to take)
+            raise
 
     def select_path(self, k: int) -> None:
         """Make path k (an index into plans, 0 to K - 1; the page labels it k + 1) the one
@@ -299,9 +303,14 @@ class App:
         self.drive_path = k
         self.page.mark_drive_path(k)
 
-    def record(self, trial: dict, label: str) -> None:
+    def record(self, trial: dict, label: str) -> bool:
         """Keep a trial's record (TrialResult.to_json()) with label ("" for Drive, "batch",
-        ...); the Results folder and the status line show it."""
+        ...); the Results folder and the status line show it. A success without a drive
+        (unrecordable) is not kept, and the status line says why; whether it was kept."""
+        why = unrecordable(trial)
+        if why is not None:
+            self.page.set_status(f"No trial recorded: {why}.")
+            return False
         trial = {**trial, "label": label}
         self.scene_trials.append(trial)
         self.page.show_results(self.scene_trials)
@@ -311,3 +320,19 @@ class App:
             f"s, {trial['energy']:.3f} J ({trial['relative_energy']:.2f} x a straight walk on "
             f"the floor)."
         )
+        return True
+
+
+def unrecordable(trial: dict) -> str | None:
+    """Why a trial's record (TrialResult.to_json()) is not one to keep, or None: a "success"
+    with no path to drive (fewer than two waypoints: start and goal one point) or no drive
+    (0 s simulated) is no run at all, and a results table that counted it would count a
+    success that never happened (issue 30). A failure without a path ("no_path") is a real
+    outcome of planning, and is kept."""
+    if trial.get("outcome") != "success":
+        return None
+    if len(trial.get("path") or ()) < 2:
+        return "there is no path to drive (start and goal are one point)"
+    if not float(trial.get("drive_time") or 0.0) > 0.0:
+        return "nothing was driven (0 s simulated)"
+    return None

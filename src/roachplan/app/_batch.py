@@ -15,6 +15,7 @@ from roachplan.experiments import ExperimentSpec, LocalPool
 
 from ._app import App
 from ._commands import CancelBatchCmd, RunTrialsCmd
+from ._said import error_text, is_for_the_user, log_internal
 
 
 @dataclass(eq=False)
@@ -73,8 +74,11 @@ def _feed(batch: Batch, spec: ExperimentSpec, calls: list, workers: int) -> None
         finally:
             batch.pool.close()
         batch.results.put(("done", "cancelled" if batch.cancelled.is_set() else "finished"))
-    except Exception as exc:  # noqa: BLE001 - reported in the panel
-        batch.results.put(("done", "cancelled" if batch.cancelled.is_set() else f"failed: {exc}"))
+    except Exception as exc:  # noqa: BLE001 - reported in the panel, in the page's words
+        if not is_for_the_user(exc):
+            log_internal(exc, where="the batch of trials")
+        how = "cancelled" if batch.cancelled.is_set() else f"failed: {error_text(exc)}"
+        batch.results.put(("done", how))
 
 
 class BatchPanel:
@@ -106,7 +110,8 @@ class BatchPanel:
         self.status.content = f"Starting {n} trials on {workers} workers ..."
 
     def drain(self, record) -> None:
-        """Pass each finished trial's record to record(trial); show the progress."""
+        """Pass each finished trial's record to record(trial) (App.record: whether it was
+        recorded); show the progress."""
         b = self.batch
         if b is None:
             return
@@ -119,8 +124,9 @@ class BatchPanel:
                 self.end(payload)
                 return
             b.done += 1
-            b.successes += payload["outcome"] == "success"
-            record({k: v for k, v in payload.items() if k not in ("kind", "index", "target_route")})
+            trial = {k: v for k, v in payload.items() if k not in ("kind", "index", "target_route")}
+            # (record refuses a "success" without a drive: not counted either)
+            b.successes += bool(record(trial)) and trial["outcome"] == "success"
             self.progress.value = 100.0 * b.done / b.total
         text = b.progress()
         if b.done and self.status.content != text:  # (before the first: "Starting ...")

@@ -53,7 +53,8 @@ def do_plan(app: App, cmd: PlanCmd) -> None:
     def step(events: list[Attempt]) -> bool:
         for attempt in events:
             tried.append(attempt.seed)
-            if attempt.plan is not None:
+            # A "path" of one waypoint (start and goal one point) is nothing to drive.
+            if attempt.plan is not None and len(attempt.plan.plan.path_xyz) >= 2:
                 plans.append(attempt.plan)
                 app.page.view.add_path(attempt.plan.plan.path_xyz)
         if failure(job) and not errors:
@@ -113,7 +114,10 @@ def do_plan(app: App, cmd: PlanCmd) -> None:
 def do_drive(app: App, cmd: DriveCmd) -> None:
     """Drive the path marked for Drive; its trial joins the results."""
     if not app.plans or app.plan_endpoints is None:
-        app.page.notify(cmd.client_id, "Nothing to drive", "Plan a path first.", error=True)
+        # (Drive is disabled then; a click sent before it was, or from a stale page, lands here)
+        text = "There is no planned path to drive: press Plan and wait for a path first."
+        app.page.set_status(text)
+        app.page.notify(cmd.client_id, "Nothing to drive", text, error=True)
         return
     start, goal = app.plan_endpoints
     if not app.page.view.path_nodes:  # (hidden by Best path or Show trial: show what is driven)
