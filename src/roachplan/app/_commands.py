@@ -97,6 +97,9 @@ class PlaceCmd(Cmd):
 class MarkersCmd(Cmd):
     """A marker was dragged or a yaw slider moved: re-check start and goal."""
 
+    settled: bool = False
+    """The drag ended (the marker is put down on the surface where it stands)."""
+
 
 @dataclass(frozen=True)
 class ViewCmd(Cmd):

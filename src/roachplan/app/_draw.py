@@ -111,7 +111,8 @@ class SceneView:
     def show(self, world: World, on_marker) -> None:
         """Replace everything drawn by this world, with the markers at its start and goal."""
         s, scene, r = self.scene, world.scene, world.robot
-        for name in ("/terrain", "/robot", "/markers", "/standable"):
+        # Nothing of the last world stays drawn: a real robot's live track (/live) included.
+        for name in ("/terrain", "/robot", "/markers", "/standable", "/live"):
             s.remove_by_name(name)
         for root in self.shown:
             self.clear(root)
@@ -133,15 +134,15 @@ class SceneView:
                 s.add_mesh_simple(
                     "/terrain/unknown", *unknown, color=UNKNOWN_COLOUR, opacity=0.85, side="double"
                 )
-        if scene.ground is not None:
-            (lo, hi) = np.asarray(scene.bounds)
-            size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
+        plane = ground_plane(world)
+        if plane is not None:
+            z, centre, (hx, hy) = plane
             s.add_grid(
                 "/terrain/ground",
-                width=float(size[0]),
-                height=float(size[1]),
+                width=2 * hx,
+                height=2 * hy,
                 cell_size=0.25,
-                position=(*((lo + hi) / 2), scene.ground),
+                position=(*centre, z),
             )
         self.robot_node = s.add_box(
             "/robot", color=(60, 60, 70), dimensions=(r.body_length, r.body_width, r.body_height)
@@ -249,6 +250,8 @@ class SceneView:
                 node.thickness = thickness
                 text = f"{k + 1}: Drive" if k == selected else str(k + 1)
                 pts = np.concatenate([node.points[:, 0], node.points[-1:, 1]])
+                if not len(pts):  # (no segment: nothing to label)
+                    continue
                 self.scene.add_label(f"/plans/{k}/label", text, position=label_position(pts, k))
 
     def hide_paths(self) -> None:
@@ -280,6 +283,24 @@ class SceneView:
                 opacity=0.7,
                 side="double",
             )
+
+
+def ground_plane(
+    world: World,
+) -> tuple[float, tuple[float, float], tuple[float, float]] | None:
+    """The ground plane as drawn: (height [m], centre (x, y) [m], half its size (hx, hy) [m]):
+    the planning area plus about a metre round it; None for a scene without one."""
+    scene = world.scene
+    if scene.ground is None:
+        return None
+    (lo, hi) = np.asarray(scene.bounds, dtype=float)
+    size = np.ceil(hi - lo + 2.0)  # the bounds plus a metre around [m]
+    centre = (lo + hi) / 2
+    return (
+        float(scene.ground),
+        (float(centre[0]), float(centre[1])),
+        (float(size[0]) / 2, float(size[1]) / 2),
+    )
 
 
 def unknown_squares(world: World) -> tuple[np.ndarray, np.ndarray]:

@@ -14,9 +14,9 @@ from roachplan.scenes import World, pose_problem
 
 from ._app import App
 from ._commands import MarkersCmd, PlaceCmd
-from ._draw import INVALID, MARKER_COLOURS, SceneView, yaw_wxyz
+from ._draw import INVALID, MARKER_COLOURS, SceneView, ground_plane, on_surface, yaw_wxyz
 from ._loop import WhileBusy
-from ._picking import ray_hit_heightfield
+from ._picking import click_point
 from ._uploads import PLACE_THEM
 
 
@@ -36,6 +36,21 @@ def with_remedy(reason: str) -> str:
     if "Click places" in reason:
         return reason
     return f"{reason.rstrip('. ')}; {PLACE_THEM}."
+
+
+def one_place(world: World, start, goal) -> str:
+    """Why start and goal ((x [m], y [m], yaw [rad]) each) are no trip, or "": closer than the
+    planner's goal radius, the robot stands at its goal already - a plan of them is one point
+    and a drive of it 0 s, no trial (and where build_world could not pick them it leaves both
+    at one placeholder point: scenes/_world.py)."""
+    apart = math.dist(start[:2], goal[:2])
+    radius = world.scene.planner.goal_radius
+    if apart >= radius:
+        return ""
+    return (
+        f"{apart:.2f} m apart, within the goal radius ({radius:g} m): there is nothing to "
+        f"drive; place the goal elsewhere ({PLACE_THEM})"
+    )
 
 
 class StartGoal:
@@ -89,6 +104,9 @@ class StartGoal:
                 self.view.controls[which].wxyz = wxyz
             if problem:
                 lines.append(f"**{which} invalid**: {problem}")
+        same = one_place(world, self.pose("start"), self.pose("goal"))
+        if same:
+            lines.append(f"**start and goal are one place**: {same}")
         if lines and self.failure is not None:
             lines.insert(0, f"**Start and goal were not picked**: {self.failure}")
         text = "  \n".join(lines) or "Start and goal are valid."
@@ -109,7 +127,15 @@ def do_place(app: App, cmd: PlaceCmd) -> None:
     target = app.page.click_target()
     if target == "nothing":
         return
-    hit = ray_hit_heightfield(app.world.heightfield, cmd.ray_origin, cmd.ray_direction)
+    w = app.world
+    hit = click_point(
+        w.mesh.vertices,
+        w.mesh.faces,
+        w.heightfield,
+        cmd.ray_origin,
+        cmd.ray_direction,
+        ground=ground_plane(w),
+    )
     if hit is None:
         app.page.notify(cmd.client_id, "Missed", "That click does not hit the terrain.")
         return
@@ -132,6 +158,15 @@ def click_while_busy(app: App, cmd: PlaceCmd) -> WhileBusy:
 
 
 def do_check_markers(app: App, cmd: MarkersCmd) -> None:
-    """A marker moved: re-check both, and stand the robot at the start."""
+    """A marker moved: re-check both, and stand the robot at the start. At the end of a drag
+    the markers are put down on the surface where they stand: a drag moves a marker in the
+    level plane of its height, so one dragged over lower (or higher) ground floats over (or
+    sinks into) it, the place it stands on hidden behind (or in front of) it."""
+    if cmd.settled:
+        for which in ("start", "goal"):
+            ctl = app.page.view.controls[which]
+            p = on_surface(app.world, app.page.markers.pose(which))
+            if abs(float(ctl.position[2]) - p[2]) > 1e-4:
+                app.page.place_marker(which, p)
     app.page.check_markers()
     app.page.show_robot_at_start()

@@ -67,6 +67,7 @@ from ._panel import energy_plot, summary_markdown, trials_markdown
 from ._registry import COMMANDS
 from ._relevel import CaptureView
 from ._robot_panel import RobotPanel
+from ._said import note_body
 from ._uploads import MAX_UPLOAD_BYTES, limit_uploads, public_message
 from ._voxel_panel import VoxelPanel
 
@@ -106,6 +107,10 @@ class RoachApp:
         self._followed = 0.0
         """When the cameras last moved with the robot (time.monotonic() [s])."""
         self._follow_offsets: dict[int, np.ndarray] = {}
+        self._commands_done = 0
+        """Commands the loop has run (command_done)."""
+        self._message_at = 0
+        """_commands_done when the message under the status line was set."""
         """Client id -> its camera's offset from the robot while following [m], world frame."""
         self.max_upload_bytes = max_upload_bytes
         limit_uploads(self.server, max_upload_bytes, self._refuse_upload)
@@ -185,6 +190,8 @@ class RoachApp:
         self.title = gui.add_markdown("")
         # What is running (with its progress and Cancel) stays in view at the top.
         self.status = gui.add_markdown("Drag the start (green) and goal (blue), then **Plan**.")
+        # The whole of the last notification too long to show whole (notify).
+        self.message = gui.add_markdown("", visible=False)
         self.job_bar = gui.add_progress_bar(0.0, visible=False)
         self.cancel_job = gui.add_button(
             "Cancel",
@@ -308,13 +315,23 @@ class RoachApp:
 
     def notify(self, client_id: int | None, title: str, body: str, *, error: bool = False) -> None:
         client = self.server.get_clients().get(client_id) if client_id is not None else None
-        if client is not None:
-            client.add_notification(
-                title,
-                self.public(body),  # (the page's words, no server paths)
-                auto_close_seconds=None if error else 4.0,
-                color="red" if error else None,
-            )
+        if client is None:
+            return
+        body = self.public(body)  # (the page's words, no server paths)
+        # viser cuts a notification at 200 px, and its first lines go with the title: a longer
+        # one shows its lead and points to the whole of it, under the status line.
+        shown, cut = note_body(title, body)
+        if cut:
+            whole = body.replace("_", "\\_").replace("*", "\\*")  # (markdown: as written)
+            self.message.content = f"**{title}**: {whole}"
+            self.message.visible = True
+            self._message_at = self._commands_done
+        client.add_notification(
+            title,
+            shown,
+            auto_close_seconds=None if error or cut else 4.0,
+            color="red" if error else None,
+        )
 
     def public(self, text: str) -> str:
         return public_message(text, self.core.upload_dir)
@@ -336,6 +353,11 @@ class RoachApp:
 
     def command_done(self) -> None:
         self.drive_button.disabled = not self.core.plans
+        self._commands_done += 1
+        # The whole of a cut notification stays until the command after the one it came in.
+        if self.message.visible and self._message_at < self._commands_done - 1:
+            self.message.visible = False
+            self.message.content = ""
 
     # the handlers' Page: what the controls say -------------------------------------------------
 
@@ -373,7 +395,12 @@ class RoachApp:
 
     def show_world(self) -> None:
         world = self.core.world
-        self.view.show(world, lambda ev: self.loop.put(MarkersCmd(ev.client_id)))
+        self.view.show(
+            world,
+            lambda ev: self.loop.put(
+                MarkersCmd(ev.client_id, settled=getattr(ev, "phase", "end") == "end")
+            ),
+        )
         failure = pick_failure(world)
         self.markers.reset(world, None if failure is None else self.public(failure))
         self._standable = None
