@@ -31,6 +31,9 @@ class StandableMap:
     """Cell size [m]."""
     standable: np.ndarray
     """(ny, nx) bool: the robot stands validly at the cell centre at one of the tried yaws."""
+    yaw_valid: np.ndarray
+    """(ny, nx, n_yaw) bool: the robot stands validly at the cell centre at yaw k * 2 pi /
+    n_yaw (standable is its any over k)."""
     reachable: np.ndarray
     """(ny, nx) bool: the standable cells 4-connected to the start's cell."""
     holes: np.ndarray
@@ -64,11 +67,21 @@ def standable_map(
     ys = np.arange(ya, yb + 1e-9, cell)
     gx, gy = np.meshgrid(xs, ys)  # (ny, nx)
     yaws = np.arange(n_yaw) * (2 * np.pi / n_yaw)
+    # Where there is no surface under the body's centre the robot stands at no yaw (the body's
+    # ground is missing): only the other cells are checked (a capture's planning area is often
+    # half outside the camera's view).
+    over = np.flatnonzero(np.isfinite(hf.sample(np.stack([gx, gy], axis=-1))).ravel())
     states = np.column_stack(
-        [np.repeat(gx.ravel(), n_yaw), np.repeat(gy.ravel(), n_yaw), np.tile(yaws, gx.size)]
+        [
+            np.repeat(gx.ravel()[over], n_yaw),
+            np.repeat(gy.ravel()[over], n_yaw),
+            np.tile(yaws, len(over)),
+        ]
     )
-    ok = check_states(hf, fp, cfg, states).valid.reshape(gx.size, n_yaw).any(axis=1)
-    standable = np.asarray(ok).reshape(gx.shape)
+    yaw_valid = np.zeros((gx.size, n_yaw), dtype=bool)
+    yaw_valid[over] = check_states(hf, fp, cfg, states).valid.reshape(len(over), n_yaw)
+    yaw_valid = yaw_valid.reshape(*gx.shape, n_yaw)
+    standable = yaw_valid.any(axis=-1)
     # The start's component (4-connected); if the start's own cell centre is not standable,
     # the nearest standable cell's.
     components, _ = cast("tuple[np.ndarray, int]", ndimage.label(standable))
@@ -98,6 +111,7 @@ def standable_map(
         y0=float(ys[0]),
         cell=cell,
         standable=standable,
+        yaw_valid=yaw_valid,
         reachable=reachable,
         holes=holes,
     )
