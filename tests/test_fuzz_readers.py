@@ -358,7 +358,7 @@ def test_mutated_clouds_load_or_refuse(tmp_path, case):
 
 def test_captured_output_restores_the_terminal(capfd):
     """The PLY fallback silences Open3D on file descriptors 1 and 2, then gives them back."""
-    from roachplan.perception._capture import _captured_output
+    from roachplan.perception._read_ply import _captured_output
 
     with _captured_output() as said:
         os.write(1, b"hidden out\n")

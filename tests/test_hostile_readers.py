@@ -638,7 +638,7 @@ def test_a_bag_chunk_that_unpacks_past_its_declared_size_is_refused(
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    import roachplan.perception._capture as capture
+    import roachplan.perception._read_bag as bag_reader
     from roachplan.perception import CaptureError, load_capture
 
     ts = get_typestore(Stores.ROS1_NOETIC)
@@ -653,7 +653,7 @@ def test_a_bag_chunk_that_unpacks_past_its_declared_size_is_refused(
     data = bag.read_bytes()
     at = data.index(b"size=", data.index(b"compression=" + compression.encode()) - 40)
     bag.write_bytes(data[: at + 5] + struct.pack("<I", 100) + data[at + 9 :])
-    monkeypatch.setattr(capture, "MAX_BAG_CHUNK_BYTES", 1000)
+    monkeypatch.setattr(bag_reader, "MAX_BAG_CHUNK_BYTES", 1000)
     with pytest.raises(CaptureError, match=r"packed\.bag: a chunk of the bag unpacks to more than"):
         load_capture(bag)
 

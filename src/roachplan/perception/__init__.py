@@ -15,11 +15,17 @@ _getattr, __dir__, __all__ = lazy_exports(
         "PinholeNumbers": "._settings",
         "load_calibration": "._camera",
         "load_intrinsics": "._camera",
-        "CAPTURE_SUFFIXES": "._capture",
         "Capture": "._capture",
         "depth_scale_advice": "._capture",
         "depth_to_points": "._capture",
-        "load_capture": "._capture",
+        "CAPTURE_SUFFIXES": "._inputs",
+        "INPUT_KINDS": "._inputs",
+        "INPUT_SUFFIXES": "._inputs",
+        "MESH_SUFFIXES": "._inputs",
+        "MODEL_SUFFIXES": "._inputs",
+        "InputKind": "._inputs",
+        "input_kind": "._inputs",
+        "load_capture": "._inputs",
         "CaptureError": "._errors",
         "GroundChoice": "._ground",
         "GroundConfig": "._ground",
@@ -68,11 +74,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._camera import Intrinsics as Intrinsics
     from ._camera import load_calibration as load_calibration
     from ._camera import load_intrinsics as load_intrinsics
-    from ._capture import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
     from ._capture import Capture as Capture
     from ._capture import depth_scale_advice as depth_scale_advice
     from ._capture import depth_to_points as depth_to_points
-    from ._capture import load_capture as load_capture
     from ._choices import DEPTH_UNITS as DEPTH_UNITS
     from ._choices import FRAMES as FRAMES
     from ._choices import METHODS as METHODS
@@ -80,6 +84,14 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._ground import GroundChoice as GroundChoice
     from ._ground import GroundConfig as GroundConfig
     from ._ground import choose_ground as choose_ground
+    from ._inputs import CAPTURE_SUFFIXES as CAPTURE_SUFFIXES
+    from ._inputs import INPUT_KINDS as INPUT_KINDS
+    from ._inputs import INPUT_SUFFIXES as INPUT_SUFFIXES
+    from ._inputs import MESH_SUFFIXES as MESH_SUFFIXES
+    from ._inputs import MODEL_SUFFIXES as MODEL_SUFFIXES
+    from ._inputs import InputKind as InputKind
+    from ._inputs import input_kind as input_kind
+    from ._inputs import load_capture as load_capture
     from ._pipeline import STAGES as STAGES
     from ._pipeline import Reconstruction as Reconstruction
     from ._pipeline import mesh_capture as mesh_capture

@@ -665,7 +665,7 @@ def mesh_capture(
 ) -> Reconstruction:
     """Read a capture file and reconstruct its terrain; on_stage("read") once it is read, then
     as reconstruct calls it."""
-    from ._capture import load_capture
+    from ._inputs import load_capture
 
     cap = load_capture(
         path,
