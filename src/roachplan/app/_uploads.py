@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import yaml
 
-from roachplan.perception import CAPTURE_SUFFIXES, load_yaml
+from roachplan.perception import CAPTURE_SUFFIXES, input_kind, load_yaml
 from roachplan.scenes import DEFAULT_BACKEND, DEFAULT_TIMEOUT, LIBRARY, MESH_SUFFIXES, SceneError
 
 if TYPE_CHECKING:
@@ -154,20 +154,22 @@ def _file_object(
     scad: dict,
 ) -> dict:
     """The terrain object of an uploaded model, mesh or capture file (written into folder as
-    fname): a .scad with the `scad` keys (timeout, backend); a capture with the calibration
-    uploaded before it, when it is a depth image."""
-    if suffix == ".ply" and _ply_has_faces(data):
-        return {"mesh": fname}
-    if suffix in CAPTURE_SUFFIXES:
+    fname), by what the file is (perception.input_kind, as the command line and the scene
+    loader decide it): a .scad with the `scad` keys (timeout, backend); a capture with the
+    calibration uploaded before it, when it is a depth image. (suffix and data: the file's, as
+    written; input_kind reads what it needs of the file.)"""
+    found = input_kind(folder / fname)
+    assert found is not None  # (_accepted took only UPLOAD_SUFFIXES: .yaml and .zip go elsewhere)
+    if found.kind == "capture":
         capture = dict(capture)
-        if calibration is not None and suffix in DEPTH_IMAGE_SUFFIXES:
+        if calibration is not None and found.is_depth_image:
             calib = safe_name(calibration.name)
             if calib == fname:
                 calib = f"calibration-{calib}"
             shutil.copy(calibration, folder / calib)
             capture["intrinsics"] = calib
         return _capture_object(fname, capture)
-    if suffix == ".scad":
+    if found.kind == "model":
         return {"scad": fname, **scad}
     return {"mesh": fname}
 
@@ -200,12 +202,6 @@ def limit_uploads(server, max_bytes: int, refuse) -> None:
     ws.unregister_handler(_messages.FileTransferPart, part)
     ws.register_handler(_messages.FileTransferStartUpload, on_start)
     ws.register_handler(_messages.FileTransferPart, on_part)
-
-
-def _ply_has_faces(data: bytes) -> bool:
-    head = data[:4096].split(b"end_header", 1)[0]
-    m = re.search(rb"element face (\d+)", head)
-    return bool(m and int(m.group(1)) > 0)
 
 
 def _check_sources_inside(path: Path, folder: Path) -> None:

@@ -8,7 +8,6 @@ user can get wrong is reported as a SceneError naming the file, the key and what
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, overload
@@ -27,8 +26,12 @@ from roachplan._settings import seed as seed_number
 from roachplan._settings import setting as s
 from roachplan.perception import (
     CAPTURE_SUFFIXES,
+    INPUT_SUFFIXES,
     MAX_YAML_BYTES,
+    MESH_SUFFIXES,
+    MODEL_SUFFIXES,
     CaptureSettings,
+    input_kind,
     load_yaml,
     short_repr,
 )
@@ -41,9 +44,9 @@ from ._openscad import DEFAULT_BACKEND, DEFAULT_TIMEOUT, Backend, backend_proble
 from ._scad_sandbox import timeout_problem
 from ._scad_source import param_problem, scad_variables
 
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb")
-TERRAIN_SUFFIXES = tuple(sorted({".scad", *MESH_SUFFIXES, *CAPTURE_SUFFIXES}))
-"""Files that are a scene of their own wherever a scene is taken."""
+TERRAIN_SUFFIXES = INPUT_SUFFIXES
+"""Files that are a scene of their own wherever a scene is taken (perception.INPUT_KINDS;
+MESH_SUFFIXES, re-exported here, are its meshes)."""
 QUATERNION_TOLERANCE = 1e-3
 """How far from 1 a quaternion's norm may be [-]: four rounded decimals ([0, 0, 0.7071,
 0.7071]) are within it and are normalised; further off is a typing error, refused."""
@@ -126,7 +129,7 @@ class TerrainObject:
     def kind(self) -> Literal["scad", "mesh", "capture"]:
         if self.capture is not None:
             return "capture"
-        return "scad" if self.source.suffix.lower() == ".scad" else "mesh"
+        return "scad" if self.source.suffix.lower() in MODEL_SUFFIXES else "mesh"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -180,25 +183,15 @@ def resolve_scene(name_or_path: str | Path) -> Path:
     return resolve_in_library(name_or_path, LIBRARY, "scene", SceneError)
 
 
-def ply_has_faces(path: Path) -> bool:
-    """A .ply with faces is a mesh; without, a point cloud (a capture)."""
-    with open(path, "rb") as f:
-        head = f.read(4096).split(b"end_header", 1)[0]
-    m = re.search(rb"element face (\d+)", head)
-    return bool(m and int(m.group(1)) > 0)
-
-
 def terrain_file_scene(path: Path) -> Scene:
     """A scene of one terrain file: a capture (its floor is the ground: no ground plane), or a
-    mesh or .scad model on a ground plane at z = 0; start, goal and bounds are picked when the
-    world is built."""
-    suffix = path.suffix.lower()
-    if suffix == ".scad":
-        obj = TerrainObject(source=path, key="terrain[0]")
-    elif suffix in MESH_SUFFIXES and (suffix != ".ply" or ply_has_faces(path)):
-        obj = TerrainObject(source=path, key="terrain[0]")
-    else:
+    mesh or .scad model on a ground plane at z = 0 (what it is: perception.input_kind); start,
+    goal and bounds are picked when the world is built."""
+    found = input_kind(path)
+    if found is None or found.kind == "capture":
         obj = TerrainObject(source=path, key="terrain[0]", capture=CaptureSettings())
+    else:
+        obj = TerrainObject(source=path, key="terrain[0]")
     return Scene(
         name=path.stem,
         path=path,
@@ -424,7 +417,7 @@ def _terrain_object(ctx: YamlFields, value: Any, key: str) -> TerrainObject:
     if not isinstance(data[kind], str):
         raise ctx.fail(f"{key}.{kind}", f"expected a file name, got {short_repr(data[kind])}")
     source = _existing_file(ctx, data[kind], f"{key}.{kind}")
-    allowed = {"scad": (".scad",), "mesh": MESH_SUFFIXES, "capture": CAPTURE_SUFFIXES}[kind]
+    allowed = {"scad": MODEL_SUFFIXES, "mesh": MESH_SUFFIXES, "capture": CAPTURE_SUFFIXES}[kind]
     if source.suffix.lower() not in allowed:
         raise ctx.fail(f"{key}.{kind}", f"{source.name}: expected a {' or '.join(allowed)} file")
     capture = _capture_of(ctx, data, key) if kind == "capture" else None
