@@ -23,7 +23,6 @@ import numpy as np
 from roachplan.planning import PlanResult
 from roachplan.processes import Pool
 from roachplan.scenes import build_world
-from roachplan.sim import Simulation
 
 from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL
@@ -101,16 +100,9 @@ class TrialWorker:
         captured = any(obj.kind == "capture" for obj in scene.terrain)
         sigma = uncertainty.terrain_height if captured else 0.0
         if sigma > 0:  # a capture's surface, moved by the sensor's error (_uncertainty.py)
-            mesh = self.world.mesh
-            vertices = np.array(mesh.vertices, dtype=np.float64)
+            vertices = np.array(self.world.sim_terrain.vertices, dtype=np.float64)
             vertices[:, 2] += terrain_noise(uncertainty, seed, len(vertices))
-            world_sim = Simulation(
-                vertices,
-                mesh.faces,
-                ground_height=scene.ground,
-                robot=self.world.robot,
-                cfg=scene.sim,
-            )
+            world_sim = self.world.simulation(vertices=vertices)
         else:
             world_sim = self.world.simulation()
         with world_sim as sim:

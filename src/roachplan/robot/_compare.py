@@ -103,17 +103,9 @@ def logged_track(log: RunLog, latency: float = 0.0) -> Track:
 
 
 def _simulation(world: World, params: SimParams):
-    from roachplan.sim import Simulation
-
     robot = params.robot_file().robot()
     cfg = dataclasses.replace(world.scene.sim, friction=params.friction)
-    return Simulation(
-        world.mesh.vertices,
-        world.mesh.faces,
-        ground_height=world.scene.ground,
-        robot=robot,
-        cfg=cfg,
-    )
+    return world.simulation(robot=robot, cfg=cfg)
 
 
 def replay_commands(world: World, log: RunLog, params: SimParams, times: np.ndarray) -> Track:

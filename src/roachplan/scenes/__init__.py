@@ -37,6 +37,14 @@ _getattr, __dir__, __all__ = lazy_exports(
         "read_yaml": "._scene",
         "resolve_in_library": "._scene",
         "resolve_scene": "._scene",
+        "SIM_MAX_MESH_TRIANGLES": "._sim_terrain",
+        "SIM_MAX_TRIANGLES": "._sim_terrain",
+        "SIM_MAX_TOLERANCE": "._sim_terrain",
+        "SimTerrain": "._sim_terrain",
+        "crop_mesh": "._sim_terrain",
+        "sim_terrain": "._sim_terrain",
+        "simplified_heightfield_mesh": "._sim_terrain",
+        "standable_grid": "._sim_terrain",
         "OnCapture": "._world",
         "World": "._world",
         "Terrain": "._world",
@@ -84,6 +92,14 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._scene import resolve_in_library as resolve_in_library
     from ._scene import resolve_scene as resolve_scene
     from ._scene import terrain_file_scene as terrain_file_scene
+    from ._sim_terrain import SIM_MAX_MESH_TRIANGLES as SIM_MAX_MESH_TRIANGLES
+    from ._sim_terrain import SIM_MAX_TOLERANCE as SIM_MAX_TOLERANCE
+    from ._sim_terrain import SIM_MAX_TRIANGLES as SIM_MAX_TRIANGLES
+    from ._sim_terrain import SimTerrain as SimTerrain
+    from ._sim_terrain import crop_mesh as crop_mesh
+    from ._sim_terrain import sim_terrain as sim_terrain
+    from ._sim_terrain import simplified_heightfield_mesh as simplified_heightfield_mesh
+    from ._sim_terrain import standable_grid as standable_grid
     from ._world import OnCapture as OnCapture
     from ._world import Terrain as Terrain
     from ._world import World as World

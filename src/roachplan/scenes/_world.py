@@ -25,13 +25,14 @@ from roachplan.planning import (
     signature_label,
     standable_map,
 )
-from roachplan.sim import LEG_NAMES, RobotConfig, Simulation, quat_to_matrix
+from roachplan.sim import LEG_NAMES, RobotConfig, SimConfig, SimError, Simulation, quat_to_matrix
 
 from ._autopose import auto_bounds, pick_start_goal
 from ._errors import SceneError
 from ._mesh import clean_terrain_mesh, read_mesh, scaled_mesh
 from ._openscad import render_scad_result
 from ._scene import Scene, TerrainObject
+from ._sim_terrain import SIM_MAX_MESH_TRIANGLES, SimTerrain, sim_terrain, standable_grid
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
@@ -132,15 +133,44 @@ class World:
             return named
         return signature_label(homology_signature(self.regions.holes, path_xy))
 
-    def simulation(self) -> Simulation:
-        """A fresh PyBullet world of this terrain, ground and robot (the caller closes it)."""
-        return Simulation(
-            self.mesh.vertices,
-            self.mesh.faces,
-            ground_height=self.scene.ground,
-            robot=self.robot,
-            cfg=self.scene.sim,
-        )
+    @functools.cached_property
+    def sim_terrain(self) -> SimTerrain:
+        """The terrain the physics engine is given: the mesh itself, or, for a large capture,
+        its part near the planning area or the planner's height field as triangles
+        (scenes/_sim_terrain.py; computed once)."""
+        return sim_terrain_of(self)
+
+    def simulation(
+        self,
+        *,
+        vertices: np.ndarray | None = None,
+        robot: RobotConfig | None = None,
+        cfg: SimConfig | None = None,
+    ) -> Simulation:
+        """A fresh PyBullet world of this terrain (sim_terrain), ground and robot (the caller
+        closes it). vertices: the terrain's vertices moved ((V, 3) [m], as sim_terrain's: a
+        rollout's drawn sensor error); robot, cfg: other than the scene's (a fitted robot)."""
+        terrain = self.sim_terrain
+        try:
+            return Simulation(
+                terrain.vertices if vertices is None else vertices,
+                terrain.faces,
+                ground_height=self.scene.ground,
+                robot=self.robot if robot is None else robot,
+                cfg=self.scene.sim if cfg is None else cfg,
+            )
+        except SimError as exc:
+            raise SceneError(f"{self.scene.path}: {exc}") from None
+
+
+def sim_terrain_of(world: World) -> SimTerrain:
+    """The terrain the physics engine is given for world (World.sim_terrain)."""
+    # Only a large mesh needs where the feet go (the regions take a second on a capture).
+    large = len(world.mesh.faces) > SIM_MAX_MESH_TRIANGLES
+    reach = world.footprint.leg_reach + float(np.hypot(*world.robot.foot_points_xy.T).max())
+    feet = standable_grid(world.heightfield, world.regions, reach) if large else None
+    m = world.mesh
+    return sim_terrain(m.vertices, m.faces, world.heightfield, world.bounds, standable=feet)
 
 
 def footprint_of(robot: RobotConfig) -> Footprint:
@@ -405,7 +435,13 @@ def build_world(
             start = goal = ((xa + xb) / 2, (ya + yb) / 2, 0.0)
         scene = dataclasses.replace(scene, start=start, goal=goal)
         world = dataclasses.replace(world, scene=scene)
-    if notes:
+    if len(mesh.faces) > SIM_MAX_MESH_TRIANGLES:
+        # Made now, once: every drive's child gets it with the world, and the user is told.
+        notes.append(world.sim_terrain.note())
+        cached = {k: v for k, v in world.__dict__.items() if k in ("sim_terrain", "regions")}
+        world = dataclasses.replace(world, notes=tuple(notes))
+        world.__dict__.update(cached)  # (the same scene and terrain: still true)
+    elif notes:
         world = dataclasses.replace(world, notes=tuple(notes))
     for key, pose in (("robot.start", scene.start), ("goal", scene.goal)) if check_poses else ():
         assert pose is not None  # given, or picked above

@@ -82,12 +82,7 @@ class Simulation:
         # Static terrain: one concave triangle mesh on a mass-0 body.
         self.terrain_id = None
         if len(terrain_faces):
-            shape = bc.createCollisionShape(
-                p.GEOM_MESH,
-                vertices=terrain_vertices.tolist(),
-                indices=terrain_faces.reshape(-1).tolist(),
-                flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
-            )
+            shape = self._terrain_shape(terrain_vertices, terrain_faces)
             self.terrain_id = bc.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
             bc.changeDynamics(self.terrain_id, -1, lateralFriction=cfg.friction, restitution=0.0)
         self.ground_id = None
@@ -116,6 +111,26 @@ class Simulation:
         return cls(*no_terrain, ground_height=0.0, robot=robot, cfg=cfg)
 
     # -- construction -------------------------------------------------------------------------
+
+    def _terrain_shape(self, vertices: np.ndarray, faces: np.ndarray) -> int:
+        """The terrain's concave triangle mesh (vertices (V, 3) [m], faces (F, 3)) as a
+        collision shape; SimError saying what to change when PyBullet refuses it (it takes up
+        to ~175k triangles), its own warnings (printed on standard output) kept off stdout."""
+        try:
+            with _c_stdout_silenced():
+                return self._bc.createCollisionShape(
+                    p.GEOM_MESH,
+                    vertices=vertices.tolist(),
+                    indices=faces.reshape(-1).tolist(),
+                    flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+                )
+        except p.error:
+            self.close()
+            raise SimError(
+                f"PyBullet refused the terrain mesh ({len(vertices):,} vertices, "
+                f"{len(faces):,} triangles; it takes up to about 175,000 triangles): give "
+                f"smaller bounds, or a coarser capture (a larger perception voxel)"
+            ) from None
 
     def _create_robot(self) -> int:
         bc, r = self._bc, self.robot
