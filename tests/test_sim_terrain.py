@@ -15,10 +15,10 @@ from roachplan.scenes import (
     SIM_MAX_TRIANGLES,
     build_world,
     crop_mesh,
+    level_ground,
     load_scene,
     sim_terrain,
     simplified_heightfield_mesh,
-    standable_grid,
 )
 from roachplan.sim import RobotConfig, SimConfig, SimError, Simulation
 
@@ -106,7 +106,7 @@ def test_walls_are_coarser_than_where_the_robot_stands():
     ny, nx = hf.heights.shape
     stand = np.zeros((ny, nx), dtype=bool)
     stand[:, :100] = True  # only the left floor is walked on
-    v, f, err = simplified_heightfield_mesh(hf, standable=stand)
+    v, f, err = simplified_heightfield_mesh(hf, ground=stand)
     v_all, f_all, _ = simplified_heightfield_mesh(hf)
     assert len(f) < len(f_all)
     diff = np.abs(rasterised(v, f, hf) - hf.heights)
@@ -152,17 +152,14 @@ def test_a_mesh_the_engine_refuses_is_a_clear_error_and_nothing_on_stdout(capfd)
     assert capfd.readouterr().out == ""
 
 
-def test_standable_grid_reaches_the_feet():
-    class Regions:  # a StandableMap's grid: one standable 4 cm cell at (1, 1)
-        x0, y0, cell = 0.0, 0.0, 0.04
-        standable = np.zeros((51, 51), dtype=bool)
-
-    Regions.standable[25, 25] = True
-    hf = HeightField(0.0, 0.0, 0.01, np.zeros((201, 201)))
-    mask = standable_grid(hf, Regions, reach=0.1)
-    j, i = np.nonzero(mask)
-    assert mask[100, 100] and not mask[0, 0]
-    assert (i.max() - i.min()) * 0.01 == pytest.approx(0.2, abs=0.021)
+def test_level_ground_is_the_floor_and_the_ramp_not_the_step():
+    hf = terrain_field(noise=0.003)
+    level = level_ground(hf, max_slope_deg=25.0)
+    x = hf.x0 + np.arange(hf.heights.shape[1]) * hf.resolution
+    assert level[150, (x > 0.1) & (x < 0.9)].all()  # the floor, and its noisy patch
+    assert level[50, (x > 2.05) & (x < 2.55)].all()  # the 10 deg ramp
+    assert not level[50, np.argmin(np.abs(x - 1.0))]  # the 5 cm step's edge
+    assert not level[90, 40]  # the dropout
 
 
 @pytest.mark.slow
@@ -188,12 +185,17 @@ def test_a_wide_kinect_capture_is_planned_and_driven_with_json_alone_on_stdout(t
     terrain = world.sim_terrain
     assert len(world.mesh.faces) > SIM_MAX_TRIANGLES  # (the case this is about)
     assert terrain.kind == "heightfield" and len(terrain.faces) <= SIM_MAX_TRIANGLES
-    # Where the robot's feet go, the engine's heights are the planner's, within the error the
-    # note states, and that within the sensor's noise at this range (SIM_MAX_TOLERANCE, raised at
-    # most 2.5x by the cap).
-    hf = world.heightfield
-    reach = world.footprint.leg_reach + np.hypot(*world.robot.foot_points_xy.T).max()
-    feet = standable_grid(hf, world.regions, reach)
+    # Where the robot can stand, the engine's heights are the planner's, within the error the
+    # note states, and that within the sensor's noise at this range (SIM_MAX_TOLERANCE, raised
+    # at most 2.5x by the cap).
+    hf, regions = world.heightfield, world.regions
+    ny, nx = hf.heights.shape
+    i = np.round((hf.x0 + np.arange(nx) * hf.resolution - regions.x0) / regions.cell).astype(int)
+    j = np.round((hf.y0 + np.arange(ny) * hf.resolution - regions.y0) / regions.cell).astype(int)
+    my, mx = regions.standable.shape
+    inside = ((j >= 0) & (j < my))[:, None] & ((i >= 0) & (i < mx))[None, :]
+    centres = regions.standable[np.clip(j, 0, my - 1)][:, np.clip(i, 0, mx - 1)] & inside
+    feet = centres  # (4 cm cells where the robot's centre can stand, on the 1 cm grid)
     diff = np.abs(rasterised(terrain.vertices, terrain.faces, hf) - hf.heights)[feet]
     assert np.nanmax(diff) <= terrain.max_error + 1e-9
     assert terrain.max_error <= 2.5 * SIM_MAX_TOLERANCE

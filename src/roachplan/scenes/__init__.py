@@ -44,7 +44,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "crop_mesh": "._sim_terrain",
         "sim_terrain": "._sim_terrain",
         "simplified_heightfield_mesh": "._sim_terrain",
-        "standable_grid": "._sim_terrain",
+        "level_ground": "._sim_terrain",
         "OnCapture": "._world",
         "World": "._world",
         "Terrain": "._world",
@@ -97,9 +97,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._sim_terrain import SIM_MAX_TRIANGLES as SIM_MAX_TRIANGLES
     from ._sim_terrain import SimTerrain as SimTerrain
     from ._sim_terrain import crop_mesh as crop_mesh
+    from ._sim_terrain import level_ground as level_ground
     from ._sim_terrain import sim_terrain as sim_terrain
     from ._sim_terrain import simplified_heightfield_mesh as simplified_heightfield_mesh
-    from ._sim_terrain import standable_grid as standable_grid
     from ._world import OnCapture as OnCapture
     from ._world import Terrain as Terrain
     from ._world import World as World

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-from scipy import ndimage
 
 from roachplan.planning import HeightField
 
@@ -63,7 +62,7 @@ class SimTerrain:
     """How many triangles the world's mesh has."""
     max_error: float
     """Largest height difference from the planner's height field at its grid points where the
-    robot's feet may touch [m], for kind "heightfield" (0 otherwise: the engine then has the
+    ground is level enough to stand on (level_ground) [m], for kind "heightfield" (0 otherwise: the engine then has the
     very mesh the field came from)."""
 
     def note(self) -> str:
@@ -78,7 +77,7 @@ class SimTerrain:
         return (
             f"the simulator's terrain: the planner's height field as {len(self.faces):,} "
             f"triangles (the mesh has {self.source_triangles:,}), flat pieces merged; where the "
-            f"robot can stand, heights within {self.max_error * 1000:.1f} mm of the planner's"
+            f"ground is level enough to stand on, heights within {self.max_error * 1000:.1f} mm of the planner's"
         )
 
 
@@ -88,7 +87,7 @@ def sim_terrain(
     heightfield: HeightField,
     bounds: tuple[tuple[float, float], tuple[float, float]],
     *,
-    standable: np.ndarray | None = None,
+    ground: np.ndarray | None = None,
     max_mesh_triangles: int = SIM_MAX_MESH_TRIANGLES,
     max_triangles: int = SIM_MAX_TRIANGLES,
 ) -> SimTerrain:
@@ -96,8 +95,8 @@ def sim_terrain(
     faces (F, 3)), whose planner stands the robot on heightfield, within bounds ((xmin, ymin),
     (xmax, ymax)) [m]: the mesh as it is when it has at most max_mesh_triangles, else its
     triangles within SIM_CROP_MARGIN of bounds when those are few enough, else the height field
-    as at most max_triangles triangles (simplified_heightfield_mesh; standable: where the feet
-    may touch, (ny, nx) bool on its grid)."""
+    as at most max_triangles triangles (simplified_heightfield_mesh; ground: where the feet
+    may go, (ny, nx) bool on its grid, level_ground)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     n = len(faces)
@@ -106,9 +105,7 @@ def sim_terrain(
     cropped = crop_mesh(vertices, faces, bounds, SIM_CROP_MARGIN)
     if len(cropped[1]) <= max_mesh_triangles:
         return SimTerrain(*cropped, "cropped", n, 0.0)
-    v, f, err = simplified_heightfield_mesh(
-        heightfield, standable=standable, max_triangles=max_triangles
-    )
+    v, f, err = simplified_heightfield_mesh(heightfield, ground=ground, max_triangles=max_triangles)
     return SimTerrain(v, f, "heightfield", n, err)
 
 
@@ -136,7 +133,7 @@ def crop_mesh(
 def simplified_heightfield_mesh(
     hf: HeightField,
     *,
-    standable: np.ndarray | None = None,
+    ground: np.ndarray | None = None,
     max_triangles: int = SIM_MAX_TRIANGLES,
     min_tolerance: float = SIM_MIN_TOLERANCE,
     max_tolerance: float = SIM_MAX_TOLERANCE,
@@ -144,12 +141,12 @@ def simplified_heightfield_mesh(
     """(vertices (V, 3) [m], faces (F, 3), largest height error [m]): the height field's grid
     points joined into triangles, two per square block of cells, the blocks as large as keeps
     every grid point inside within the tolerance of the two triangles (a quadtree, blocks of
-    1 to 2^MAX_BLOCK_LEVEL cells a side). Where the robot may stand or put a foot (standable:
-    (ny, nx) bool on the field's grid; None: everywhere) a grid point's tolerance is
+    1 to 2^MAX_BLOCK_LEVEL cells a side). Where the robot may stand or put a foot (ground:
+    (ny, nx) bool on the field's grid, level_ground; None: everywhere) a grid point's tolerance is
     NOISE_TOLERANCE times its height noise (the sensor's), clipped to [min_tolerance,
     max_tolerance] [m]; elsewhere (walls, steep ground) OFF_GROUND_TOLERANCE. All tolerances
     are raised together while the triangles are more than max_triangles. Cells with a corner
-    off the surface (NaN) are left out. The error returned is the largest over the standable
+    off the surface (NaN) are left out. The error returned is the largest over the ground's
     grid points: each is within it of the triangles above it.
 
     Neighbouring blocks of different sizes meet at T-junctions, so the surface may step by up
@@ -158,7 +155,7 @@ def simplified_heightfield_mesh(
     """
     h = np.asarray(hf.heights, dtype=np.float64)
     noise = np.zeros_like(h) if hf.noise is None else np.nan_to_num(hf.noise)
-    ground = np.ones(h.shape, dtype=bool) if standable is None else np.asarray(standable)
+    ground = np.ones(h.shape, dtype=bool) if ground is None else np.asarray(ground)
     tolerance = np.where(
         ground, np.clip(NOISE_TOLERANCE * noise, min_tolerance, max_tolerance), OFF_GROUND_TOLERANCE
     )
@@ -172,20 +169,21 @@ def simplified_heightfield_mesh(
     return (*_blocks_mesh(hf, blocks), error)
 
 
-def standable_grid(hf: HeightField, regions, reach: float) -> np.ndarray:
-    """(ny, nx) bool on hf's grid: the points within reach [m] of a cell of regions (a
-    StandableMap: where the robot's centre can stand) that is standable, so the places its
-    feet may touch."""
-    ny, nx = hf.heights.shape
-    x = hf.x0 + np.arange(nx) * hf.resolution
-    y = hf.y0 + np.arange(ny) * hf.resolution
-    i = np.round((x - regions.x0) / regions.cell).astype(np.int64)
-    j = np.round((y - regions.y0) / regions.cell).astype(np.int64)
-    my, mx = regions.standable.shape
-    inside = ((j >= 0) & (j < my))[:, None] & ((i >= 0) & (i < mx))[None, :]
-    centre = regions.standable[np.clip(j, 0, my - 1)][:, np.clip(i, 0, mx - 1)] & inside
-    steps = max(int(np.ceil(reach / hf.resolution)), 1)
-    return ndimage.binary_dilation(centre, iterations=steps)
+def level_ground(hf: HeightField, max_slope_deg: float, span: float = 0.04) -> np.ndarray:
+    """(ny, nx) bool on hf's grid: the points where the surface is level enough to stand on,
+    its slope over span [m] (wider than a capture's noise: 3 mm over 1 cm is 17 deg) at most
+    max_slope_deg [deg] in x and in y; False off the surface. Where the feet of a robot that
+    stands go: the walls, a bridge's sides and steep ground are what it only bumps into."""
+    h = hf.heights
+    k = max(int(round(span / hf.resolution / 2)), 1)
+    limit = np.tan(np.radians(max_slope_deg)) * 2 * k * hf.resolution
+    level = np.isfinite(h)
+    with np.errstate(invalid="ignore"):
+        dx = np.abs(h[:, 2 * k :] - h[:, : -2 * k]) <= limit
+        dy = np.abs(h[2 * k :, :] - h[: -2 * k, :]) <= limit
+    level[:, k:-k] &= dx
+    level[k:-k, :] &= dy
+    return level
 
 
 def _block_errors(
@@ -240,7 +238,7 @@ def _quadtree_blocks(
     levels: list[tuple[np.ndarray, np.ndarray]], scale: float
 ) -> tuple[np.ndarray, float]:
     """((B, 3) int blocks (row j, column i, side s in cells), the largest |height - triangles|
-    over their standable points [m]): tiling every cell whose four corners are on the surface, each the largest
+    over their ground points [m]): tiling every cell whose four corners are on the surface, each the largest
     aligned block whose points are within scale x their tolerance (_block_errors' levels),
     unless a larger block holding it is."""
     top = len(levels) - 1

@@ -32,7 +32,7 @@ from ._errors import SceneError
 from ._mesh import clean_terrain_mesh, read_mesh, scaled_mesh
 from ._openscad import render_scad_result
 from ._scene import Scene, TerrainObject
-from ._sim_terrain import SIM_MAX_MESH_TRIANGLES, SimTerrain, sim_terrain, standable_grid
+from ._sim_terrain import SIM_MAX_MESH_TRIANGLES, SimTerrain, level_ground, sim_terrain
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
@@ -165,12 +165,11 @@ class World:
 
 def sim_terrain_of(world: World) -> SimTerrain:
     """The terrain the physics engine is given for world (World.sim_terrain)."""
-    # Only a large mesh needs where the feet go (the regions take a second on a capture).
-    large = len(world.mesh.faces) > SIM_MAX_MESH_TRIANGLES
-    reach = world.footprint.leg_reach + float(np.hypot(*world.robot.foot_points_xy.T).max())
-    feet = standable_grid(world.heightfield, world.regions, reach) if large else None
-    m = world.mesh
-    return sim_terrain(m.vertices, m.faces, world.heightfield, world.bounds, standable=feet)
+    hf, m = world.heightfield, world.mesh
+    slope = world.scene.planner.validity.max_slope_deg
+    # (only a large mesh becomes the height field's triangles, for which the ground matters)
+    ground = level_ground(hf, slope) if len(m.faces) > SIM_MAX_MESH_TRIANGLES else None
+    return sim_terrain(m.vertices, m.faces, hf, world.bounds, ground=ground)
 
 
 def footprint_of(robot: RobotConfig) -> Footprint:
