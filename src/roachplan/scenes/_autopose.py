@@ -4,21 +4,27 @@ model).
 A model on a ground plane is something to cross: the planning area reaches past it onto the
 ground on every side, and start and goal stand on the ground at either end of its long axis,
 so a plan crosses it where the robot can, or goes round it. Otherwise (a capture, whose floor
-is the ground; a model too large to go round) they go inside the largest connected region
-where the robot can stand, as far apart as that region allows up to a cap (a trial's drive
-time grows with the distance). Either way each is valid and a plan joins them (a region
-4-connected at 4 cm can still hold a neck the robot cannot turn through).
+is the ground; a model too large to go round) they go inside the largest region where the
+robot can stand and move about (its places and headings joined by steps and turns, on the
+4 cm standable map), as far apart as that region allows up to a cap (a trial's drive time
+grows with the distance): at the ends of its longest walk, then, as long as a plan does not
+join them, at the ends of shorter stretches of it, within a few seconds' planning in all.
+Either way each is valid and a plan joins them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections import deque
+import time
 from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import ConvexHull, QhullError
 
 from roachplan.planning import VALID, PlanningError, check_states, plan_path, standable_map
 
@@ -29,6 +35,19 @@ MIN_AUTO_DISTANCE = 1.0
 """Start and goal are at least this far apart where the region is that large [m]."""
 MAX_AUTO_EXTENT = 10.0
 """Largest side of the planning area chosen automatically [m] (the height field is 1 cm)."""
+PICK_BUDGET = 8.0
+"""Planning time a pick spends trying pairs, all its tries together [s]."""
+PICK_MILESTONES = 400
+"""A roadmap planner's (PRM's) milestones in one try of a pair [-]: the try's result then
+does not hang on the machine's speed (its time limit is a safety net)."""
+CORRIDOR_SLACK = 1.3
+"""A try's planner samples round the walks between the pair at most this many times the
+shortest [-]..."""
+CORRIDOR_CELLS = 8
+"""...plus this many cells (32 cm) [-]."""
+_ROADMAPS = ("prm", "prmstar")
+"""Planners whose iteration budget counts milestones (planning/_ompl.py grows their roadmap
+in fixed batches)."""
 GROUND_APRON = 0.5
 """On a terrain with a ground plane, the planning area reaches this far past the model on
 every side [m]: room to start and stop on the ground and to go round it."""
@@ -70,80 +89,154 @@ def auto_bounds(mesh_bounds: np.ndarray, *, ground: bool):
     return ((float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))), note
 
 
-def pick_start_goal(world, *, seed: int = 0, tries: int = 4) -> AutoPoses:
+def pick_start_goal(world, *, seed: int = 0, budget: float = PICK_BUDGET) -> AutoPoses:
     """Start and goal on the world's terrain (see the module docstring); PlanningError saying
-    why when there is nowhere to stand or no two places a plan joins."""
+    why when there is nowhere to stand or no two places a plan joins, and how far apart two
+    places of the region are at most. budget: planning time of all the tries together [s]."""
     across = across_the_model(world, seed=seed)
     if across is not None:
         return across
     sc, hf, fp = world.scene, world.heightfield, world.footprint
-    vcfg = sc.planner.validity
     bounds = sc.bounds
     (xa, ya), (xb, yb) = bounds
-    sm = standable_map(hf, fp, vcfg, bounds, ((xa + xb) / 2, (ya + yb) / 2))
-    region = _largest_region(sm.standable)
+    sm = standable_map(hf, fp, sc.planner.validity, bounds, ((xa + xb) / 2, (ya + yb) / 2))
+    region = _largest_region(sm.yaw_valid, along_heading=sc.planner.turning_radius is not None)
     area = float(region.sum()) * sm.cell**2
-    region = _inside(region)
-    cells = np.argwhere(region)  # (K, 2) rows j, i
-    centroid = cells.mean(axis=0)
-    first = tuple(cells[np.argmin(np.sum((cells - centroid) ** 2, axis=1))])
-    a = _farthest(region, first)[0]
-    _, dist = _farthest(region, a)
-    cap = MAX_AUTO_DISTANCE / sm.cell
-    xy = lambda c: np.array([sm.x0 + c[1] * sm.cell, sm.y0 + c[0] * sm.cell])  # noqa: E731
-    pa = xy(a)
-    reach = np.where(np.isfinite(dist), dist, -1.0)
-    failures = []
-    for attempt in range(tries):
-        limit = cap * (0.7**attempt)
-        ok = (reach >= 0) & (reach <= limit)
-        centres = np.column_stack(
-            [sm.x0 + np.nonzero(ok)[1] * sm.cell, sm.y0 + np.nonzero(ok)[0] * sm.cell]
-        )
-        if len(centres) < 2:
+    walks = _Geodesic(region)
+    spine = _Geodesic(_core(region, sm.yaw_valid)).spine(MAX_AUTO_DISTANCE / sm.cell)
+    xy = lambda c: np.array([sm.x0, sm.y0]) + np.asarray(c)[::-1] * sm.cell  # noqa: E731
+    ends = spine.cells[spine.path[[0, -1]]]
+    extent = float(np.linalg.norm(xy(ends[1]) - xy(ends[0])))
+    planner = _quick(sc.planner)
+    failures: list[tuple[float, str]] = []
+    deadline = time.perf_counter() + budget
+    for ca, cb in _candidates(spine, MAX_AUTO_DISTANCE / sm.cell):
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0.0:
             break
-        pb = centres[np.argmax(np.linalg.norm(centres - pa, axis=1))]
+        pa, pb = xy(ca), xy(cb)
+        d = float(np.linalg.norm(pb - pa))
         heading = float(np.arctan2(pb[1] - pa[1], pb[0] - pa[0]))
-        start = _valid_pose(world, pa, heading)
-        goal = _valid_pose(world, pb, heading)
+        start, goal = _valid_pose(world, pa, heading), _valid_pose(world, pb, heading)
         if start is None or goal is None:
-            failures.append("no valid heading at a picked place")
+            failures.append((d, "no valid heading at a picked place"))
             continue
-        planner = _quick(sc.planner)
+        # A try may spend what is left, but only half of it while a shorter pair could follow.
+        cfg = dataclasses.replace(
+            planner,
+            time_limit=min(planner.time_limit, max(remaining / 2, min(remaining, 1.0))),
+            max_iterations=(
+                min(planner.max_iterations, PICK_MILESTONES)
+                if planner.name in _ROADMAPS
+                else planner.max_iterations
+            ),
+        )
+        # The planner samples round the walk between them (a path it finds there is a path
+        # of the scene's plan; over a whole room its roadmap takes many times longer).
+        regions = dataclasses.replace(sm, reachable=walks.corridor(ca, cb))
         try:
-            result = plan_path(hf, fp, start, goal, bounds=bounds, cfg=planner, seed=seed)
+            result = plan_path(
+                hf, fp, start, goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions
+            )
         except PlanningError as exc:
-            failures.append(str(exc))
+            failures.append((d, str(exc)))
             continue
         if result.found:
-            d = float(np.linalg.norm(pb - pa))
             note = (
                 f"start and goal picked automatically {d:.2f} m apart in the largest "
-                f"region the robot can stand in ({area:.1f} m^2)"
+                f"region the robot can stand and move in ({area:.1f} m^2)"
             )
-            if d < MIN_AUTO_DISTANCE:
+            if failures:
+                note += f"; the planner joined no pair further apart ({_said(failures)})"
+            elif d < MIN_AUTO_DISTANCE:
                 note += f"; it allows no more than {d:.2f} m"
             return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
-        failures.append(_why_not(result, float(np.linalg.norm(pb - pa))))
-    distinct = list(dict.fromkeys(failures))  # the same reason twice is said once
+        failures.append((d, result.message))
+    why = _said(failures) if failures else "the region is a single place"
+    if failures and planner.name in _ROADMAPS:
+        why += f" (each try at most {PICK_MILESTONES} milestones; {budget:g} s for all)"
+    elif failures:
+        why += f" ({budget:g} s for all the tries)"
     raise PlanningError(
-        f"could not pick a start and goal the planner joins in the largest standable region "
-        f"({area:.2f} m^2): {'; '.join(distinct[-2:]) or 'the region is a single place'}; "
-        f"give start and goal"
+        f"could not pick a start and goal the planner joins in the largest region the robot "
+        f"can stand and move in ({area:.2f} m^2; two places in it at most {extent:.2f} m "
+        f"apart): {why}; give start and goal"
     )
 
 
-def _largest_region(standable: np.ndarray) -> np.ndarray:
-    """(ny, nx) bool: the largest 4-connected region of standable ((ny, nx) bool);
-    PlanningError when there is none."""
-    labels, n = cast("tuple[np.ndarray, int]", ndimage.label(standable))
-    if n == 0:
+def _said(failures: list[tuple[float, str]]) -> str:
+    """The planner's reasons for not joining pairs ((distance [m], reason) each), each reason
+    once, after the distances it was given for."""
+    by_reason: dict[str, list[float]] = {}
+    for d, why in failures:
+        by_reason.setdefault(why, []).append(d)
+    return "; ".join(
+        f"{', '.join(f'{d:.2f}' for d in ds)} m apart: {why}" for why, ds in by_reason.items()
+    )
+
+
+def _largest_region(yaw_valid: np.ndarray, *, along_heading: bool) -> np.ndarray:
+    """(ny, nx) bool: the cells of the largest region the robot can stand *and* move about in,
+    from yaw_valid ((ny, nx, n_yaw) bool: valid at a cell's centre at yaw k * 2 pi / n_yaw).
+    Two valid (cell, yaw) are joined by a step: the same yaw in the next cell along that
+    heading, forward or back (along_heading: a drivable plan's robot walks where it faces), or
+    in any 4-neighbouring cell (a raw plan's states move any way); or by a turn on the spot:
+    neighbouring yaws in one cell, the last next to the first. Cells where the robot stands at
+    some yaw, 4-connected, can still be several such regions (a neck it cannot turn in, a
+    strip it stands across but cannot walk along). PlanningError when it stands nowhere."""
+    if not yaw_valid.any():
         raise PlanningError(
             "the robot can stand nowhere on this terrain (no place is flat, wide and clear "
             "enough for its six feet): check the ground found, or give start and goal"
         )
-    sizes = ndimage.sum(np.ones_like(labels), labels, index=np.arange(1, n + 1))
-    return labels == (1 + int(np.argmax(sizes)))
+    ny, nx, n_yaw = yaw_valid.shape
+    j, i, k = np.nonzero(yaw_valid)
+    node = np.full(yaw_valid.shape, -1)
+    node[j, i, k] = np.arange(len(j))
+    rows, cols = [], []
+    for yaw in range(n_yaw):
+        valid, here = yaw_valid[..., yaw], node[..., yaw]
+        if along_heading:
+            angle = yaw * 2 * np.pi / n_yaw
+            step = (round(math.sin(angle)), round(math.cos(angle)))  # (dj, di)
+            steps = [step if step > (0, 0) else (-step[0], -step[1])]  # forward or back alike
+        else:
+            steps = [(0, 1), (1, 0)]
+        for dj, di in steps:
+            a, b = _pairs_of_cells(dj, di, (ny, nx))
+            ok = valid[a] & valid[b]
+            rows.append(here[a][ok])
+            cols.append(here[b][ok])
+        turn = valid & yaw_valid[..., (yaw + 1) % n_yaw]
+        rows.append(here[turn])
+        cols.append(node[..., (yaw + 1) % n_yaw][turn])
+    edges = (np.concatenate(rows), np.concatenate(cols))
+    graph = coo_matrix((np.ones(len(edges[0])), edges), shape=(len(j), len(j)))
+    _, component = connected_components(graph, directed=False)
+    # A region's size: the cells where it holds at least one heading.
+    held = np.unique(np.column_stack([component, j * nx + i]), axis=0)[:, 0]
+    largest = component == int(np.argmax(np.bincount(held)))
+    region = np.zeros((ny, nx), dtype=bool)
+    region[j[largest], i[largest]] = True
+    return region
+
+
+def _pairs_of_cells(dj: int, di: int, shape: tuple[int, int]) -> tuple[tuple, tuple]:
+    """Index expressions (a, b) into a (ny, nx) grid: a selects the cells that have a
+    neighbour at (dj, di) (dj >= 0), b those neighbours, in the same order."""
+    ny, nx = shape
+    a = (slice(0, ny - dj), slice(max(0, -di), nx - max(0, di)))
+    b = (slice(dj, ny), slice(max(0, di), nx - max(0, -di)))
+    return a, b
+
+
+def _core(region: np.ndarray, yaw_valid: np.ndarray) -> np.ndarray:
+    """Where in the region ((ny, nx) bool) to put start and goal: where the robot stands at
+    every tried heading (yaw_valid: (ny, nx, n_yaw) bool) when that is at least a quarter of
+    it (a capture's far floor, its noise spikes and dropouts, hold some headings only, and a
+    roadmap grows slowly there), away from the edge (_inside)."""
+    clean = region & yaw_valid.all(axis=-1)
+    return _inside(clean if clean.sum() >= 0.25 * region.sum() else region)
 
 
 def _inside(region: np.ndarray) -> np.ndarray:
@@ -162,9 +255,106 @@ def _inside(region: np.ndarray) -> np.ndarray:
     return region
 
 
-def _why_not(result, distance: float) -> str:
-    """The planner's own reason for not joining two places `distance` [m] apart."""
-    return f"{distance:.2f} m apart: {result.message}"
+@dataclass(frozen=True, eq=False)
+class _Spine:
+    """A longest walk through a region, as far as a pick is concerned: cells[path] from one
+    end to the other, each step to an 8-neighbour."""
+
+    cells: np.ndarray
+    """(K, 2) the region's cells, j, i."""
+    path: np.ndarray
+    """(L,) indices into cells, from one end to the other."""
+    length: np.ndarray
+    """(L,) distance walked along the path from its first cell [cells]."""
+
+
+class _Geodesic:
+    """Distances walked within a mask ((ny, nx) bool, 8-connected) [cells] (scipy's Dijkstra
+    over the grid's graph)."""
+
+    def __init__(self, mask: np.ndarray) -> None:
+        self.mask = mask
+        self.cells = np.argwhere(mask)  # (K, 2) j, i
+        self.index = np.full(mask.shape, -1)
+        self.index[mask] = np.arange(len(self.cells))
+        ny, nx = mask.shape
+        rows, cols, weights = [], [], []
+        for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            a, b = _pairs_of_cells(dj, di, (ny, nx))
+            ok = mask[a] & mask[b]
+            rows.append(self.index[a][ok])
+            cols.append(self.index[b][ok])
+            weights.append(np.full(int(ok.sum()), math.hypot(dj, di)))
+        k = len(self.cells)
+        edges = (np.concatenate(rows), np.concatenate(cols))
+        self.graph = coo_matrix((np.concatenate(weights), edges), shape=(k, k)).tocsr()
+
+    def spine(self, cap: float) -> _Spine:
+        """The two cells of the mask farthest apart in a straight line, at most cap [cells]
+        (on a room's floor, opposite corners or the cap; along a strip, its ends), the pair
+        with the clearer straight line between them among those within a cell of that; and
+        the walk between them."""
+        cells = self.cells
+        best, best_key = (0, 0), (-1, -1.0)
+        for a in _outermost(cells):
+            straight = np.linalg.norm(cells - cells[a], axis=1)
+            b = int(np.argmax(np.where(straight <= cap, straight, -1.0)))
+            key = (round(float(straight[b])), self.in_sight(cells[a], cells[b]))
+            if key > best_key:
+                best, best_key = (a, b), key
+        a, b = best
+        walked, previous = dijkstra(self.graph, directed=False, indices=a, return_predecessors=True)
+        path = [b]
+        while path[-1] != a:
+            path.append(int(previous[path[-1]]))
+        path = np.array(path[::-1])
+        return _Spine(cells=cells, path=path, length=walked[path])
+
+    def in_sight(self, a: np.ndarray, b: np.ndarray) -> float:
+        """The fraction of the straight line from cell a to cell b ((2,) j, i) in the mask."""
+        n = int(np.ceil(np.hypot(*(b - a)))) + 1
+        on = np.rint(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)).astype(int)
+        return float(self.mask[on[:, 0], on[:, 1]].mean())
+
+    def corridor(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(ny, nx) bool: the cells of the mask on a walk from cell a to cell b ((2,) j, i,
+        both in the mask) at most CORRIDOR_SLACK times the shortest, plus CORRIDOR_WIDTH."""
+        ka, kb = self.index[tuple(a)], self.index[tuple(b)]
+        walked = dijkstra(self.graph, directed=False, indices=[ka, kb])
+        keep = walked.sum(axis=0) <= CORRIDOR_SLACK * walked[0, kb] + CORRIDOR_CELLS
+        out = np.zeros_like(self.mask)
+        out[tuple(self.cells[keep].T)] = True
+        return out
+
+
+def _outermost(cells: np.ndarray) -> np.ndarray:
+    """Indices of the cells ((K, 2) j, i) on their convex hull (where the two farthest apart
+    are), or of the outermost along 16 directions when the hull is flat (a one-cell strip)."""
+    try:
+        return np.sort(ConvexHull(cells).vertices)
+    except QhullError:
+        angles = np.arange(16) * np.pi / 8
+        return np.unique(np.argmax(cells @ np.stack([np.sin(angles), np.cos(angles)]), axis=0))
+
+
+def _candidates(spine: _Spine, cap: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Pairs of cells ((2,) j, i each) to try, longest first, at most cap [cells] apart: the
+    spine's ends, then stretches of it 0.6, 0.35 and 0.2 as long (each try that fails halves
+    the distance, about), at its middle and at either end (the planner may fail in one part
+    of the region and not in another)."""
+    total = float(spine.length[-1])
+    pairs: dict[tuple[int, int], float] = {}
+    for fraction in (1.0, 0.6, 0.35, 0.2):
+        span = fraction * total
+        for lo in ((total - span) / 2, 0.0, total - span):
+            ka = int(np.searchsorted(spine.length, lo - 1e-9))
+            kb = min(int(np.searchsorted(spine.length, lo + span - 1e-9)), len(spine.path) - 1)
+            pair = (int(spine.path[ka]), int(spine.path[kb]))
+            apart = float(np.linalg.norm(spine.cells[pair[0]] - spine.cells[pair[1]]))
+            if pair[0] != pair[1] and apart <= cap:
+                pairs.setdefault(pair, apart)
+    order = sorted(pairs, key=lambda p: -pairs[p])  # stable: the middle first among equals
+    return [(spine.cells[a], spine.cells[b]) for a, b in order]
 
 
 def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
@@ -211,15 +401,11 @@ def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
             return None
         ends.append(pose)
     start, goal = ends
-    result = plan_path(
-        world.heightfield,
-        world.footprint,
-        start,
-        goal,
-        bounds=sc.bounds,
-        cfg=_quick(sc.planner),
-        seed=seed,
-    )
+    hf, fp = world.heightfield, world.footprint
+    # The standable map is made here, not inside the plan's short time limit.
+    regions = standable_map(hf, fp, sc.planner.validity, sc.bounds, start[:2])
+    cfg = _quick(sc.planner)
+    result = plan_path(hf, fp, start, goal, bounds=sc.bounds, cfg=cfg, seed=seed, regions=regions)
     if not result.found:
         return None
     d = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
@@ -232,8 +418,6 @@ def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
 
 def _quick(cfg):
     """The scene's planner with a short budget: the check only asks whether a path exists."""
-    import dataclasses
-
     return dataclasses.replace(cfg, time_limit=min(cfg.time_limit, 5.0))
 
 
@@ -260,23 +444,3 @@ def _valid_pose(
     if not len(ok):
         return None
     return (x, y, float(yaws[ok[0]]) + 0.0)
-
-
-def _farthest(mask: np.ndarray, source: tuple[int, int]) -> tuple[tuple[int, int], np.ndarray]:
-    """Breadth-first (4-connected) distances [cells] within mask ((ny, nx) bool) from source
-    (j, i): (the farthest cell, (ny, nx) distances, inf outside the source's component)."""
-    dist = np.full(mask.shape, np.inf)
-    dist[source] = 0.0
-    queue = deque([source])
-    far = source
-    ny, nx = mask.shape
-    while queue:
-        j, i = queue.popleft()
-        d = dist[j, i] + 1
-        for dj, di in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            a, b = j + dj, i + di
-            if 0 <= a < ny and 0 <= b < nx and mask[a, b] and dist[a, b] == np.inf:
-                dist[a, b] = d
-                queue.append((a, b))
-                far = (a, b)
-    return far, dist

@@ -1,0 +1,211 @@
+"""Start and goal picked on a terrain nobody placed them on (scenes/_autopose.py, issue 30):
+in the largest region where the robot can stand *and* move, as far apart as it allows, joined
+by a plan, within seconds; and where nothing can be joined, a message that says why and how
+far apart two places of the region are."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from conftest import roachplan
+from roachplan.planning import HeightField, PlanResult, check_states, plan_path, standable_map
+from roachplan.scenes import World, load_scene
+from roachplan.scenes import _autopose as autopose
+from roachplan.scenes._autopose import MIN_AUTO_DISTANCE, _largest_region, pick_start_goal
+
+
+def capture_like_floor(
+    size: tuple[float, float] = (8.0, 6.0), *, seed: int = 0, crate: bool = True
+) -> World:
+    """A world like a depth capture of a room's floor, made straight as a height field (no
+    meshing: a second to make): heights with 1.5 mm of sensor noise, 3 cm dropouts (no
+    surface), ten times as many on the far floor (y > a quarter of the depth) as near the
+    camera (about 97 % and 70 % of random poses valid there, as on the library's captures),
+    a crate 1 m x 0.6 m in the middle; no ground plane, start and goal left to pick."""
+    rng = np.random.default_rng(seed)
+    res, margin = 0.01, 0.15
+    width, depth = size
+    x0, y0 = -width / 2 - margin, -depth / 2 - margin
+    nx = round((width + 2 * margin) / res) + 1
+    ny = round((depth + 2 * margin) / res) + 1
+    xs, ys = x0 + np.arange(nx) * res, y0 + np.arange(ny) * res
+    z = rng.normal(0.0, 0.0015, (ny, nx))
+    rate = np.where(ys[:, None] > depth / 4, 0.004, 0.0003)
+    speck = rng.random((ny, nx)) < rate
+    dropout = np.zeros_like(speck)
+    for dj in range(3):
+        for di in range(3):
+            dropout |= np.roll(np.roll(speck, dj, axis=0), di, axis=1)
+    z[dropout] = np.nan
+    if crate:
+        z[np.ix_(np.abs(ys) < 0.3, np.abs(xs) < 0.5)] = 0.3
+    hf = HeightField(x0=x0, y0=y0, resolution=res, heights=z, noise=np.full_like(z, 0.0015))
+    flat = load_scene("flat")
+    scene = dataclasses.replace(
+        flat,
+        terrain=(),
+        ground=None,
+        start=None,
+        goal=None,
+        bounds=((-width / 2, -depth / 2), (width / 2, depth / 2)),
+        seed=seed,
+    )
+    return World(scene=scene, mesh=trimesh.Trimesh(), heightfield=hf, robot=scene.robot)
+
+
+def with_poses(world: World, start, goal) -> World:
+    return dataclasses.replace(
+        world, scene=dataclasses.replace(world.scene, start=start, goal=goal)
+    )
+
+
+def test_the_standable_map_checks_every_cell_it_could_stand_on():
+    """Cells with no surface under the body's centre are skipped: the map is the same as
+    checking every cell at every yaw."""
+    w = capture_like_floor((2.0, 1.6), crate=False)
+    hf, fp, cfg = w.heightfield, w.footprint, w.scene.planner.validity
+    sm = standable_map(hf, fp, cfg, w.bounds, (0.0, 0.0))
+    (xa, ya), (xb, yb) = w.bounds
+    gx, gy = np.meshgrid(np.arange(xa, xb + 1e-9, sm.cell), np.arange(ya, yb + 1e-9, sm.cell))
+    yaws = np.arange(8) * np.pi / 4
+    states = np.column_stack(
+        [np.repeat(gx.ravel(), 8), np.repeat(gy.ravel(), 8), np.tile(yaws, gx.size)]
+    )
+    every = check_states(hf, fp, cfg, states).valid.reshape(*gx.shape, 8)
+    assert (sm.yaw_valid == every).all()
+    assert (sm.standable == every.any(axis=-1)).all()
+    assert 0 < sm.standable.mean() < 1  # dropouts made some cells unstandable
+
+
+def _l_shape(corner_yaws) -> np.ndarray:
+    """(20, 20, 8) valid yaws: an arm along x (row 2) the robot stands on facing along it (0
+    and 180 deg), an arm along y (column 2) likewise (90 and 270 deg), meeting at a corner
+    cell valid at corner_yaws (indices of 45 deg steps)."""
+    valid = np.zeros((20, 20, 8), dtype=bool)
+    valid[2, 2:15, [0, 4]] = True
+    valid[2:15, 2, [2, 6]] = True
+    valid[2, 2, :] = False
+    valid[2, 2, corner_yaws] = True
+    return valid
+
+
+@pytest.mark.parametrize("along_heading", [True, False])
+def test_the_region_is_where_the_robot_can_move_not_only_stand(along_heading):
+    """A corner joins the two arms only where the robot can turn on it (every heading between,
+    the last heading next to the first); a strip the robot stands across but not along joins
+    nothing for a robot that walks where it faces."""
+    assert _largest_region(_l_shape(list(range(8))), along_heading=along_heading).sum() == 25
+    assert _largest_region(_l_shape([0, 2]), along_heading=along_heading).sum() == 13
+    assert _largest_region(_l_shape([6, 7, 0]), along_heading=along_heading).sum() == 25
+    across = np.zeros((5, 30, 8), dtype=bool)
+    across[2, :, 2] = True  # a strip along x, the robot valid on it only facing +y
+    assert _largest_region(across, along_heading=along_heading).sum() == (
+        1 if along_heading else 30
+    )
+
+
+def test_a_large_capture_like_floor_gets_start_and_goal_far_apart_that_a_plan_joins():
+    """An 8 m x 6 m floor with a capture's noise and dropouts (the picker's plans used to
+    spend their 5 s remaking the standable map of the whole area, and sample all of it: "no
+    path within its time limit" at 1.2 m, then 1.0 m): start and goal up to the 4 m cap apart,
+    and the scene's own plan joins them."""
+    w = capture_like_floor()
+    picked = pick_start_goal(w, seed=w.scene.seed)
+    assert picked.distance >= 3.5, picked.note
+    assert picked.distance <= autopose.MAX_AUTO_DISTANCE + 1e-9
+    assert "picked automatically" in picked.note
+    w = with_poses(w, picked.start, picked.goal)
+    plan = plan_path(
+        w.heightfield,
+        w.footprint,
+        w.start,
+        w.goal,
+        bounds=w.bounds,
+        cfg=w.scene.planner,
+        seed=w.scene.seed,
+        regions=w.regions,
+    )
+    assert plan.found, plan.message
+
+
+def test_the_pick_is_the_same_every_time():
+    """Workers rebuild the world and pick again: they must get the same start and goal."""
+    w = capture_like_floor((4.0, 3.0), seed=2)
+    a, b = pick_start_goal(w, seed=2), pick_start_goal(w, seed=2)
+    assert (a.start, a.goal) == (b.start, b.goal)
+    assert a.distance >= 2.0
+
+
+def _not_joined(why: str):
+    def plan(hf, fp, start, goal, *, bounds, cfg, seed, regions=None, **_):
+        return PlanResult(
+            found=False,
+            planner=cfg.name,
+            seed=seed,
+            states=np.zeros((0, 3)),
+            path_xyz=np.zeros((0, 3)),
+            plan_time=0.0,
+            message=why,
+        )
+
+    return plan
+
+
+def test_no_joinable_pair_says_why_and_how_far_apart_places_are(monkeypatch):
+    w = capture_like_floor((3.0, 2.0), crate=False)
+    monkeypatch.setattr(autopose, "plan_path", _not_joined("prm found no path, as a test"))
+    with pytest.raises(autopose.PlanningError) as err:
+        pick_start_goal(w, seed=0)
+    text = str(err.value)
+    assert "could not pick a start and goal the planner joins" in text
+    assert "prm found no path, as a test" in text
+    assert "give start and goal" in text
+    # How far apart places of the region are: the floor's diagonal at most, less its rim.
+    extent = float(text.split("at most ")[1].split(" m", maxsplit=1)[0])
+    assert 2.5 < extent <= math.hypot(3.0, 2.0)
+    # The pairs tried, longest first, and shorter ones after it.
+    tried = text.split("): ")[1].split(" m apart", maxsplit=1)[0]
+    tried = [float(d) for d in tried.split(", ")]
+    assert tried == sorted(tried, reverse=True)
+    assert tried[0] == pytest.approx(extent, abs=0.01) and tried[-1] < 0.5 * tried[0]
+
+
+def test_when_only_shorter_pairs_are_joined_the_longest_joined_is_picked_and_said(monkeypatch):
+    w = capture_like_floor((3.0, 2.0), crate=False)
+    real, refused = autopose.plan_path, _not_joined("prm found no path, as a test")
+
+    def plan(hf, fp, start, goal, **kw):
+        far = math.dist(start[:2], goal[:2]) > 1.5
+        return (refused if far else real)(hf, fp, start, goal, **kw)
+
+    monkeypatch.setattr(autopose, "plan_path", plan)
+    picked = pick_start_goal(w, seed=0)
+    assert MIN_AUTO_DISTANCE <= picked.distance <= 1.5
+    assert "the planner joined no pair further apart" in picked.note
+    assert "prm found no path, as a test" in picked.note
+
+
+@pytest.mark.slow
+def test_a_kinect2_qhd_capture_of_a_library_scene_gets_a_joined_pick(tmp_path):
+    """The capture a user made (issue 30): the double bridge seen by a Kinect v2 in QHD from
+    3.2 m behind and 1.8 m up, used directly as a scene: `plan` picks start and goal at least
+    1 m apart and plans between them (it said "could not pick a start and goal the planner
+    joins ... (31.74 m^2): 1.45 m apart: prm found no path within its time limit")."""
+    png = tmp_path / "qhd.png"
+    made = roachplan(
+        "synth-capture", "double_bridge", "--eye", "0,-3.2,1.8", "--target", "0,0,0",
+        "--intrinsics", "kinect2-qhd", "-o", str(png),
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    done = roachplan("plan", "--scene", str(png), "--json", timeout=600)
+    assert done.returncode == 0, done.stderr
+    r = json.loads(done.stdout)
+    assert "picked automatically" in done.stderr
+    assert len(r["path"]) >= 2
+    assert math.dist(r["states"][0][:2], r["states"][-1][:2]) >= MIN_AUTO_DISTANCE
