@@ -12,6 +12,7 @@ import pytest
 import trimesh
 import yaml
 
+from conftest import roachplan
 from roachplan.scenes import SceneError, build_terrain_mesh, build_world, load_scene, render_scad
 from roachplan.scenes._scad_sandbox import confined, sandbox_available
 from roachplan.scenes._scad_source import scad_variables
@@ -169,6 +170,25 @@ def test_openscad_errors_are_passed_through(tmp_path, fresh_cache, backend):
         match=r"bad\.scad: OpenSCAD failed:\nERROR: Parser error: syntax error in file bad\.scad, line 2",
     ):
         render_scad(tmp_path / "bad.scad", backend=backend)
+
+
+@pytest.mark.parametrize("backend", ["cgal", "manifold"])
+def test_a_2d_model_is_refused_where_it_loaded_as_a_1_m_cube(tmp_path, fresh_cache, backend):
+    """`square(1);` loaded as "1 terrain object(s), 12 triangles, 1.00x1.00x1.00 m" (the
+    evaluator's preview of it); the binary failed with its statistics and "Current top level
+    object is not a 3D object". Both now say what is wrong and how to mend it."""
+    (tmp_path / "plate.scad").write_text("square(1);\n")
+    out = roachplan("scene", "check", "--scad-backend", backend, str(tmp_path / "plate.scad"))
+    assert out.returncode == 1
+    assert "12 triangles" not in out.stdout and "Traceback" not in out.stderr
+    assert out.stdout.startswith(f"FAIL {tmp_path / 'plate.scad'}: ")
+    assert (
+        f"{tmp_path / 'plate.scad'}: the model is 2-D: its top level draws only flat shapes "
+        in out.stdout
+    )
+    assert "no height" in out.stdout
+    assert "`linear_extrude(height = 0.05) square(1);`" in out.stdout
+    assert "CGAL" not in out.stdout  # not the binary's statistics
 
 
 def test_an_unknown_parameter_names_the_models_variables():

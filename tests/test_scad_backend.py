@@ -469,6 +469,66 @@ def test_a_non_integer_rands_seed_is_refused_and_auto_remembers_it(tmp_path):
     assert again.cached and again.path == auto.path and again.why == auto.why
 
 
+FLAT_MODELS = {
+    "square": ("square(1);\n", {}),
+    "lifted": ("translate([0, 0, 2]) circle(0.5, $fn = 12);\n", {}),
+    "params": ("w = 1;\nsquare([w, 2]);\n", {"w": 3}),
+}
+"""Models whose top level is 2-D: the binary refuses them ("Current top level object is not a
+3D object"); openscad-evaluator wrote its preview instead, the shape extruded 1 unit up from
+where it lies (square(1): a 1 x 1 x 1 cube of 12 triangles, loaded as terrain)."""
+
+
+@needs_jail
+@pytest.mark.parametrize("backend", ["cgal", "manifold", "auto"])
+@pytest.mark.parametrize("name", sorted(FLAT_MODELS))
+def test_a_2d_model_is_refused_by_every_backend(name, backend, tmp_path):
+    code, params = FLAT_MODELS[name]
+    src = _model(tmp_path, code)
+    with pytest.raises(SceneError) as err:
+        render_scad(src, params, backend=backend)
+    text = str(err.value)
+    assert text.startswith(f"{src}: the model is 2-D: its top level draws only flat shapes")
+    assert "which have no height, so it is no terrain" in text
+    assert (
+        "extrude what it draws into a solid, e.g. `linear_extrude(height = 0.05) square(1);`"
+        in text
+    )
+    assert "backend auto gave it to the binary" not in text  # auto: manifold's own refusal
+    assert not list((tmp_path / "cache" / "openscad").glob("*.stl"))  # nothing cached
+
+
+@needs_jail
+def test_a_solid_shaped_like_the_evaluators_2d_stand_in_is_rendered(tmp_path):
+    """A slab 1 unit thick is also what a real extrusion makes: the evaluator is asked for the
+    model as a drawing, which it refuses for a 3-D model, and the slab renders."""
+    cases = {
+        "linear_extrude(1) square(1);\n": [[0, 0, 0], [1, 1, 1]],
+        "translate([0, 0, 0.5]) linear_extrude(1) square([2, 1]);\n": [[0, 0, 0.5], [2, 1, 1.5]],
+    }
+    for code, bounds in cases.items():
+        src = _model(tmp_path, code)
+        for backend in ("cgal", "manifold"):
+            mesh = trimesh.load_mesh(render_scad(src, backend=backend))
+            assert np.allclose(mesh.bounds, bounds), (code, backend)
+        assert render_scad_result(src).backend == "manifold"
+
+
+@needs_jail
+def test_a_2d_stand_in_cached_before_the_refusal_is_refused(tmp_path):
+    """A render cache from before 2-D models were refused may hold the evaluator's slab."""
+    from roachplan.scenes._openscad import _cache_path
+
+    src = _model(tmp_path, "square(1);\n")
+    cached = _cache_path("manifold", src.resolve(), {}, [])
+    cached.parent.mkdir(parents=True)
+    trimesh.creation.box((1, 1, 1), trimesh.transformations.translation_matrix([0.5] * 3)).export(
+        cached
+    )
+    with pytest.raises(SceneError, match=r"m\.scad: the model is 2-D"):
+        render_scad(src, backend="manifold")
+
+
 # -- auto, the default: who renders, and the note that says so ------------------------------------
 
 

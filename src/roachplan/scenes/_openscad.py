@@ -41,6 +41,7 @@ from ._errors import SceneError
 from ._manifold_main import FACTS_SUFFIX
 from ._scad_manifold import (
     TEXT_DEVIATION,
+    flat_stand_in,
     main_digest,
     manifold_argv,
     manifold_differs,
@@ -139,6 +140,45 @@ def _render_argv(
         *defines,
         scad_file.name,
     ], None
+
+
+NOT_3D = "Current top level object is not a 3D object"
+"""What the binary says of a model whose top level is 2-D (and then writes no mesh)."""
+
+
+def flat_model_problem(scad_file: Path) -> str:
+    """The refusal of a model whose top level is 2-D: it names the file, says that it has no
+    height and how to give it one."""
+    return (
+        f"{scad_file}: the model is 2-D: its top level draws only flat shapes (square(), "
+        f"circle(), polygon(), text(), projection() ...), which have no height, so it is no "
+        f"terrain; extrude what it draws into a solid, e.g. `linear_extrude(height = 0.05) "
+        f"square(1);` (a plate 5 cm thick, in metres)"
+    )
+
+
+def _drawn_flat(
+    scad_file: Path, params: Mapping[str, ScadValue], *, memory: int, timeout: float
+) -> bool:
+    """Whether openscad-evaluator draws the model as SVG, which it writes of a 2-D top level
+    only (a 3-D one fails: "not a 2D object"): run in the jail, under the render's limits, to
+    tell its stand-in for a 2-D model from a solid of the same shape (flat_stand_in)."""
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(dir=cache, prefix=".render-"))
+    try:
+        (work / "out").mkdir()
+        jail = jail_wanted()
+        target = f"{JAIL_OUT}/drawing.svg" if jail else str(work / "out" / "drawing.svg")
+        argv, layout = manifold_argv(manifold_input(scad_file, params, work, jail), target)
+        cmd = confined(
+            argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail, layout=layout
+        )
+        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what=scad_file.name)
+        drawing = work / "out" / "drawing.svg"
+        return not run.timed_out and run.status == 0 and drawing.is_file()
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def _named(why: str, backend: str) -> str:
@@ -277,6 +317,9 @@ def _render_with(
     the message when it is hit."""
     out = _cache_path(backend, scad_file, params, deps)
     if out.is_file():
+        # (a render cached before 2-D models were refused may be the evaluator's stand-in)
+        if backend == "manifold" and _flat(scad_file, params, out, memory=memory, timeout=timeout):
+            raise _BackendFailed(flat_model_problem(scad_file))
         facts = _read_facts(out.with_suffix(_FACTS))
         return ScadRender(
             model=scad_file,
@@ -310,6 +353,8 @@ def _render_with(
         seconds = time.monotonic() - t0
         mesh = work / "out" / "mesh.stl"
         if run.status != 0 or not mesh.is_file() or mesh.stat().st_size == 0:
+            if backend == "cgal" and NOT_3D in run.stderr:
+                raise _BackendFailed(flat_model_problem(scad_file))
             why = render_failure(scad_file, run, memory=memory, timeout=limit, jail=jail)
             own = run.status != _jail.SETUP_FAILED and not limit_hit(
                 run.status, run.stderr, memory=memory, timeout=limit
@@ -320,6 +365,8 @@ def _render_with(
                 remember=own,
                 why=_short_failure(run.stderr, why),
             )
+        if backend == "manifold" and _flat(scad_file, params, mesh, memory=memory, timeout=timeout):
+            raise _BackendFailed(flat_model_problem(scad_file))
         if backend == "manifold":
             problem = manifold_mesh_problem(scad_file, mesh)
             if problem:
@@ -340,6 +387,15 @@ def _render_with(
     return ScadRender(
         model=scad_file, path=out, backend=backend, asked=backend, seconds=seconds, **_found(facts)
     )
+
+
+def _flat(
+    scad_file: Path, params: Mapping[str, ScadValue], mesh: Path, *, memory: int, timeout: float
+) -> bool:
+    """Whether backend manifold's mesh of the model is the evaluator's stand-in for a 2-D top
+    level (a slab 1 unit thick, flat_stand_in, that the evaluator also draws as SVG), which the
+    binary refuses: the model is then refused alike, whoever renders it."""
+    return flat_stand_in(mesh) and _drawn_flat(scad_file, params, memory=memory, timeout=timeout)
 
 
 def _read_facts(path: Path) -> dict:

@@ -53,6 +53,30 @@ binary, which the evaluator does not reproduce; before _manifold_main.py's text 
 evaluator's own Liberation Sans, HarfBuzz's positions unscaled) 14 glyphs at size 10 sat up to
 2.5 apart, more the longer the string."""
 
+FLAT_STAND_IN_HEIGHT = 1.0
+"""How thick openscad-evaluator makes a model whose top level is 2-D [model units]: it exports
+its preview, the shape extruded 1 unit up from where it lies, where the binary refuses the
+model ("Current top level object is not a 3D object"). Seen: `square(1);` came out a 1 x 1 x 1
+cube of 12 triangles."""
+
+
+def flat_stand_in(mesh_path: Path) -> bool:
+    """Whether backend manifold's mesh may be the evaluator's stand-in for a 2-D top level: a
+    slab FLAT_STAND_IN_HEIGHT thick whose vertices all lie on its top or its bottom. A solid
+    extruded by that much looks the same: the model is then asked for as a drawing
+    (_openscad.py: the evaluator writes SVG of a 2-D model only) before it is refused."""
+    import numpy as np
+    import trimesh
+
+    z = np.asarray(trimesh.load_mesh(mesh_path, process=False).vertices, dtype=np.float64)[:, 2]
+    if len(z) == 0:
+        return False
+    lo, hi = float(z.min()), float(z.max())
+    tol = 1e-6 * max(1.0, abs(lo), abs(hi))  # (the STL's float32 coordinates)
+    on_faces = (np.abs(z - lo) <= tol) | (np.abs(z - hi) <= tol)
+    return abs(hi - lo - FLAT_STAND_IN_HEIGHT) <= tol and bool(on_faces.all())
+
+
 MANIFOLD_PACKAGES = ("openscad-evaluator", "manifold3d")
 """The distributions backend manifold runs (with what they require)."""
 _MANIFOLD_MAIN = Path(__file__).with_name("_manifold_main.py")
