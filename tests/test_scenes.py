@@ -189,6 +189,40 @@ def test_an_unreadable_mesh_file_is_refused(tmp_path, content, expected):
         build_world(load_scene(write_scene(tmp_path, VALID)))
 
 
+FLAT_XY = {
+    "drawing.obj": b"v 0 0\nv 1 0\nv 1 1\nv 0 1\nf 1 2 3\nf 1 3 4\n",
+    "drawing.ply": (
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        b"element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        b"0 0\n1 0\n0 1\n3 0 1 2\n"
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FLAT_XY))
+def test_a_mesh_of_2d_vertices_is_refused_as_having_no_height(tmp_path, name):
+    """A mesh file whose vertices have x and y alone is a drawing (the OBJ's was an internal
+    error, the PLY's "cannot be read as a mesh: 'z'"); the OpenSCAD case is a 2-D model."""
+    (tmp_path / name).write_bytes(FLAT_XY[name])
+    with pytest.raises(SceneError) as err:
+        build_world(load_scene(tmp_path / name))
+    assert f"terrain[0].mesh: {tmp_path / name} is 2-D: its vertices have no z coordinate" in str(
+        err.value
+    )
+    assert "no height" in str(err.value)
+
+
+def test_a_flat_mesh_is_a_patch_of_floor(tmp_path):
+    """A mesh of x, y, z with no extent in z stays what it is, a patch of floor (it is not
+    thickened, nor refused): on the ground plane of its own scene, or the only floor."""
+    quad = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]])
+    quad.export(tmp_path / "patch.stl")
+    world = build_world(load_scene(tmp_path / "patch.stl"))
+    assert len(world.mesh.faces) == 2
+    assert np.allclose(world.mesh.extents, [1.0, 1.0, 0.0])
+    assert world.scene.ground == 0.0
+
+
 def test_meshes_are_cleaned_and_turned_to_face_up(tmp_path):
     # An open 2 x 2 quad grid, wound downward, with a duplicated corner, a degenerate face and
     # a triangle on a NaN vertex: cleaning keeps exactly the 8 real triangles, facing up.

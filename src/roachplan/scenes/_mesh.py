@@ -22,14 +22,30 @@ def read_mesh(path, label: str) -> trimesh.Trimesh:
         raise SceneError(f"{label}: {path} is an empty file")
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
+    except KeyError as exc:
+        if exc.args == ("z",):  # trimesh's PLY reader, on vertices of x and y alone
+            raise SceneError(_flat_drawing(label, path)) from None
+        raise SceneError(f"{label}: {path} cannot be read as a mesh: {exc}") from None
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise SceneError(f"{label}: {path} cannot be read as a mesh: {exc}") from None
+    if isinstance(loaded, trimesh.Trimesh) and np.asarray(loaded.vertices).shape[1:] != (3,):
+        raise SceneError(_flat_drawing(label, path))  # an OBJ of `v x y` lines
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         kind = Path(path).suffix.lstrip(".").upper()
         raise SceneError(
             f"{label}: {path} contains no triangles: it is not a valid {kind} file, or an empty one"
         )
     return loaded
+
+
+def _flat_drawing(label: str, path) -> str:
+    """The refusal of a mesh file whose vertices have no z: a 2-D drawing. (A mesh of x, y, z
+    that is flat is a patch of floor, and is taken.)"""
+    return (
+        f"{label}: {path} is 2-D: its vertices have no z coordinate, so it has no height and "
+        f"is no terrain; give it heights (a solid, or a surface of x, y, z) in the program "
+        f"that made it"
+    )
 
 
 def terrain_extent(mesh: trimesh.Trimesh) -> float:
