@@ -49,7 +49,7 @@ def one_place(world: World, start, goal) -> str:
         return ""
     return (
         f"{apart:.2f} m apart, within the goal radius ({radius:g} m): there is nothing to "
-        f"drive; place the goal elsewhere ({PLACE_THEM})"
+        f"drive; place the goal elsewhere (Start and goal → Click places)"
     )
 
 

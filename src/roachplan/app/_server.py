@@ -107,10 +107,6 @@ class RoachApp:
         self._followed = 0.0
         """When the cameras last moved with the robot (time.monotonic() [s])."""
         self._follow_offsets: dict[int, np.ndarray] = {}
-        self._commands_done = 0
-        """Commands the loop has run (command_done)."""
-        self._message_at = 0
-        """_commands_done when the message under the status line was set."""
         """Client id -> its camera's offset from the robot while following [m], world frame."""
         self.max_upload_bytes = max_upload_bytes
         limit_uploads(self.server, max_upload_bytes, self._refuse_upload)
@@ -190,7 +186,8 @@ class RoachApp:
         self.title = gui.add_markdown("")
         # What is running (with its progress and Cancel) stays in view at the top.
         self.status = gui.add_markdown("Drag the start (green) and goal (blue), then **Plan**.")
-        # The whole of the last notification too long to show whole (notify).
+        # The whole of the last notification too long to show whole (notify), until the next
+        # one, new work (a followed job) or a new world.
         self.message = gui.add_markdown("", visible=False)
         self.job_bar = gui.add_progress_bar(0.0, visible=False)
         self.cancel_job = gui.add_button(
@@ -325,7 +322,6 @@ class RoachApp:
             whole = body.replace("_", "\\_").replace("*", "\\*")  # (markdown: as written)
             self.message.content = f"**{title}**: {whole}"
             self.message.visible = True
-            self._message_at = self._commands_done
         client.add_notification(
             title,
             shown,
@@ -339,6 +335,7 @@ class RoachApp:
     def show_job(self, running: bool) -> None:
         self.cancel_job.visible = running
         if running:
+            self.clear_message()  # (new work: the last one's message is done with)
             self.job_bar.value, self.job_bar.visible = 0.0, True
         else:
             self.job_bar.visible = False
@@ -353,9 +350,11 @@ class RoachApp:
 
     def command_done(self) -> None:
         self.drive_button.disabled = not self.core.plans
-        self._commands_done += 1
-        # The whole of a cut notification stays until the command after the one it came in.
-        if self.message.visible and self._message_at < self._commands_done - 1:
+
+    def clear_message(self) -> None:
+        """The whole of the last cut notification (notify) goes: new work started, or a new
+        world is shown."""
+        if self.message.visible:
             self.message.visible = False
             self.message.content = ""
 
@@ -395,6 +394,7 @@ class RoachApp:
 
     def show_world(self) -> None:
         world = self.core.world
+        self.clear_message()
         self.view.show(
             world,
             lambda ev: self.loop.put(
@@ -466,6 +466,8 @@ class RoachApp:
                 self._aim(client, position, zoom=False)
 
     def list_plans(self, count: int) -> None:
+        # Drive only while there is a path to drive (a new world, a new plan clear them).
+        self.drive_button.disabled = count == 0
         names = tuple(str(k + 1) for k in range(count)) or ("none",)
         self.drive_path_picker.options = names
         self.drive_path_picker.value = names[0]
