@@ -189,13 +189,13 @@ def test_a_wide_kinect_capture_is_planned_and_driven_with_json_alone_on_stdout(t
     # note states, and that within the sensor's noise at this range (SIM_MAX_TOLERANCE, raised
     # at most 2.5x by the cap).
     hf, regions = world.heightfield, world.regions
-    ny, nx = hf.heights.shape
-    i = np.round((hf.x0 + np.arange(nx) * hf.resolution - regions.x0) / regions.cell).astype(int)
-    j = np.round((hf.y0 + np.arange(ny) * hf.resolution - regions.y0) / regions.cell).astype(int)
-    my, mx = regions.standable.shape
-    inside = ((j >= 0) & (j < my))[:, None] & ((i >= 0) & (i < mx))[None, :]
-    centres = regions.standable[np.clip(j, 0, my - 1)][:, np.clip(i, 0, mx - 1)] & inside
-    feet = centres  # (4 cm cells where the robot's centre can stand, on the 1 cm grid)
+    # The grid points where the robot's centre can stand (the standable map's 4 cm cells fall
+    # on the height field's 1 cm grid), and where the ground is level enough to stand on.
+    centres = regions.cell_centres(regions.standable)
+    i = np.round((centres[:, 0] - hf.x0) / hf.resolution).astype(int)
+    j = np.round((centres[:, 1] - hf.y0) / hf.resolution).astype(int)
+    feet = level_ground(hf, world.scene.planner.validity.max_slope_deg)
+    feet[j, i] = True
     diff = np.abs(rasterised(terrain.vertices, terrain.faces, hf) - hf.heights)[feet]
     assert np.nanmax(diff) <= terrain.max_error + 1e-9
     assert terrain.max_error <= 2.5 * SIM_MAX_TOLERANCE

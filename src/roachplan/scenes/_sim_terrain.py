@@ -186,6 +186,18 @@ def level_ground(hf: HeightField, max_slope_deg: float, span: float = 0.04) -> n
     return level
 
 
+def standable_points(hf: HeightField, regions) -> np.ndarray:
+    """(ny, nx) bool on hf's grid: the points within half a cell of a standable cell's centre
+    of regions (a StandableMap: where the robot's centre can stand at some heading)."""
+    ny, nx = hf.heights.shape
+    i = np.round((hf.x0 + np.arange(nx) * hf.resolution - regions.x0) / regions.cell)
+    j = np.round((hf.y0 + np.arange(ny) * hf.resolution - regions.y0) / regions.cell)
+    i, j = i.astype(np.int64), j.astype(np.int64)
+    my, mx = regions.standable.shape
+    inside = ((j >= 0) & (j < my))[:, None] & ((i >= 0) & (i < mx))[None, :]
+    return regions.standable[np.clip(j, 0, my - 1)][:, np.clip(i, 0, mx - 1)] & inside
+
+
 def _block_errors(
     h: np.ndarray, tol: np.ndarray, ground: np.ndarray
 ) -> list[tuple[np.ndarray, np.ndarray]]:

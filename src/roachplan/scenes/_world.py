@@ -32,7 +32,13 @@ from ._errors import SceneError
 from ._mesh import clean_terrain_mesh, read_mesh, scaled_mesh
 from ._openscad import render_scad_result
 from ._scene import Scene, TerrainObject
-from ._sim_terrain import SIM_MAX_MESH_TRIANGLES, SimTerrain, level_ground, sim_terrain
+from ._sim_terrain import (
+    SIM_MAX_MESH_TRIANGLES,
+    SimTerrain,
+    level_ground,
+    sim_terrain,
+    standable_points,
+)
 
 HEIGHTFIELD_RESOLUTION = 0.01
 """Grid spacing of the planner's height field [m]: the bridge edges are sharp to within this."""
@@ -167,8 +173,11 @@ def sim_terrain_of(world: World) -> SimTerrain:
     """The terrain the physics engine is given for world (World.sim_terrain)."""
     hf, m = world.heightfield, world.mesh
     slope = world.scene.planner.validity.max_slope_deg
-    # (only a large mesh becomes the height field's triangles, for which the ground matters)
-    ground = level_ground(hf, slope) if len(m.faces) > SIM_MAX_MESH_TRIANGLES else None
+    ground = None
+    if len(m.faces) > SIM_MAX_MESH_TRIANGLES:  # (it may become the height field's triangles)
+        # Where the feet go: level ground, and every place the robot can stand (the regions,
+        # which every trial's route label needs anyway).
+        ground = level_ground(hf, slope) | standable_points(hf, world.regions)
     return sim_terrain(m.vertices, m.faces, hf, world.bounds, ground=ground)
 
 
