@@ -4,9 +4,8 @@ RealSense preset, from three viewpoints, each used as a scene as a user would (`
 
     make bench        (or: .venv/bin/python benchmarks/bench_captures.py [--quick])
 
-Viewpoints, around the scene's terrain (centre c, its larger half-extent r): low and near (eye
-1.2 r + 0.6 m back, 0.6 m up), high and far (2 r + 1.5 m back, 1.8 m up), oblique (from the side
-and back at 45 deg, 1.2 m up). Stages: render (the synthetic depth image), world (perception,
+Viewpoints (perception.survey_views), around the scene's terrain: low and near, high and far,
+oblique. Stages: render (the synthetic depth image), world (perception,
 height field, start and goal picked), sim terrain (what PyBullet is given), plan (PRM, seed 1),
 drive (the tracking driver). A row ends in one of: driven (and its outcome), "no pick" (no
 start and goal the planner joins: the message says why), "no path", or "ERROR" (an exception
@@ -26,35 +25,36 @@ import trimesh
 
 from roachplan import drive, plan
 from roachplan._errors import InputError
-from roachplan.perception import PRESETS, NoiseModel, look_at, render_depth, save_depth
+from roachplan.perception import (
+    PRESETS,
+    NoiseModel,
+    look_at,
+    render_depth,
+    save_depth,
+    survey_views,
+)
 from roachplan.scenes import LIBRARY, build_terrain_mesh, build_world, library_names, load_scene
 
 CAMERAS = ("kinect2-sd", "kinect2-qhd", "kinect2-hd", "realsense-d435-1280x720")
 
 
-def viewpoints(mesh: trimesh.Trimesh) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """(eye, target) [m] of the three views of a terrain (world frame)."""
-    lo, hi = mesh.bounds
-    c = (lo + hi) / 2
-    r = float(max(hi[0] - lo[0], hi[1] - lo[1])) / 2
-    target = np.array([c[0], c[1], lo[2]])
-    return {
-        "low-near": (target + [0.0, -(1.2 * r + 0.6), 0.6], target),
-        "high-far": (target + [0.0, -(2.0 * r + 1.5), 1.8], target),
-        "oblique": (target + [(r + 0.8) * 0.7, -(r + 0.8) * 0.7, 1.2], target),
-    }
-
-
-def scene_mesh(name: str) -> trimesh.Trimesh:
-    """A library scene's terrain with its ground as a large slab (what the camera sees)."""
+def scene_mesh(name: str) -> tuple[trimesh.Trimesh, dict]:
+    """A library scene's terrain with its ground as a large slab (what the camera sees), and
+    the survey views of its terrain (of its planning area where it has none)."""
     scene = load_scene(name)
     mesh = build_terrain_mesh(scene)
+    if len(mesh.faces):
+        views = survey_views(mesh.bounds)
+    else:
+        assert scene.bounds is not None  # (a scene without terrain gives its bounds)
+        (x0, y0), (x1, y1) = scene.bounds
+        views = survey_views([[x0, y0, scene.ground or 0.0], [x1, y1, scene.ground or 0.0]])
     if scene.ground is not None:
         g = trimesh.creation.box((100.0, 100.0, 0.01))
         g.apply_translation((0, 0, scene.ground - 0.005))
         mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
     assert isinstance(mesh, trimesh.Trimesh)  # (meshes concatenate to a mesh)
-    return mesh
+    return mesh, views
 
 
 def run(png: Path) -> dict:
@@ -91,8 +91,7 @@ def sweep(quick: bool) -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in library_names(LIBRARY):
-            mesh = scene_mesh(name)
-            views = viewpoints(mesh)
+            mesh, views = scene_mesh(name)
             for view, (eye, target) in list(views.items())[: 1 if quick else 3]:
                 for camera in cameras:
                     intr = PRESETS[camera]
@@ -137,8 +136,8 @@ def _line(r: dict) -> str:
 
 def first_path() -> None:
     """Capture to first path: 1920x1080 beside 640x480, the same view of double_bridge."""
-    mesh = scene_mesh("double_bridge")
-    eye, target = viewpoints(mesh)["high-far"]
+    mesh, views = scene_mesh("double_bridge")
+    eye, target = views["high-far"]
     times = {}
     with tempfile.TemporaryDirectory() as tmp:
         for camera in ("kinect2-hd", "realsense-d435-640x480"):

@@ -47,6 +47,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "look_at": "._synthetic",
         "render_depth": "._synthetic",
         "save_depth": "._synthetic",
+        "survey_views": "._synthetic",
         "VoxelStudyRow": "._voxel_study",
         "format_study": "._voxel_study",
         "planarity_warning": "._voxel_study",
@@ -107,6 +108,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._synthetic import look_at as look_at
     from ._synthetic import render_depth as render_depth
     from ._synthetic import save_depth as save_depth
+    from ._synthetic import survey_views as survey_views
     from ._voxel_study import VoxelStudyRow as VoxelStudyRow
     from ._voxel_study import format_study as format_study
     from ._voxel_study import planarity_warning as planarity_warning

@@ -62,6 +62,23 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return out
 
 
+def survey_views(mesh_bounds) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Three views of a terrain whose mesh has these (2, 3) bounds [m], as (eye, target) [m]
+    in its frame, looking at the centre of its base (centre c, larger half-extent r):
+    "low-near" (1.2 r + 0.6 m back, 0.6 m up), "high-far" (2 r + 1.5 m back, 1.8 m up) and
+    "oblique" (r + 0.8 m away at 45 deg to the side and back, 1.2 m up): the kinds of view a
+    person takes of the ground in front of them."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in mesh_bounds)
+    c = (lo + hi) / 2
+    r = float(max(hi[0] - lo[0], hi[1] - lo[1])) / 2
+    target = np.array([c[0], c[1], lo[2]])
+    return {
+        "low-near": (target + [0.0, -(1.2 * r + 0.6), 0.6], target),
+        "high-far": (target + [0.0, -(2.0 * r + 1.5), 1.8], target),
+        "oblique": (target + [(r + 0.8) * 0.7, -(r + 0.8) * 0.7, 1.2], target),
+    }
+
+
 def render_depth(
     mesh: trimesh.Trimesh,
     intr: Intrinsics,
