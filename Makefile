@@ -55,6 +55,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_planning.py
 	$(BIN)/python benchmarks/bench_experiment.py
 	$(BIN)/python benchmarks/bench_perception.py
+	$(BIN)/python benchmarks/bench_captures.py
 	$(BIN)/python benchmarks/bench_app.py
 	$(BIN)/python benchmarks/bench_drivable.py
 	$(BIN)/python benchmarks/bench_choose.py

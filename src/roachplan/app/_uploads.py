@@ -76,9 +76,7 @@ def scene_from_upload(
         obj = _zip_object(name, data, folder, capture=capture, scad=scad)
     else:
         (folder / fname).write_bytes(data)
-        obj = _file_object(
-            fname, suffix, data, folder, capture=capture, calibration=calibration, scad=scad
-        )
+        obj = _file_object(fname, folder, capture=capture, calibration=calibration, scad=scad)
     is_capture = "capture" in obj
     fname = obj["capture"] if is_capture else fname  # (a capture in a .zip names the scene)
     scene = {
@@ -145,8 +143,6 @@ def _zip_object(name: str, data: bytes, folder: Path, *, capture: dict, scad: di
 
 def _file_object(
     fname: str,
-    suffix: str,
-    data: bytes,
     folder: Path,
     *,
     capture: dict,
@@ -156,8 +152,7 @@ def _file_object(
     """The terrain object of an uploaded model, mesh or capture file (written into folder as
     fname), by what the file is (perception.input_kind, as the command line and the scene
     loader decide it): a .scad with the `scad` keys (timeout, backend); a capture with the
-    calibration uploaded before it, when it is a depth image. (suffix and data: the file's, as
-    written; input_kind reads what it needs of the file.)"""
+    calibration uploaded before it, when it is a depth image."""
     found = input_kind(folder / fname)
     assert found is not None  # (_accepted took only UPLOAD_SUFFIXES: .yaml and .zip go elsewhere)
     if found.kind == "capture":
