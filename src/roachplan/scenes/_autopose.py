@@ -37,7 +37,11 @@ MAX_AUTO_EXTENT = 10.0
 """Largest side of the planning area chosen automatically [m] (the height field is 1 cm)."""
 PICK_BUDGET = 8.0
 """Planning time a pick spends trying pairs, all its tries together [s]."""
-PICK_MILESTONES = 400
+CORE_EXTENT = 0.7
+"""Start and goal go as far inside the region's edge (and away from places the robot stands at
+some headings only) as leaves two places this fraction as far apart as the region's own two
+farthest apart [-]."""
+PICK_MILESTONES = 200
 """A roadmap planner's (PRM's) milestones in one try of a pair [-]: the try's result then
 does not hang on the machine's speed (its time limit is a safety net)."""
 CORRIDOR_SLACK = 1.3
@@ -103,14 +107,16 @@ def pick_start_goal(world, *, seed: int = 0, budget: float = PICK_BUDGET) -> Aut
     region = _largest_region(sm.yaw_valid, along_heading=sc.planner.turning_radius is not None)
     area = float(region.sum()) * sm.cell**2
     walks = _Geodesic(region)
-    spine = _Geodesic(_core(region, sm.yaw_valid)).spine(MAX_AUTO_DISTANCE / sm.cell)
+    cap = MAX_AUTO_DISTANCE / sm.cell
+    core = _core(region, sm.yaw_valid, cap)
+    a, b, _ = _farthest_pair(core, cap)
+    spine = _Geodesic(core).walk(a, b)
     xy = lambda c: np.array([sm.x0, sm.y0]) + np.asarray(c)[::-1] * sm.cell  # noqa: E731
-    ends = spine.cells[spine.path[[0, -1]]]
-    extent = float(np.linalg.norm(xy(ends[1]) - xy(ends[0])))
+    extent = _farthest_pair(region, np.inf)[2] * sm.cell  # what could be done at most [m]
     planner = _quick(sc.planner)
     failures: list[tuple[float, str]] = []
     deadline = time.perf_counter() + budget
-    for ca, cb in _candidates(spine, MAX_AUTO_DISTANCE / sm.cell):
+    for ca, cb in _candidates(spine, cap):
         remaining = deadline - time.perf_counter()
         if remaining <= 0.0:
             break
@@ -149,7 +155,7 @@ def pick_start_goal(world, *, seed: int = 0, budget: float = PICK_BUDGET) -> Aut
             if failures:
                 note += f"; the planner joined no pair further apart ({_said(failures)})"
             elif d < MIN_AUTO_DISTANCE:
-                note += f"; it allows no more than {d:.2f} m"
+                note += f"; two places in it are at most {extent:.2f} m apart"
             return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
         failures.append((d, result.message))
     why = _said(failures) if failures else "the region is a single place"
@@ -230,35 +236,74 @@ def _pairs_of_cells(dj: int, di: int, shape: tuple[int, int]) -> tuple[tuple, tu
     return a, b
 
 
-def _core(region: np.ndarray, yaw_valid: np.ndarray) -> np.ndarray:
-    """Where in the region ((ny, nx) bool) to put start and goal: where the robot stands at
-    every tried heading (yaw_valid: (ny, nx, n_yaw) bool) when that is at least a quarter of
-    it (a capture's far floor, its noise spikes and dropouts, hold some headings only, and a
-    roadmap grows slowly there), away from the edge (_inside)."""
+def _core(region: np.ndarray, yaw_valid: np.ndarray, cap: float) -> np.ndarray:
+    """Where in the region ((ny, nx) bool) to put start and goal: as far inside its edge as
+    3 cells (12 cm), and at each depth where the robot stands at every tried heading
+    (yaw_valid: (ny, nx, n_yaw) bool) rather than at some, as still holds two places
+    CORE_EXTENT as far apart as the region's own two farthest apart (up to cap [cells]). A
+    pose on the rim of a noisy capture is valid by a hair, one beside a chair leg is a
+    collision waiting for the first step, and a capture's far floor (noise spikes, dropouts)
+    holds some headings only and a roadmap grows slowly there; but a strip of floor in front
+    of the desks is only a few cells wide."""
     clean = region & yaw_valid.all(axis=-1)
-    return _inside(clean if clean.sum() >= 0.25 * region.sum() else region)
+    options = []
+    for rounds in (3, 2, 1, 0):
+        for mask in (clean, region):
+            part = _largest_part(
+                ndimage.binary_erosion(mask, iterations=rounds) if rounds else mask
+            )
+            if part.any():
+                options.append((part, _farthest_pair(part, cap)[2]))
+    keep = CORE_EXTENT * max(span for _, span in options)
+    return next(part for part, span in options if span >= keep)
 
 
-def _inside(region: np.ndarray) -> np.ndarray:
-    """The region ((ny, nx) bool) away from its edge where it is wide enough (up to 3 cells,
-    12 cm, keeping at least a quarter of it): a pose on the rim of a noisy capture is valid by
-    a hair, and one beside a chair leg is a collision waiting for the first step."""
-    area = region.sum()
-    for rounds in (3, 2, 1):
-        inner = ndimage.binary_erosion(region, iterations=rounds)
-        labels, m = cast("tuple[np.ndarray, int]", ndimage.label(inner))
-        if m:
-            sizes = ndimage.sum(np.ones_like(labels), labels, np.arange(1, m + 1))
-            inner = labels == (1 + int(np.argmax(sizes)))
-            if inner.sum() >= 0.25 * area:
-                return inner
-    return region
+def _largest_part(mask: np.ndarray) -> np.ndarray:
+    """(ny, nx) bool: the largest 8-connected part of mask ((ny, nx) bool; empty: itself)."""
+    labels, m = cast("tuple[np.ndarray, int]", ndimage.label(mask, np.ones((3, 3))))
+    if not m:
+        return mask
+    return labels == 1 + int(np.argmax(np.bincount(labels.ravel())[1:]))
+
+
+def _farthest_pair(mask: np.ndarray, cap: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The two cells ((2,) j, i each) of mask ((ny, nx) bool, not empty) farthest apart in a
+    straight line, at most cap [cells] (on a room's floor, opposite corners or the cap; along
+    a strip, its ends), the pair whose straight line is the more in the mask among those
+    within a cell of that; and their distance [cells]."""
+    cells = np.argwhere(mask)
+    best, best_key = (0, 0), (-1, -1.0)
+    for a in _outermost(cells):
+        straight = np.linalg.norm(cells - cells[a], axis=1)
+        b = int(np.argmax(np.where(straight <= cap, straight, -1.0)))
+        key = (round(float(straight[b])), _in_sight(mask, cells[a], cells[b]))
+        if key > best_key:
+            best, best_key = (a, b), key
+    a, b = cells[best[0]], cells[best[1]]
+    return a, b, float(np.linalg.norm(b - a))
+
+
+def _in_sight(mask: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """The fraction of the straight line from cell a to cell b ((2,) j, i) in mask."""
+    n = int(np.ceil(np.hypot(*(b - a)))) + 1
+    on = np.rint(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)).astype(int)
+    return float(mask[on[:, 0], on[:, 1]].mean())
+
+
+def _outermost(cells: np.ndarray) -> np.ndarray:
+    """Indices of the cells ((K, 2) j, i) on their convex hull (where the two farthest apart
+    are), or of the outermost along 16 directions when the hull is flat (a one-cell strip)."""
+    try:
+        return np.sort(ConvexHull(cells).vertices)
+    except QhullError:
+        angles = np.arange(16) * np.pi / 8
+        return np.unique(np.argmax(cells @ np.stack([np.sin(angles), np.cos(angles)]), axis=0))
 
 
 @dataclass(frozen=True, eq=False)
 class _Spine:
-    """A longest walk through a region, as far as a pick is concerned: cells[path] from one
-    end to the other, each step to an 8-neighbour."""
+    """A walk through a region between two places: cells[path] from one to the other, each
+    step to an 8-neighbour."""
 
     cells: np.ndarray
     """(K, 2) the region's cells, j, i."""
@@ -289,32 +334,17 @@ class _Geodesic:
         edges = (np.concatenate(rows), np.concatenate(cols))
         self.graph = coo_matrix((np.concatenate(weights), edges), shape=(k, k)).tocsr()
 
-    def spine(self, cap: float) -> _Spine:
-        """The two cells of the mask farthest apart in a straight line, at most cap [cells]
-        (on a room's floor, opposite corners or the cap; along a strip, its ends), the pair
-        with the clearer straight line between them among those within a cell of that; and
-        the walk between them."""
-        cells = self.cells
-        best, best_key = (0, 0), (-1, -1.0)
-        for a in _outermost(cells):
-            straight = np.linalg.norm(cells - cells[a], axis=1)
-            b = int(np.argmax(np.where(straight <= cap, straight, -1.0)))
-            key = (round(float(straight[b])), self.in_sight(cells[a], cells[b]))
-            if key > best_key:
-                best, best_key = (a, b), key
-        a, b = best
-        walked, previous = dijkstra(self.graph, directed=False, indices=a, return_predecessors=True)
-        path = [b]
-        while path[-1] != a:
+    def walk(self, a: np.ndarray, b: np.ndarray) -> _Spine:
+        """The shortest walk from cell a to cell b ((2,) j, i, both in one part of the mask)."""
+        ka, kb = int(self.index[tuple(a)]), int(self.index[tuple(b)])
+        walked, previous = dijkstra(
+            self.graph, directed=False, indices=ka, return_predecessors=True
+        )
+        path = [kb]
+        while path[-1] != ka:
             path.append(int(previous[path[-1]]))
         path = np.array(path[::-1])
-        return _Spine(cells=cells, path=path, length=walked[path])
-
-    def in_sight(self, a: np.ndarray, b: np.ndarray) -> float:
-        """The fraction of the straight line from cell a to cell b ((2,) j, i) in the mask."""
-        n = int(np.ceil(np.hypot(*(b - a)))) + 1
-        on = np.rint(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)).astype(int)
-        return float(self.mask[on[:, 0], on[:, 1]].mean())
+        return _Spine(cells=self.cells, path=path, length=walked[path])
 
     def corridor(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(ny, nx) bool: the cells of the mask on a walk from cell a to cell b ((2,) j, i,
@@ -325,16 +355,6 @@ class _Geodesic:
         out = np.zeros_like(self.mask)
         out[tuple(self.cells[keep].T)] = True
         return out
-
-
-def _outermost(cells: np.ndarray) -> np.ndarray:
-    """Indices of the cells ((K, 2) j, i) on their convex hull (where the two farthest apart
-    are), or of the outermost along 16 directions when the hull is flat (a one-cell strip)."""
-    try:
-        return np.sort(ConvexHull(cells).vertices)
-    except QhullError:
-        angles = np.arange(16) * np.pi / 8
-        return np.unique(np.argmax(cells @ np.stack([np.sin(angles), np.cos(angles)]), axis=0))
 
 
 def _candidates(spine: _Spine, cap: float) -> list[tuple[np.ndarray, np.ndarray]]:
