@@ -9,7 +9,6 @@ it is written into a fresh folder under the app's upload directory under a sanit
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 import shutil
@@ -240,7 +239,7 @@ def prepare_upload_scene(scene_path: Path, *, on_capture: OnCapture | None = Non
     if filled:
         scene_path.write_text(yaml.safe_dump({**raw, **filled}, sort_keys=False))
         # Only what was picked was written: the same terrain, with the scene as now written.
-        world = dataclasses.replace(world, scene=load_scene(scene_path))
+        world = world.with_scene(load_scene(scene_path))
     return world
 
 

@@ -146,6 +146,23 @@ class World:
         (scenes/_sim_terrain.py; computed once)."""
         return sim_terrain_of(self)
 
+    def with_notes(self, notes: tuple[str, ...]) -> World:
+        """This world with other notes; what it has computed (regions, sim_terrain) kept."""
+        world = dataclasses.replace(self, notes=notes)
+        world.__dict__.update(
+            {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
+        )
+        return world
+
+    def with_scene(self, scene: Scene) -> World:
+        """This terrain, height field and robot with scene: the same scene with what was picked
+        for it written down (start, goal, bounds as the page writes them). The simulator's
+        terrain is kept (made from the same mesh and height field: a second or two)."""
+        world = dataclasses.replace(self, scene=scene)
+        if "sim_terrain" in self.__dict__:
+            world.__dict__["sim_terrain"] = self.__dict__["sim_terrain"]
+        return world
+
     def simulation(
         self,
         *,
@@ -446,9 +463,7 @@ def build_world(
     if len(mesh.faces) > SIM_MAX_MESH_TRIANGLES:
         # Made now, once: every drive's child gets it with the world, and the user is told.
         notes.append(world.sim_terrain.note())
-        cached = {k: v for k, v in world.__dict__.items() if k in ("sim_terrain", "regions")}
-        world = dataclasses.replace(world, notes=tuple(notes))
-        world.__dict__.update(cached)  # (the same scene and terrain: still true)
+        world = world.with_notes(tuple(notes))
     elif notes:
         world = dataclasses.replace(world, notes=tuple(notes))
     for key, pose in (("robot.start", scene.start), ("goal", scene.goal)) if check_poses else ():
