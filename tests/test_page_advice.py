@@ -19,6 +19,7 @@ import yaml
 
 from conftest import ROOT
 from test_app import CHROMIUM, browser_pages, set_value, upload
+from test_page_messages import said_whole
 from test_page_view import dropdown
 from test_perception import REAL
 
@@ -266,7 +267,7 @@ def test_a_model_under_the_ground_is_raised_with_position_then_planned_in_an_are
         upload(page, rock)
         note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
         note.wait_for(timeout=120_000)
-        text = note.inner_text()
+        text = said_whole(note)
         page.screenshot(path=artifacts / "advice-02-model-under-the-ground.png")
         assert "Loaded model → Position [m]" in text and "`" not in text, text
         page.get_by_text(re.compile(r"sunk_step\.stl\W* did not load")).wait_for(timeout=10_000)
@@ -317,4 +318,4 @@ def test_start_and_goal_nobody_could_pick_are_explained_with_the_pages_controls(
         assert "View → Show where it can stand" in text
         assert "--" not in text and "give start and goal" not in text
         note = page.locator(".mantine-Notification-root").filter(has_text="not picked")
-        assert "Click places" in note.inner_text()
+        assert "Click places" in said_whole(note)

@@ -15,6 +15,7 @@ import pytest
 import trimesh
 
 from test_app import CHROMIUM, browser_pages, set_value, title, upload
+from test_page_messages import said_whole
 from test_page_view import dropdown
 
 pytestmark = [
@@ -144,7 +145,7 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
     with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
         upload(page, cloud)
         note = _refusal(page, "cloud_mm.pcd")
-        text = note.inner_text()
+        text = said_whole(note)
         page.screenshot(path=artifacts / "results-03-bad-upload.png")
         # What happened, with the file's own name, and what to do, in the page's terms.
         assert "cloud_mm.pcd" in text and "millimetres" in text
@@ -171,7 +172,7 @@ def test_a_bad_upload_is_explained_in_the_pages_terms(app, artifacts, tmp_path):
         # A model in millimetres: the advice names the page's button, once, and it works.
         upload(page, step)
         note = _refusal(page, "step_mm.stl")
-        text = note.inner_text()
+        text = said_whole(note)
         page.screenshot(path=artifacts / "results-04-model-in-millimetres.png")
         for internal in ("--", "/tmp", ".yaml", "terrain object", "terrain[0]"):
             assert internal not in text, f"{internal!r} in {text!r}"
@@ -204,7 +205,7 @@ def test_the_depth_scale_advice_names_the_box_and_following_it_loads(app, artifa
         upload(page, png)
         note = page.locator(".mantine-Notification-root").filter(has_text="Could not load")
         note.wait_for(timeout=120_000)
-        text = note.inner_text()
+        text = said_whole(note)
         page.wait_for_timeout(600)  # (the notification slides in: the screenshot shows it whole)
         page.screenshot(path=artifacts / "results-05-depth-scale-advice.png")
         assert "Depth scale [units/m] to 5000" in text, text

@@ -153,7 +153,9 @@ def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artif
         inside = np.all(np.abs(pts[:, :2] - centre) <= 0.25, axis=1)
         assert np.sum(inside & (pts[:, 2] > 0.1)) > 1000  # the chair is in the square
         page.get_by_role("button", name="Run voxel study").click()
-        page.get_by_text("Region not planar").wait_for(timeout=60_000)  # the notification
+        # The notification (its title: the whole of it is also under the status line).
+        note = page.locator(".mantine-Notification-title", has_text="Region not planar")
+        note.wait_for(timeout=60_000)
         page.screenshot(path=artifacts / "voxel-03-chair-not-planar.png")
         chair = _check_rows(_table(page), sizes)
         assert chair[0][2] > 20.0  # the chair's height, not a sensor's noise [mm]
