@@ -81,7 +81,7 @@ def standable_map(
     yaw_valid = np.zeros((gx.size, n_yaw), dtype=bool)
     yaw_valid[over] = check_states(hf, fp, cfg, states).valid.reshape(len(over), n_yaw)
     yaw_valid = yaw_valid.reshape(*gx.shape, n_yaw)
-    standable = yaw_valid.any(axis=-1)
+    standable = np.asarray(yaw_valid.any(axis=-1))
     # The start's component (4-connected); if the start's own cell centre is not standable,
     # the nearest standable cell's.
     components, _ = cast("tuple[np.ndarray, int]", ndimage.label(standable))
