@@ -401,8 +401,8 @@ PAGE_ADVICE = (
     # scenes: the planning area, start and goal
     (
         r"\(set bounds, or crop\)",
-        "(to plan elsewhere: set Planning area → Min x, y [m] and Max x, y [m] and press Plan in "
-        "this area; for a capture, also Meshing (captures) → Crop)",
+        "(to plan elsewhere: set Planning area → Min x, y [m] and Max x, y [m] and press "
+        "Planning area → Reload with this area; for a capture, also Meshing (captures) → Crop)",
     ),
     (
         r"give bounds: the scene has no terrain to take them from",
