@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from roachplan.processes import Running
 from roachplan.scenes import World, list_scenes
 
 from ._app import App
@@ -40,6 +41,9 @@ class Loading:
     result: tuple[World, CaptureView | None] | None = None
     """(World, CaptureView | None) once it arrived."""
     error: str | None = None
+    rendering: tuple[str, float] = ("", 0.0)
+    """What the last OpenSCAD render said of itself (Running.what: the model's name, and for
+    the binary why it renders and how long it is expected to take), and when [s of the job]."""
 
 
 class BackgroundLoad:
@@ -81,7 +85,9 @@ class BackgroundLoad:
         ld = self.current
         if ld is None or ld.result is not None or ld.error is not None:
             return ld
-        ld.job.poll()  # (its events: an OpenSCAD render's Running; the status counts seconds)
+        for event in ld.job.poll():  # (an OpenSCAD render's Running; the status counts seconds)
+            if isinstance(event, Running):
+                ld.rendering = (event.what, ld.job.elapsed)
         if ld.job.done:
             ld.result, ld.error = load_outcome(ld.job)
         if ld.result is None and ld.error is None:
@@ -98,9 +104,18 @@ class BackgroundLoad:
     def show(self, text: str | None = None) -> None:
         ld = self.current
         if text is None:
-            text = f"{ld.what} ... {ld.job.elapsed:.0f} s" if ld is not None else ""
+            text = f"{ld.what} ... {ld.job.elapsed:.0f} s{_rendering(ld)}" if ld is not None else ""
         if self.status.content != text:
             self.status.content = text
+
+
+def _rendering(ld: Loading) -> str:
+    """What the OpenSCAD render running says of itself, when it says more than the model's
+    name (the binary: why it renders, how long it is expected to take), else ""."""
+    said, when = ld.rendering
+    if said == Path(said).name or ld.job.elapsed - when > 2:  # (the name alone, or it ended)
+        return ""
+    return f"; OpenSCAD {said}"
 
 
 def do_load_scene(app: App, cmd: LoadSceneCmd) -> None:
