@@ -216,3 +216,28 @@ def test_a_kinect2_qhd_capture_of_a_library_scene_gets_a_joined_pick(tmp_path):
     assert "picked automatically" in done.stderr
     assert len(r["path"]) >= 2
     assert math.dist(r["states"][0][:2], r["states"][-1][:2]) >= MIN_AUTO_DISTANCE
+
+
+def test_the_worlds_regions_reuse_the_picks_checks_and_equal_a_fresh_map():
+    """The standable map the pick made is not made a second time for World.regions (seconds
+    on a capture), and what it gives is the map made afresh."""
+    from roachplan.scenes import build_world
+    from test_perception import REAL
+
+    world = build_world(load_scene(str(REAL / "office_desk_160x120.pcd")))
+    assert world.checked is not None
+    fresh = standable_map(
+        world.heightfield,
+        world.footprint,
+        world.scene.planner.validity,
+        world.bounds,
+        world.start[:2],
+        min_hole_area=world.robot.body_length * world.robot.body_width * 4,
+    )
+    np.testing.assert_array_equal(world.regions.yaw_valid, fresh.yaw_valid)
+    np.testing.assert_array_equal(world.regions.reachable, fresh.reachable)
+    np.testing.assert_array_equal(world.regions.holes, fresh.holes)
+    moved = dataclasses.replace(
+        world, scene=dataclasses.replace(world.scene, bounds=((0, 0), (1, 1)))
+    )
+    assert moved.regions.yaw_valid.shape != world.regions.yaw_valid.shape  # (not reused)

@@ -71,6 +71,9 @@ class AutoPoses:
     """Area of the region they are in [m^2]."""
     note: str
     """How they were chosen, for the user."""
+    yaw_valid: np.ndarray | None = None
+    """The standable map's checks over the scene's bounds (StandableMap.yaw_valid; None: not
+    made), for World.regions to reuse rather than make again."""
 
 
 def auto_bounds(mesh_bounds: np.ndarray, *, ground: bool):
@@ -156,7 +159,14 @@ def pick_start_goal(world, *, seed: int = 0, budget: float = PICK_BUDGET) -> Aut
                 note += f"; the planner joined no pair further apart ({_said(failures)})"
             elif d < MIN_AUTO_DISTANCE:
                 note += f"; two places in it are at most {extent:.2f} m apart"
-            return AutoPoses(start=start, goal=goal, distance=d, region_area=area, note=note)
+            return AutoPoses(
+                start=start,
+                goal=goal,
+                distance=d,
+                region_area=area,
+                note=note,
+                yaw_valid=sm.yaw_valid,
+            )
         failures.append((d, result.message))
     why = _said(failures) if failures else "the region is a single place"
     if failures and planner.name in _ROADMAPS:
@@ -433,7 +443,14 @@ def across_the_model(world, *, seed: int = 0) -> AutoPoses | None:
         f"start and goal picked automatically on the ground at either end of the model "
         f"({extents[long]:.2f} m long), {d:.2f} m apart"
     )
-    return AutoPoses(start=start, goal=goal, distance=d, region_area=float("nan"), note=note)
+    return AutoPoses(
+        start=start,
+        goal=goal,
+        distance=d,
+        region_area=float("nan"),
+        note=note,
+        yaw_valid=regions.yaw_valid,
+    )
 
 
 def _quick(cfg):

@@ -87,6 +87,10 @@ class World:
     renders: tuple[str, ...] = ()
     """Of the notes, one per OpenSCAD object: who rendered it, why, and what that may change
     (ScadRender.note), for the page's status line."""
+    checked: tuple | None = dataclasses.field(default=None, repr=False)
+    """(height field, bounds, validity config, StandableMap.yaw_valid): the standable map's
+    checks as the start and goal's pick made them, for regions to reuse while the world has
+    that same height field, bounds and validity (a capture's take seconds); None: none made."""
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -119,15 +123,22 @@ class World:
     def regions(self) -> StandableMap:
         """Where the robot can stand within the scene's bounds, and the holes between those
         places (computed once, ~50 ms): the terrain sampler's support and the route labels."""
+        validity = self.scene.planner.validity
+        reuse = None
+        if self.checked is not None:
+            hf, bounds, cfg, yaw_valid = self.checked
+            if hf is self.heightfield and bounds == self.bounds and cfg == validity:
+                reuse = yaw_valid
         # A hole smaller than the robot's own footprint is noise to go through or over, not
         # an obstacle to go round.
         return standable_map(
             self.heightfield,
             self.footprint,
-            self.scene.planner.validity,
+            validity,
             self.bounds,
             self.start[:2],
             min_hole_area=self.robot.body_length * self.robot.body_width * 4,
+            yaw_valid=reuse,
         )
 
     def route(self, path_xy: np.ndarray) -> str:
@@ -447,8 +458,10 @@ def build_world(
     )
     world = World(scene=scene, mesh=mesh, heightfield=hf, robot=robot, renders=terrain.notes)
     if scene.start is None:
+        picked_checks = None
         try:
             picked = pick_start_goal(world, seed=scene.seed)
+            picked_checks = picked.yaw_valid
             notes.append(picked.note)
             start, goal = picked.start, picked.goal
         except PlanningError as exc:
@@ -460,6 +473,9 @@ def build_world(
             start = goal = ((xa + xb) / 2, (ya + yb) / 2, 0.0)
         scene = dataclasses.replace(scene, start=start, goal=goal)
         world = dataclasses.replace(world, scene=scene)
+        if picked_checks is not None:
+            checked = (hf, scene.bounds, scene.planner.validity, picked_checks)
+            world = dataclasses.replace(world, checked=checked)
     if len(mesh.faces) > SIM_MAX_MESH_TRIANGLES:
         # Made now, once: every drive's child gets it with the world, and the user is told.
         notes.append(world.sim_terrain.note())
