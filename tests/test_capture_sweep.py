@@ -19,7 +19,7 @@ SAMPLE = [
     ("double_bridge", "kinect2-qhd", "high-far"),  # the report's resolution; no pick before
     ("plywood_bridge", "realsense-d435-1280x720", "oblique"),
     ("heightmap", "kinect2-sd", "low-near"),
-    ("voxel_wall", "kinect2-hd", "high-far"),  # 1920x1080
+    ("double_bridge_rough", "kinect2-hd", "oblique"),  # 1920x1080
 ]
 
 
