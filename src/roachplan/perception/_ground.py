@@ -6,9 +6,15 @@ points, behind walls and furniture. So the ground is searched for as a person wo
 points roughly along the camera's +y (a level camera's "up" is -y) unless a calibration, an
 IMU or the user says otherwise; only surfaces that face up under that prior are searched,
 however small a share of the cloud they are (each point's normal decides, so a floor of 3 %
-of the points is found among walls of 60 %); among the planes found there, the horizontal
-ones are those parallel to the best-supported one; the ground is the lowest of them that is
-well supported (the floor under a desk, not the desk; never a wall).
+of the points is found among walls of 60 %). Each plane found there is settled on its own
+surface - the points near it that face as it does, not the foot of a wall or of a person
+beside it, in a band that widens with range as depth noise does - and measured by the area
+it covers, not by its count of points (a far floor is sparse). Up is the orientation of the
+largest group of parallel surfaces near the prior under which the scene's walls, people and
+furniture stand upright; the horizontal surfaces are those parallel to it, and the ground is
+the lowest of them that is large enough, heights compared where the surfaces lie (the floor
+under a desk, not the desk; never a wall, nor a far floor's tilted slab that passes below
+the sensor).
 
 All directions here are in the capture's frame (a camera's: x right, y down, z forward).
 """
@@ -16,6 +22,7 @@ All directions here are in the capture's frame (a camera's: x right, y down, z f
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -26,8 +33,19 @@ CAMERA_UP = (0.0, -1.0, 0.0)
 Z_UP = (0.0, 0.0, 1.0)
 """Up in a world or robot frame (REP 103: z up)."""
 MAX_BAND = 0.05
-"""Widest band round the ground plane its final fit takes points from [m]: a rough or noisy
-ground's scatter, short of what a curb or a rug would add."""
+"""Widest band round a plane its fit takes points from [m]: a rough or noisy ground's
+scatter, short of what a curb or a rug would add."""
+STRIP = 0.1
+"""A ground whose points spread less than this across (the standard deviation of its
+narrower in-plane direction [m]; 0.1 is a strip 35 cm deep) has its tilt across set by the
+other level surfaces as much as by itself; a wider one, less so, by (STRIP / its spread)^2 per
+point: its own tilt is then known better than a desk top is parallel to it (two desks 1 cm
+apart in height read as one plane tilted 1 deg, 4 cm at the camera)."""
+MIN_PIECE = 0.05
+"""Smallest connected part of another level surface that joins the ground's fit [m^2]."""
+SETTLE_ROUNDS = 10
+"""Most rounds of fitting a plane on its band and the band on the plane's scatter (3 to 5
+settle it)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,13 +62,19 @@ class GroundConfig:
     """A plane whose up-facing normal is within this angle of the gravity prior may be the
     ground: a camera pitched down 46 deg at a desk still qualifies, a wall (90 deg) or a
     surface above the camera (> 90 deg) does not."""
+    prior_sigma_deg: float = 30.0
+    """How far gravity is likely to be from the prior [deg]: a surface's area counts toward
+    the up direction weighed by a Gaussian of this width in its angle from the prior (at 30
+    deg 0.61, at 45 deg 0.32, at 60 deg 0.14)."""
     parallel_deg: float = 6.0
     """Planes within this angle of the chosen up are horizontal (parallel to the ground)."""
     min_area: float = 0.25
     """A horizontal plane needs this much area (occupied 5 cm cells) [m^2] to be the ground:
     50 cm x 50 cm, a few robot lengths; smaller patches below the floor are noise."""
-    min_fraction: float = 0.02
-    """...and this fraction of the points."""
+    surface_deg: float = 35.0
+    """A point counts toward a plane only where its own surface (its normal, from its 16
+    nearest neighbours) is within this angle of the plane's: not the foot of a wall, a person
+    or a desk leg, which lies within centimetres of the floor but faces sideways [deg]."""
     level_gap: float = 0.05
     """Level planes closer than this [m] to a larger one are fragments of it (a noisy floor
     far from the camera comes out of RANSAC as several slightly tilted slabs), not a level of
@@ -174,12 +198,25 @@ def _ransac_plane(
 def _area(points: np.ndarray, normal: np.ndarray, cell: float = 0.05) -> float:
     """Area [m^2] covered by points ((N, 3)) lying on a plane with this normal: occupied cells
     of a cell x cell grid in the plane."""
+    uv = np.floor(points @ _in_plane(normal).T / cell).astype(np.int64)
+    return len(np.unique(uv, axis=0)) * cell * cell
+
+
+def _narrow_spread(points: np.ndarray, normal: np.ndarray) -> float:
+    """Standard deviation [m] of points ((N, 3)) on a plane with this normal ((3,) unit) along
+    their narrower in-plane principal direction."""
+    if len(points) < 3:
+        return 0.0
+    uv = points @ _in_plane(normal).T
+    return float(np.sqrt(max(np.linalg.eigvalsh(np.cov(uv.T))[0], 1e-12)))
+
+
+def _in_plane(normal: np.ndarray) -> np.ndarray:
+    """(2, 3) two unit vectors spanning the plane with this normal ((3,) unit)."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = np.cross(normal, helper)
     u /= np.linalg.norm(u)
-    v = np.cross(normal, u)
-    uv = np.floor(np.column_stack([points @ u, points @ v]) / cell).astype(np.int64)
-    return len(np.unique(uv, axis=0)) * cell * cell
+    return np.array([u, np.cross(normal, u)])
 
 
 def choose_ground(
@@ -193,18 +230,21 @@ def choose_ground(
 
     1. Planes are found one after another (find_planes) among the points facing up within
        prior_tolerance_deg of the prior, as hypotheses inside that cone (gravity first).
-    2. The best-supported group of mutually parallel candidates gives the refined up (the
-       floor and a desk agree on it; a sloping surface does not).
-    3. The horizontal planes (within parallel_deg of the refined up) that are well supported
-       (min_area, min_fraction) are ground candidates; the lowest one (farthest below the
-       sensor) is the ground.
+    2. Each is settled on its own surface (_settle): the points near it whose own normal
+       agrees with it (not the foot of a wall or a person), in a band that grows with range as
+       the sensor's noise does; its area is measured there, on all the points.
+    3. The largest group of mutually parallel surfaces gives the refined up (the floor and a
+       desk agree on it; a sloping surface does not).
+    4. The level surfaces (within parallel_deg of the refined up) at least min_area large are
+       ground candidates; the lowest one, its height taken where it lies
+       along the refined up, is the ground.
     near: a point ((3,), capture frame [m]) on the intended ground: then the plane through it
     is the ground whatever its orientation (the user's re-levelling click).
     """
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
     # Planes are searched in an even subsample (RANSAC's cost grows with the points; 30,000
-    # still put dozens in every 5 cm cell of a surface); the chosen one is refitted on all.
+    # still put dozens in every 5 cm cell of a surface); they are settled on all the points.
     sub = points[:: max(1, len(points) // 30000)]
     warnings: list[str] = []
     if near is not None:
@@ -223,17 +263,16 @@ def choose_ground(
     # only planes within the prior's cone are hypotheses. Searching the whole cloud found the
     # largest planes first (walls, furniture), and a floor of a few per cent was never among
     # the eight (a level-camera office, a room with a person in it).
-    facing = _facing_up(sub, up, cfg.prior_tolerance_deg, toward_sensor)
+    normals = _normals(sub, up, toward_sensor)
+    facing = normals @ up >= np.cos(np.radians(cfg.prior_tolerance_deg))
     planes = []
     if facing.sum() >= 50:
         planes = find_planes(sub[facing], up, cfg, toward_sensor, cone_deg=cfg.prior_tolerance_deg)
-    pool = int(facing.sum())  # the points a ground may be a share of
     candidates = [p for p in planes if p.angle_deg <= cfg.prior_tolerance_deg]
     if not candidates:
         planes = find_planes(sub, up, cfg, toward_sensor)
         if not planes:
             raise CaptureError("no plane found in the capture: nothing to take as the ground")
-        pool = len(sub)
         best = min(planes, key=lambda p: p.angle_deg)
         warnings.append(
             f"no plane faces up within {cfg.prior_tolerance_deg:g} deg of the assumed gravity; "
@@ -242,128 +281,378 @@ def choose_ground(
         )
         candidates = [best]
 
-    refined = _refined_up(candidates, up, cfg, warnings)
+    cloud = _Cloud.of(points, sub, normals, candidates, toward_sensor=toward_sensor)
+    fits = [_fit(cloud, p, up, cfg) for p in candidates]
+    # A steep candidate (a sensor's ripples on a wall, 55 deg off) may settle onto the wall it
+    # lies on: what left the cone is no candidate (unless the cone held none).
+    fits = [f for f in fits if f.plane.angle_deg <= cfg.prior_tolerance_deg] or fits
+    refined = _refined_up(fits, up, normals, cfg, warnings)
     ground, well = _lowest_level(
-        planes,
-        refined,
-        cfg,
-        pool=pool,
-        total=len(sub),
-        toward_sensor=toward_sensor,
-        warnings=warnings,
+        fits, refined, cfg, total=len(points), toward_sensor=toward_sensor, warnings=warnings
     )
     # The level surfaces share one normal (a floor and the desks on it): fitted jointly, their
     # up is better known than from the ground alone, which may be a strip a few tens of
     # centimetres deep at the bottom of the view (2 deg there is 5 cm at the camera).
-    level = [(p.normal, p.offset) for p in [ground, *[q for q in well if q is not ground]]]
-    n, d = _refit_level(points, level, cfg.threshold)
+    # Each other surface counts piece by piece, each connected part at its own height: two
+    # desks 2 cm apart in height are one level (level_gap), and as one plane they read tilted
+    # 1 deg (4 cm at the camera).
+    n = ground.plane.normal
+    level: list[_Level] = [(n, ground.plane.offset, None)]
+    claimed = ground.on.copy()  # two candidates may have settled on one surface
+    for f in well:
+        for r in _pieces(cloud, f) if f is not ground else []:
+            own = r & f.on & ~claimed
+            if _area(points[own], n) >= MIN_PIECE:  # its offset under the ground's normal
+                level.append((n, float(-n @ points[own].mean(axis=0)), r & ~claimed))
+                claimed |= r
+    spread = _narrow_spread(points[ground.on], ground.plane.normal)
+    n, offsets, _ = _settle(cloud, level, cfg, others=min(1.0, (STRIP / spread) ** 2))
+    d = offsets[0]
     support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
     return GroundChoice(
         normal=n,
         offset=d,
         support=support,
         fraction=support / len(points),
-        area=ground.area,
-        planes=tuple(planes),
+        area=ground.plane.area,
+        planes=tuple(f.plane for f in fits),
         warnings=tuple(warnings),
     )
 
 
-def _refined_up(
-    candidates: list[Plane], up: np.ndarray, cfg: GroundConfig, warnings: list[str]
-) -> np.ndarray:
-    """(3,) unit up refined by the best-supported group of mutually parallel candidate planes
-    (the floor and a desk agree on it; a sloping surface does not); a warning when another
-    orientation is nearly as well supported."""
+@dataclass(frozen=True, eq=False)
+class _Cloud:
+    """The points a plane is settled on, with what decides which of them are its surface."""
 
-    def group(p: Plane) -> list[Plane]:
-        return [q for q in candidates if _angle(p.normal, q.normal) <= cfg.parallel_deg]
+    points: np.ndarray
+    """(N, 3) [m]."""
+    normals: np.ndarray
+    """(N, 3) unit normal of each point's surface (zero where not needed: far from every
+    candidate plane)."""
+    ranges: np.ndarray | None
+    """(N,) distance from the sensor [m], or None when the origin is not the sensor (a world
+    frame): then the noise is taken as the same everywhere."""
 
-    scores = [sum(q.support for q in group(p)) for p in candidates]
-    order = np.argsort(scores)[::-1]
-    members = group(candidates[int(order[0])])
-    refined = np.sum([q.support * q.normal for q in members], axis=0)
-    refined /= np.linalg.norm(refined)
-    rivals = [
-        candidates[int(k)]
-        for k in order[1:]
-        if _angle(candidates[int(k)].normal, refined) > cfg.parallel_deg
+    @classmethod
+    def of(
+        cls,
+        points: np.ndarray,
+        sub: np.ndarray,
+        normals: np.ndarray,
+        planes: list[Plane],
+        *,
+        toward_sensor: bool,
+    ) -> _Cloud:
+        """points ((N, 3)) with each one's normal taken from its nearest point of sub ((M, 3),
+        a subsample of them whose normals ((M, 3)) are known): only the points within MAX_BAND
+        of one of the planes need one (estimating normals on all the points took a second on
+        a 300,000-point capture, under load)."""
+        from scipy.spatial import KDTree
+
+        near = np.zeros(len(points), dtype=bool)
+        for p in planes:
+            near |= np.abs(points @ p.normal + p.offset) <= MAX_BAND
+        full = np.zeros_like(points)
+        if near.any():
+            full[near] = normals[KDTree(sub).query(points[near], k=1)[1]]
+        ranges = np.linalg.norm(points, axis=1) if toward_sensor else None
+        return cls(points=points, normals=full, ranges=ranges)
+
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """A candidate plane settled on its own surface (_settle) and measured there."""
+
+    plane: Plane
+    """The plane, its support and area counted on its surface's points."""
+    centre: np.ndarray
+    """(3,) centroid of its surface's points [m]: where its height is taken."""
+    on: np.ndarray
+    """(N,) bool: its surface's points in the cloud."""
+
+
+def _fit(cloud: _Cloud, plane: Plane, up: np.ndarray, cfg: GroundConfig) -> _Fit:
+    """A RANSAC plane settled on its own surface's points in the cloud, and measured there."""
+    n, (d,), (on,) = _settle(cloud, [(plane.normal, plane.offset, None)], cfg)
+    pts = cloud.points[on]
+    return _Fit(
+        plane=Plane(
+            normal=n,
+            offset=d,
+            support=len(pts),
+            area=_area(pts, n) if len(pts) else 0.0,
+            angle_deg=_angle(n, up),
+        ),
+        centre=pts.mean(axis=0) if len(pts) else -d * n,
+        on=on,
+    )
+
+
+def _pieces(cloud: _Cloud, f: _Fit) -> list[np.ndarray]:
+    """(N,) bool regions, one per connected part (5 cm cells, 8-connected) of a settled
+    surface at least MIN_PIECE large: the cloud's points near its plane whose cell is in that
+    part. None when the surface is too wide for a grid of cells (a survey's ground)."""
+    from scipy import ndimage
+
+    pts, n = cloud.points, f.plane.normal
+    near = np.abs(pts @ n + f.plane.offset) <= MAX_BAND
+    cells = np.floor(pts[near] @ _in_plane(n).T / 0.05).astype(np.int64)
+    own = cells[f.on[near]]
+    if len(own) == 0:
+        return []
+    lo = own.min(axis=0)
+    shape = own.max(axis=0) - lo + 1
+    if np.prod(shape) > 4_000_000:  # wider than 100 m: no room's desks
+        return [near]
+    grid = np.zeros(shape, dtype=bool)
+    grid[tuple((own - lo).T)] = True
+    labels, count = cast("tuple[np.ndarray, int]", ndimage.label(grid, structure=np.ones((3, 3))))
+    at = cells - lo
+    inside = np.all((at >= 0) & (at < shape), axis=1)
+    part = np.zeros(len(pts), dtype=np.int64)
+    part[np.flatnonzero(near)[inside]] = labels[tuple(at[inside].T)]
+    size = np.bincount(labels.ravel(), minlength=count + 1) * 0.05**2
+    return [part == k for k in range(1, count + 1) if size[k] >= MIN_PIECE]
+
+
+_Level = tuple[np.ndarray, float, "np.ndarray | None"]
+"""A plane to settle: its normal ((3,) unit), offset [m], and the region ((N,) bool) its
+points must lie in, or None: anywhere."""
+
+
+def _settle(
+    cloud: _Cloud, level: list[_Level], cfg: GroundConfig, others: float = 1.0
+) -> tuple[np.ndarray, list[float], list[np.ndarray]]:
+    """(unit normal, an offset per plane, each plane's inlier mask (N,)) of the parallel planes
+    level (the ground first) fitted jointly: one normal, an offset per plane, by least squares
+    weighted by the noise expected at each point's range, and the other planes' points by
+    others beside the first's.
+
+    A plane's points are those within its band whose own normal is within surface_deg of the
+    plane's: the foot of a wall, of a person or of a desk's legs lies within centimetres of
+    the floor, and on a small floor such points outnumbered the floor's own near the band's
+    edge, tilting it (5 deg, 19 cm at the camera). The band settles on the plane's own scatter
+    as it grows with range (3 robust sigmas in bins of range, never less at a longer range;
+    between threshold and MAX_BAND): a far, noisy floor is fitted on its whole band, a near
+    one on its centimetre, and the near points, known better, weigh more."""
+    pts, ranges = cloud.points, cloud.ranges
+    cos_s = np.cos(np.radians(cfg.surface_deg))
+    n = np.asarray(level[0][0], dtype=np.float64)
+    offsets = [float(d) for _, d, _ in level]
+    regions = [r for _, _, r in level]
+    bands = [np.full(len(pts), cfg.threshold) for _ in level]
+    masks = [np.zeros(len(pts), dtype=bool) for _ in level]
+    for _ in range(SETTLE_ROUNDS):
+        agree = cloud.normals @ n >= cos_s
+        heights = pts @ n
+        masks = [
+            agree & (np.abs(heights + dk) <= bk) & (True if rk is None else rk)
+            for dk, bk, rk in zip(offsets, bands, regions, strict=True)
+        ]
+        if masks[0].sum() < 3:
+            break
+        weights = [
+            (1.0 if k == 0 else others) / bk[mk] ** 2  # the band is 3 sigmas of the noise
+            for k, (mk, bk) in enumerate(zip(masks, bands, strict=True))
+        ]
+        m, new = _orthogonal(pts, masks, weights, n=n, offsets=offsets)
+        settled = (
+            _angle(m, n) < 0.01
+            and max(abs(a - b) for a, b in zip(new, offsets, strict=True)) < 5e-4
+        )
+        n, offsets = m, new
+        bands = [
+            _band(pts @ n + dk, mk, ranges, cfg) if mk.sum() >= 3 else bk
+            for dk, mk, bk in zip(offsets, masks, bands, strict=True)
+        ]
+        if settled:
+            break
+    return n, offsets, masks
+
+
+def _orthogonal(
+    pts: np.ndarray,
+    masks: list[np.ndarray],
+    weights: list[np.ndarray],
+    *,
+    n: np.ndarray,
+    offsets: list[float],
+) -> tuple[np.ndarray, list[float]]:
+    """(unit normal, offsets) of parallel planes, each through the weighted centroid of its
+    points (masks: (N,) bool; weights: one per masked point), the normal minimizing the
+    weighted squared distances to them (each plane's points centred on their centroid). n,
+    offsets: the planes so far (the normal's side; the offsets of planes with no points)."""
+    stacked, centres = [], []
+    for mk, w in zip(masks, weights, strict=True):
+        if mk.sum() < 3:
+            centres.append(None)
+            continue
+        c = (w[:, None] * pts[mk]).sum(axis=0) / w.sum()
+        stacked.append(np.sqrt(w)[:, None] * (pts[mk] - c))
+        centres.append(c)
+    x = np.concatenate(stacked)
+    m = np.linalg.eigh(x.T @ x)[1][:, 0]
+    m = m if m @ n >= 0 else -m
+    return m, [
+        float(-m @ c) if c is not None else dk for c, dk in zip(centres, offsets, strict=True)
     ]
-    if rivals and max(sum(q.support for q in group(r)) for r in rivals) >= 0.5 * scores[order[0]]:
-        r = max(rivals, key=lambda r: sum(q.support for q in group(r)))
+
+
+def _band(
+    residuals: np.ndarray, on: np.ndarray, ranges: np.ndarray | None, cfg: GroundConfig
+) -> np.ndarray:
+    """(N,) half-width of a plane's band at each point [m]: 3 robust sigmas (1.48 median
+    absolute residual) of the plane's points (on: (N,) bool; residuals (N,) [m]) at that
+    range, in up to 6 bins of range that each hold 100 points or more, never less at a longer
+    range (the noise grows with range), between cfg.threshold and MAX_BAND. ranges: (N,) [m],
+    or None: one sigma for all."""
+    res = residuals[on]
+    bins = 0 if ranges is None else min(6, len(res) // 100)
+    if bins <= 1 or ranges is None:
+        sigma = np.full(len(residuals), _mad(res))
+    else:
+        r = ranges[on]
+        order = np.argsort(r)
+        parts = np.array_split(order, bins)
+        centres = np.array([np.median(r[k]) for k in parts])
+        sigmas = np.maximum.accumulate([_mad(res[k]) for k in parts])
+        sigma = np.interp(ranges, centres, sigmas)
+    return np.clip(3.0 * sigma, cfg.threshold, MAX_BAND)
+
+
+def _mad(x: np.ndarray) -> float:
+    """Robust sigma of x: 1.4826 median absolute deviation from its median. About the median,
+    not the plane: points off the plane on one side (a baseboard, a row of a wall's foot)
+    are no noise to widen the band for."""
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+
+
+def _refined_up(
+    fits: list[_Fit],
+    up: np.ndarray,
+    normals: np.ndarray,
+    cfg: GroundConfig,
+    warnings: list[str],
+) -> np.ndarray:
+    """(3,) unit up refined by the best group of mutually parallel candidate surfaces (the
+    floor and a desk agree on it; a sloping surface does not). A group scores its area, each
+    surface's weighed by how likely gravity is that far from the prior (a Gaussian of
+    prior_sigma_deg), times the share of the scene that stands level or upright under it
+    (_upright: walls, people, the sides of desks and shelves), so that neither a tilted prior
+    nor a sensor's artefacts decide alone: the disparity terraces of a far wall seen from
+    below face up 45-60 deg off, larger than the floor, but under them almost nothing stands
+    upright (7 % of the points, against 53 % under the floor). Only the surfaces large
+    enough to be a ground count when there are any; a warning when another orientation
+    scores nearly as well. normals: (M, 3) unit normals of the scene's points."""
+    big = [f for f in fits if _is_surface(f, cfg)] or fits
+
+    def group(f: _Fit) -> list[_Fit]:
+        return [g for g in big if _angle(f.plane.normal, g.plane.normal) <= cfg.parallel_deg]
+
+    def score(f: _Fit) -> float:
+        members = group(f)
+        mean = np.sum([g.plane.area * g.plane.normal for g in members], axis=0)
+        prior = sum(
+            g.plane.area * np.exp(-0.5 * (g.plane.angle_deg / cfg.prior_sigma_deg) ** 2)
+            for g in members
+        )
+        return prior * _upright(normals, mean / np.linalg.norm(mean))
+
+    scores = {id(f): score(f) for f in big}
+    best = max(big, key=lambda f: scores[id(f)])
+    refined = np.sum([g.plane.area * g.plane.normal for g in group(best)], axis=0)
+    refined /= np.linalg.norm(refined)
+    rivals = [f for f in big if _angle(f.plane.normal, refined) > cfg.parallel_deg]
+    if rivals and max(scores[id(r)] for r in rivals) >= 0.5 * scores[id(best)]:
+        r = max(rivals, key=lambda r: scores[id(r)])
         warnings.append(
             f"two surface orientations are nearly as well supported: the ground chosen is "
             f"{_angle(refined, up):.0f} deg from the assumed gravity, another "
-            f"{r.angle_deg:.0f} deg; check the result, or give --up or the camera pose"
+            f"{r.plane.angle_deg:.0f} deg; check the result, or give --up or the camera pose"
         )
     return refined
 
 
+def _upright(normals: np.ndarray, up: np.ndarray, tolerance_deg: float = 10.0) -> float:
+    """Share of the normals ((M, 3) unit) level or upright under up ((3,) unit), within
+    tolerance_deg: how much of a built scene agrees that up is gravity."""
+    c = np.abs(normals @ up)
+    t = np.radians(tolerance_deg)
+    return float(np.mean((c >= np.cos(t)) | (c <= np.sin(t))))
+
+
+def _is_surface(f: _Fit, cfg: GroundConfig) -> bool:
+    """Whether a settled plane is a surface the robot could stand on: min_area large, counted
+    in cells its own points occupy (not a count of points: a far floor is sparse, and a
+    floor's share of a cloud of walls and desks may be one per cent)."""
+    return f.plane.area >= cfg.min_area
+
+
 def _lowest_level(
-    planes: list[Plane],
+    fits: list[_Fit],
     refined: np.ndarray,
     cfg: GroundConfig,
     *,
-    pool: int,
     total: int,
     toward_sensor: bool,
     warnings: list[str],
-) -> tuple[Plane, list[Plane]]:
-    """(the ground, every well-supported level plane): among the planes level to refined
-    ((3,) unit; not a thin fragment of a larger one), those min_area large and min_fraction of
-    pool points are well supported, and the lowest of them is the ground. total: the points
-    searched, for the warnings' shares."""
-    horizontal: list[Plane] = []
-    for p in sorted(planes, key=lambda p: -p.support):
-        level = _angle(p.normal, refined) <= cfg.parallel_deg
-        if level and all(abs(p.offset - q.offset) >= cfg.level_gap for q in horizontal):
-            horizontal.append(p)
-    well = [
-        p for p in horizontal if p.area >= cfg.min_area and p.support >= cfg.min_fraction * pool
-    ]
+) -> tuple[_Fit, list[_Fit]]:
+    """(the ground, every large level surface): among the surfaces level to refined ((3,)
+    unit; not a fragment of a larger one at its height), those that are surfaces (_is_surface)
+    compete, and the lowest of them is the ground. Heights are taken along refined at each
+    surface's own centroid, not at the sensor: two planes a few degrees apart (a far floor's
+    slab and the floor) differ at the sensor by tens of centimetres where they meet on the
+    floor. total: the points, for the warnings' shares."""
+
+    def height(f: _Fit) -> float:  # below the sensor (above the origin in a world frame)
+        return float(-refined @ f.centre)
+
+    horizontal: list[_Fit] = []
+    for f in sorted(fits, key=lambda f: -f.plane.area):
+        level = _angle(f.plane.normal, refined) <= cfg.parallel_deg
+        if level and all(abs(height(f) - height(g)) >= cfg.level_gap for g in horizontal):
+            horizontal.append(f)
+    if not horizontal:  # none level to the refined up: the candidates' best
+        horizontal = [max(fits, key=lambda f: f.plane.area)]
+    well = [f for f in horizontal if _is_surface(f, cfg)]
     if not well:
-        well = [max(horizontal, key=lambda p: p.support)]
+        well = [max(horizontal, key=lambda f: f.plane.area)]
         warnings.append(
-            f"the ground seen is small ({well[0].area:.2f} m^2, "
-            f"{100 * well[0].support / total:.0f} % of the points)"
+            f"the ground seen is small ({well[0].plane.area:.2f} m^2, "
+            f"{100 * well[0].plane.support / total:.0f} % of the points)"
         )
-    ground = max(well, key=lambda p: p.offset)  # the lowest: farthest below the sensor
-    if toward_sensor and ground.offset <= 0:
+    ground = max(well, key=height)  # the lowest: farthest below the sensor
+    if toward_sensor and ground.plane.offset <= 0:
         warnings.append("the sensor is not above the ground chosen: check the up direction")
-    higher = [p for p in well if p is not ground and p.support > ground.support]
+    higher = [f for f in well if f is not ground and f.plane.area > ground.plane.area]
     if higher:
-        h = max(higher, key=lambda p: p.support)
+        h = max(higher, key=lambda f: f.plane.area)
         warnings.append(
-            f"the ground is the lowest level surface ({100 * ground.support / total:.0f} % of "
-            f"the points), {ground.offset - h.offset:.2f} m below a larger one "
-            f"({100 * h.support / total:.0f} %); if the robot stands on that one, click it in "
-            f"the page or give the camera pose"
+            f"the ground is the lowest level surface ({ground.plane.area:.2f} m^2), "
+            f"{height(ground) - height(h):.2f} m below a larger one ({h.plane.area:.2f} m^2); "
+            f"if the robot stands on that one, click it in the page or give the camera pose"
         )
-    if ground.angle_deg > 50.0:
+    if ground.plane.angle_deg > 50.0:
         warnings.append(
-            f"the ground is tilted {ground.angle_deg:.0f} deg from the assumed gravity: a steep "
-            f"camera, or the wrong surface"
+            f"the ground is tilted {ground.plane.angle_deg:.0f} deg from the assumed gravity: a "
+            f"steep camera, or the wrong surface"
         )
     return ground, well
 
 
-def _facing_up(
-    points: np.ndarray, up: np.ndarray, tolerance_deg: float, toward_sensor: bool
-) -> np.ndarray:
-    """(N,) bool: the points ((N, 3) [m]) whose surface faces up within tolerance_deg of up
-    ((3,) unit). Each point's normal is the smallest principal direction of its 16 nearest
-    neighbours (Open3D), turned to face the sensor at the origin (toward_sensor: a surface
-    seen from below, a ceiling or a table's underside, then faces down) or else up."""
+def _normals(points: np.ndarray, up: np.ndarray, toward_sensor: bool) -> np.ndarray:
+    """(N, 3) unit normal of each point's surface ((N, 3) [m]): the smallest principal
+    direction of its 16 nearest neighbours (Open3D), turned to face the sensor at the origin
+    (toward_sensor: a surface seen from below, a ceiling or a table's underside, then faces
+    down) or else up ((3,) unit)."""
     import open3d as o3d
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(16))
     normals = np.asarray(cloud.normals)
     if toward_sensor:
-        normals = np.where(np.einsum("ij,ij->i", normals, points)[:, None] > 0, -normals, normals)
-    else:
-        normals = np.where((normals @ up)[:, None] < 0, -normals, normals)
-    return normals @ up >= np.cos(np.radians(tolerance_deg))
+        return np.where(np.einsum("ij,ij->i", normals, points)[:, None] > 0, -normals, normals)
+    return np.where((normals @ up)[:, None] < 0, -normals, normals)
 
 
 def _ground_through(
