@@ -12,8 +12,9 @@ is 0.1 mm on the 1 m scale of the library's ramps and bridges, a hundredth of th
 height-field cell, so an agreeing mesh is the same terrain to the planner; ten times the measured
 spread, so rounding does not fail it; and far below what does differ: the rough bridge with
 another seed (bumps moved by up to 1.5 cm: 4e-3, checked below), surface()'s base 1 unit lower,
-solids touching face to face left apart (plywood_bridge: walls 6.7 cm inside the solid). text()
-has its own bound, in model units per unit of its size (TEXT_DEVIATION, checked below).
+solids touching face to face left apart (plywood_bridge before they were merged: walls 6.7 cm
+inside the solid; tests/test_scad_procedural.py). text() has its own bound, in model units per
+unit of its size (TEXT_DEVIATION, checked below).
 """
 
 from __future__ import annotations
@@ -152,11 +153,11 @@ LIBRARY_BACKENDS = {
     "double_bridge": "manifold",
     "double_bridge_rough": "manifold",
     "heightmap": "cgal",
-    "plywood_bridge": "cgal",
+    "plywood_bridge": "manifold",
     "voxel_wall": "manifold",
 }
-"""Who auto picks for each library model: surface() (heightmap) and solids touching face to
-face (plywood_bridge) go to the binary."""
+"""Who auto picks for each library model: surface() (heightmap) goes to the binary; the solids
+of plywood_bridge that touch face to face are merged as the binary merges them."""
 
 
 @pytest.mark.slow
@@ -436,21 +437,29 @@ def test_the_quad_rule_picks_the_binarys_diagonal_on_recorded_faces():
     assert cut(twisted[1:] + twisted[:1]) == [(-43.75, 37.5), (-37.5, 31.25)]
 
 
+NEAR_TOUCH = "cube(1);\ntranslate([1.0000004, 0, 0]) cube([1, 1, 2]);\n"
+"""Two blocks 4e-7 apart: one plane to the touching check, no closed solid once cut."""
+
+
 @needs_jail
-def test_solids_touching_face_to_face_go_to_the_binary():
-    """plywood_bridge's blocks, plank and ramps touch face to face: Manifold leaves walls
-    between them inside the solid, the binary merges them. manifold refuses; auto says why and
-    renders with the binary."""
+def test_solids_touching_face_to_face_that_cannot_be_merged_go_to_the_binary(tmp_path):
+    """Solids that touch face to face are merged (plywood_bridge:
+    tests/test_scad_procedural.py); where that does not give a closed solid (here, two blocks
+    not quite touching), manifold refuses, and auto says why and renders with the binary."""
+    src = _model(tmp_path, NEAR_TOUCH)
     with pytest.raises(
         SceneError,
-        match=r"plywood_bridge.scad: solids that touch face to face "
+        match=r"m.scad: solids that touch face to face "
         r"\(near \[.*\]\) stay apart in backend manifold.*backend: auto",
     ):
-        render_scad(LIBRARY / "plywood_bridge.scad", backend="manifold")
-    auto = render_scad_result(LIBRARY / "plywood_bridge.scad")
+        render_scad(src, backend="manifold")
+    auto = render_scad_result(src)
     assert auto.backend == "cgal" and auto.asked == "auto"
     assert "solids that touch face to face" in auto.why
-    assert auto.path == render_scad(LIBRARY / "plywood_bridge.scad", backend="cgal")
+    assert auto.path == render_scad(src, backend="cgal")
+    plywood = render_scad_result(LIBRARY / "plywood_bridge.scad")
+    assert plywood.backend == "manifold" and plywood.merged > 0
+    assert "solids touching face to face (on " in plywood.note()
 
 
 @needs_jail
@@ -864,14 +873,15 @@ def test_the_page_loads_with_auto_and_says_who_rendered_it_and_why(tmp_path, art
         with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
             # auto, the default: manifold draws the label, and the page says so.
             upload(page, label)
-            # In the notification, and in the status, which stays.
+            # In the notification, and in the status, which stays (and the whole notification
+            # under it, when it is cut: the first of those).
             rendered_by = page.get_by_test_id("floating-panel").get_by_text(
                 re.compile(
                     r"label\.scad: rendered with manifold \(openscad-evaluator 1\.8\.1, manifold3d "
                     r"3\.5\.4\) in"
                 )
             )
-            rendered_by.wait_for(timeout=120_000)
+            rendered_by.first.wait_for(timeout=120_000)
             page.get_by_text(
                 re.compile(
                     r"text\(\): glyphs may sit up to 0\.00075 model units "

@@ -40,6 +40,7 @@ from . import _jail
 from ._errors import SceneError
 from ._manifold_main import FACTS_SUFFIX
 from ._scad_manifold import (
+    MERGED,
     TEXT_DEVIATION,
     flat_stand_in,
     main_digest,
@@ -49,6 +50,7 @@ from ._scad_manifold import (
     manifold_mesh_problem,
     manifold_problem,
     manifold_version,
+    merge_touching,
 )
 from ._scad_sandbox import (
     JAIL_MODEL,
@@ -75,9 +77,12 @@ BACKENDS: tuple[Backend, ...] = ("auto", "cgal", "manifold")
 reference); "manifold", the Python evaluator `openscad-evaluator` on the Manifold library
 (scenes/_manifold_main.py), 3-11x faster on CSG-heavy and text() models
 (benchmarks/bench_openscad.py) and refused on the constructs where its mesh differs
-(scenes/_scad_manifold.py, MANIFOLD_DIFFERS); "auto" (the default), manifold unless the model uses one of those, or the
-evaluator refuses it, fails on it or leaves solids touching face to face apart: then the
-binary (render_scad_result says which, and why)."""
+(scenes/_scad_manifold.py, MANIFOLD_DIFFERS), its solids touching face to face merged as the
+binary merges them (merge_touching: procedural terrains, up to 28x faster here); "auto" (the default),
+manifold unless the model uses one of those, or the evaluator refuses it, fails on it or
+leaves solids touching face to face apart that could not be merged: then the binary
+(render_scad_result says which, and why; its progress line, how long it is expected to take:
+binary_expectation)."""
 DEFAULT_BACKEND: Backend = "auto"
 
 
@@ -119,7 +124,7 @@ def _backend_key(backend: str, defines: list[str]) -> bytes:
     """The cache key's part that names who renders, with which overrides."""
     if backend == "cgal":  # the key as before backends existed: cached renders stay valid
         return json.dumps([defines, openscad_version()]).encode()
-    return json.dumps([defines, manifold_version(), backend, main_digest()]).encode()
+    return json.dumps([defines, manifold_version(), backend, main_digest(), MERGED]).encode()
 
 
 def _render_argv(
@@ -188,6 +193,162 @@ def _named(why: str, backend: str) -> str:
     return why.replace("OpenSCAD failed", f"backend manifold ({manifold_version()}) failed", 1)
 
 
+# -- what the binary is expected to take ----------------------------------------------------------
+
+BINARY_PACE = (1e-3, 8e-3)
+"""How long the binary (OpenSCAD 2021.01's CGAL) takes per triangle of a model's solids, as
+its CSG tree lists them before any boolean (csg_size) [s]: the least and the most it is
+expected to take. Measured on a shared 2-core machine (docs/openscad.md, "Speed"): procedural
+terrains of 64-900 blocks, polyhedron columns or stacked voxels side by side, and 16-144
+hull()s of two spheres took 0.9-6.0 ms a triangle (median 2.9; 1.8 s for 768 triangles, 65 s
+for 10,800, 350 s for 73,740: the pace grows with the size), which this range holds."""
+TREE_TIME = (0.05, 1.0, 10.0)
+"""Time the binary is given to write a model's CSG tree, which the expectation counts: this
+share of the render's time limit, at least and at most these seconds [-, s, s]. It runs the
+model's script without any boolean (0.1-0.2 s for the models above); one whose script alone
+takes longer gets no expectation. Not counted in the render's own time limit."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class CsgSize:
+    """The size of a model as its CSG tree (the binary's `-o tree.csg`) lists it."""
+
+    solids: int
+    """Its solids before any boolean: cube(), sphere(), cylinder(), polyhedron(), surface(),
+    import(), and each extrusion of a 2-D shape."""
+    booleans: int
+    """The booleans joining them: a union, difference, intersection, hull or minkowski of n
+    children is n - 1 (a module's or a loop's children are a union too)."""
+    triangles: int
+    """The triangles of those solids, as the binary makes them ($fn, $fa, $fs); 12 for a
+    solid whose triangles are not listed (surface(), import(), an extrusion)."""
+
+
+_NODE = re.compile(r"^\s*(\w+)\((.*)\)\s*([;{])\s*$")
+_SOLIDS = {"cube", "sphere", "cylinder", "polyhedron", "surface", "import"}
+_EXTRUSIONS = {"linear_extrude", "rotate_extrude"}
+
+
+def csg_size(tree: str) -> CsgSize:
+    """The size of a model from its CSG tree (the text the binary writes with -o tree.csg:
+    a node a line, `name(arguments) {` or `name(arguments);`, `}` closing)."""
+    solids = booleans = triangles = 0
+    open_nodes: list[list] = [["", 0, False]]  # [name, children, inside an extrusion]
+    for line in [*tree.splitlines(), "}"]:  # (the top level is a union too)
+        if line.strip() == "}":
+            if not open_nodes:  # (a tree that closes more than it opened)
+                break
+            name, children, _ = open_nodes.pop()
+            if children > 1 and name not in _EXTRUSIONS:
+                booleans += children - 1
+            continue
+        node = _NODE.match(line)
+        if node is None:
+            continue
+        name, args, end = node.groups()
+        flat = open_nodes[-1][2]
+        open_nodes[-1][1] += 1
+        if not flat and (name in _SOLIDS or name in _EXTRUSIONS):
+            solids += 1
+            triangles += _triangles(name, args)
+        if end == "{":
+            open_nodes.append([name, 0, flat or name in _EXTRUSIONS])
+    return CsgSize(solids=solids, booleans=booleans, triangles=triangles)
+
+
+def _triangles(name: str, args: str) -> int:
+    """The triangles of one solid of a CSG tree as the binary makes it (12 if not known)."""
+
+    def number(key: str, default: float) -> float:
+        found = re.search(rf"(?:^|[ ,(]){re.escape(key)} = (-?[\d.e+-]+)", args)
+        try:
+            return float(found.group(1)) if found else default
+        except ValueError:
+            return default
+
+    def fragments(r: float) -> int:  # OpenSCAD's get_fragments_from_r
+        fn, fa, fs = number("$fn", 0.0), number("$fa", 12.0), number("$fs", 2.0)
+        if fn > 0:
+            return max(int(fn), 3)
+        if r < 1e-10 or fa <= 0 or fs <= 0:
+            return 3
+        return max(math.ceil(max(min(360.0 / fa, r * 2 * math.pi / fs), 5)), 5)
+
+    if name == "sphere":
+        f = fragments(number("r", 1.0))
+        return 2 * f * ((f + 1) // 2)
+    if name == "cylinder":
+        return 4 * fragments(max(number("r1", 1.0), number("r2", 1.0)))
+    if name == "polyhedron":
+        faces = re.search(r"faces = \[(.*)\]", args)
+        if faces is not None:
+            return sum(
+                max(f.count(",") - 1, 1) for f in re.findall(r"\[([^\[\]]*)\]", faces.group(1))
+            )
+    return 12
+
+
+def _csg_tree(
+    scad_file: Path, params: Mapping[str, ScadValue], *, memory: int, timeout: float
+) -> str | None:
+    """The model's CSG tree as the binary writes it (in the jail, under the render's limits),
+    or None when it did not write one within timeout [s]."""
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(dir=cache, prefix=".render-"))
+    try:
+        (work / "out").mkdir()
+        jail = jail_wanted()
+        target = f"{JAIL_OUT}/tree.csg" if jail else str(work / "out" / "tree.csg")
+        defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={scad_literal(v)}")]
+        argv = [openscad_binary(), "-o", target, *defines, scad_file.name]
+        cmd = confined(argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail)
+        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what="")
+        tree = work / "out" / "tree.csg"
+        if run.timed_out or run.status != 0 or not tree.is_file():
+            return None
+        return tree.read_text(errors="replace")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def binary_expectation(
+    scad_file: Path, params: Mapping[str, ScadValue], *, memory: int, limit: float
+) -> str:
+    """How long the binary is expected to take on the model, and why, for the render's
+    progress line: e.g. "expected to take 11 s to 86 s (an estimate: 900 solids, 899
+    booleans, 10,800 triangles in its CSG tree, at 1-8 ms a triangle)"; "" when its CSG tree
+    could not be written in its time (TREE_TIME). limit: the time the render is given [s]."""
+    share, least, most = TREE_TIME
+    tree_time = min(most, max(least, share * limit))
+    tree = _csg_tree(scad_file, params, memory=memory, timeout=tree_time)
+    if tree is None:
+        return ""
+    size = csg_size(tree)
+    lo, hi = (size.triangles * pace for pace in BINARY_PACE)
+    span = _duration(hi) if hi < 1 else f"{_duration(lo)} to {_duration(hi)}"
+    text = (
+        f"expected to take {span} (an estimate: {size.solids:,} solids, "
+        f"{size.booleans:,} booleans, {size.triangles:,} triangles in its CSG tree, at "
+        f"{BINARY_PACE[0] * 1000:g}-{BINARY_PACE[1] * 1000:g} ms a triangle)"
+    )
+    if hi > limit:
+        text += f", maybe more than its {limit:.0f} s limit"
+    return text
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 1:
+        return "under 1 s"
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 600:
+        return f"{seconds / 60:.1f} min"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 # -- rendering: one backend, or auto -------------------------------------------------------------
 
 
@@ -219,6 +380,9 @@ class ScadRender:
     warnings: tuple[str, ...] = ()
     """The renderer's own ERROR and WARNING lines, when it made a mesh anyway (a used file it
     could not parse, a module it does not know: the mesh lacks that part)."""
+    merged: int = 0
+    """On how many planes manifold's mesh had solids touching face to face that were merged
+    as the binary merges them (merge_touching), else 0."""
 
     @property
     def text_deviation(self) -> float:
@@ -246,6 +410,11 @@ class ScadRender:
                 f"; text(): glyphs may sit up to {dev:.2g} model units from OpenSCAD's "
                 f"({TEXT_DEVIATION:.2%} of their size, up to {self.text_size:.3g} here), "
                 f"{dev * scale * 1000:.2g} mm of terrain at scale {scale:g}"
+            )
+        if self.merged > 0:
+            text += (
+                f"; solids touching face to face (on {self.merged} "
+                f"plane{'s' if self.merged > 1 else ''}) merged as OpenSCAD merges them"
             )
         if self.face_spread > 0:
             text += (
@@ -311,10 +480,13 @@ def _render_with(
     timeout: float,
     memory: int,
     limit: float,
+    reason: str = "",
 ) -> ScadRender:
     """backend's render of the model, from the cache or run now in the jail (raises
     _BackendFailed). timeout: seconds this run may take; limit: the object's time limit, for
-    the message when it is hit."""
+    the message when it is hit. reason: why the binary renders it, for its progress line:
+    a binary render's Running events name the model, the reason and how long it is expected
+    to take (binary_expectation; the name alone when that is not known)."""
     out = _cache_path(backend, scad_file, params, deps)
     if out.is_file():
         # (a render cached before 2-D models were refused may be the evaluator's stand-in)
@@ -332,6 +504,11 @@ def _render_with(
         )
     out.parent.mkdir(parents=True, exist_ok=True)
     who = "OpenSCAD" if backend == "cgal" else "backend manifold"
+    what, expected = scad_file.name, ""
+    if backend == "cgal":
+        expected = binary_expectation(scad_file, params, memory=memory, limit=timeout)
+        if expected:
+            what += f" with the openscad binary{f' ({reason})' if reason else ''}, {expected}"
     # Render into a fresh folder beside the cache and rename: a killed render leaves no
     # half-written mesh behind under the final name.
     work = Path(tempfile.mkdtemp(dir=out.parent, prefix=".render-"))
@@ -343,11 +520,12 @@ def _render_with(
             argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail, layout=layout
         )
         t0 = time.monotonic()
-        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what=scad_file.name)
+        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what=what)
         if run.timed_out:
             raise _BackendFailed(
                 f"{scad_file}: {who} did not finish within its time limit of {limit:g} s "
-                f"and was stopped; a slow model may take more: give this terrain object "
+                f"and was stopped{f'; it was {expected}' if expected else ''}; a slow model "
+                f"may take more: give this terrain object "
                 f"`timeout: SECONDS` (or --scad-timeout SECONDS), at most {MAX_TIMEOUT:.0f}"
             )
         seconds = time.monotonic() - t0
@@ -367,7 +545,10 @@ def _render_with(
             )
         if backend == "manifold" and _flat(scad_file, params, mesh, memory=memory, timeout=timeout):
             raise _BackendFailed(flat_model_problem(scad_file))
+        merged = 0
         if backend == "manifold":
+            merged = merge_touching(mesh)
+            seconds = time.monotonic() - t0
             problem = manifold_mesh_problem(scad_file, mesh)
             if problem:
                 raise _BackendFailed(
@@ -379,6 +560,7 @@ def _render_with(
         facts = _read_facts(mesh.with_name(mesh.name + FACTS_SUFFIX))
         facts["seconds"] = round(seconds, 3)
         facts["warnings"] = list(render_warnings(run, jail=jail))
+        facts["merged"] = merged
         # The facts first: a mesh under its final name always has them beside it.
         out.with_suffix(_FACTS).write_text(json.dumps(facts))
         mesh.replace(out)
@@ -412,6 +594,7 @@ class _Found(TypedDict):
     text_size: float
     face_spread: float
     warnings: tuple[str, ...]
+    merged: int
 
 
 def _found(facts: dict) -> _Found:
@@ -426,7 +609,10 @@ def _found(facts: dict) -> _Found:
     if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
         warnings = []
     return _Found(
-        text_size=number("text_size"), face_spread=number("face_spread"), warnings=tuple(warnings)
+        text_size=number("text_size"),
+        face_spread=number("face_spread"),
+        warnings=tuple(warnings),
+        merged=int(number("merged")),
     )
 
 
@@ -489,7 +675,7 @@ def render_scad_result(
         "limit": timeout,
     }
     if backend != "auto":
-        return _render_with(backend, timeout=timeout, **job)
+        return _render_with(backend, timeout=timeout, reason=f"backend: {backend}", **job)
     return _render_auto(job, timeout)
 
 
@@ -520,8 +706,11 @@ def _render_auto(job: dict, timeout: float) -> ScadRender:
                 assert refused is not None  # (manifold was tried: its cache path was found)
                 _write_atomic(refused, why)
         timeout = max(timeout - (time.monotonic() - t0), 1.0)
+    # The progress line's reason: why without its details in brackets (file, line, point).
+    reason = re.sub(r"\s+\((?:[^()]|\([^()]*\))*\)", "", why)
+    reason = reason if len(reason) <= 120 else reason[:117] + "..."
     try:
-        binary = _render_with("cgal", timeout=timeout, **job)
+        binary = _render_with("cgal", timeout=timeout, reason=reason, **job)
     except _BackendFailed as exc:
         # Say why it was the binary's turn: backend manifold was tried first, or passed over.
         raise SceneError(f"{exc}\n(backend auto gave it to the binary because {why})") from None

@@ -12,8 +12,12 @@ import os
 import re
 import shutil
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from ._errors import SceneError
 from ._scad_sandbox import (
@@ -25,6 +29,9 @@ from ._scad_sandbox import (
     shared_libraries,
 )
 from ._scad_source import ScadValue, first_call, scad_literal
+
+if TYPE_CHECKING:
+    from shapely.geometry.base import BaseGeometry
 
 MANIFOLD_DIFFERS = {
     "surface": "its base is at z = 0, not 1 below the lowest height as in OpenSCAD",
@@ -112,10 +119,10 @@ def manifold_problem(scad_file: Path) -> str:
 
 def manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
     """Why the evaluator's mesh of the model cannot stand for the binary's, or "" if it can:
-    solids that touch face to face kept apart (Manifold treats touching as not overlapping,
-    so two walls stay back to back inside the solid; the binary's CGAL merges them: on
-    plywood_bridge, whose blocks, plank and ramps touch, 151 of 20,000 surface samples lay on
-    such walls, up to 6.7 cm from the binary's surface); and, for a model calling a
+    solids that touch face to face kept apart, which merge_touching could not merge (two
+    walls back to back inside the solid, where the binary's CGAL merges them: on
+    plywood_bridge, before it was merged, 151 of 20,000 surface samples lay on such walls, up
+    to 6.7 cm from the binary's surface); and, for a model calling a
     MANIFOLD_CHECKED construct, a mesh that is not closed and outward. Openness alone is not
     checked elsewhere: the binary's own mesh of solids touching along an edge is open too
     (voxel_wall)."""
@@ -132,7 +139,7 @@ def manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
             f"binary, or `backend: auto`, which picks it"
         )
     found = first_call(scad_file, MANIFOLD_CHECKED)
-    if found is None or (m.is_watertight and m.is_winding_consistent and m.volume > 0):
+    if found is None or _closed(m):
         return ""
     path, line, name = found
     return (
@@ -144,13 +151,39 @@ def manifold_mesh_problem(scad_file: Path, mesh: Path) -> str:
 
 def _touching_walls(mesh) -> tuple[float, float, float] | None:
     """A point [model units] where faces of mesh lie on one another back to back over some
-    area (solids touching face to face, kept apart), or None if none do.
+    area (solids touching face to face, kept apart), or None if none do."""
+    for plane in _back_to_back(mesh):
+        return plane.where
+    return None
+
+
+@dataclass(frozen=True)
+class _Touching:
+    """Faces of a mesh on one plane, seen from its two sides, that overlap: two solids touching
+    face to face there."""
+
+    faces: list[int]
+    """The faces on one side and on the other (indices into the mesh's faces)."""
+    normal: np.ndarray
+    """(3,) the plane's unit normal, of the first side's faces."""
+    u: np.ndarray
+    """(3,) a unit vector in the plane: the first of its 2-D coordinates."""
+    w: np.ndarray
+    """(3,) normal x u: the second."""
+    common: BaseGeometry
+    """Where the two sides overlap (a shapely geometry, in (u, w) coordinates)."""
+    where: tuple[float, float, float]
+    """A point of the overlap [model units]."""
+
+
+def _back_to_back(mesh) -> Iterator[_Touching]:
+    """Each plane where faces of mesh lie on one another back to back over some area.
     Faces are grouped by their plane (normal and offset, rounded); a plane met from both
     sides is checked for overlap in 2D. Faces merely meeting at an edge do not count."""
-    import numpy as np
+    from shapely import Polygon, unary_union
 
     if len(mesh.faces) == 0:
-        return None
+        return
     size = float(max(mesh.extents)) or 1.0
     n, c = mesh.face_normals, mesh.triangles_center
     d = np.einsum("ij,ij->i", n, c)
@@ -162,33 +195,229 @@ def _touching_walls(mesh) -> tuple[float, float, float] | None:
         other = groups.get(tuple(-v for v in key))
         if other is None or key < tuple(-v for v in key):
             continue
-        where = _overlap(mesh, n[faces[0]], faces, other, min_area=1e-8 * size * size)
-        if where is not None:
-            return where
-    return None
+        normal = n[faces[0]]
+        u, w = _plane_axes(normal)
+
+        def region(ids):
+            tris = mesh.triangles[ids]
+            return unary_union([Polygon(np.column_stack([t @ u, t @ w])).buffer(0) for t in tris])
+
+        common = region(faces).intersection(region(other))
+        if common.area <= _MIN_AREA * size * size:
+            continue
+        p = common.representative_point()
+        offset = float(mesh.triangles[faces[0]][0] @ normal)
+        x, y, z = (float(v) for v in p.x * u + p.y * w + offset * np.asarray(normal))
+        yield _Touching(faces + other, normal, u, w, common, (x, y, z))
 
 
-def _overlap(mesh, normal, faces: list[int], other: list[int], min_area: float):
-    """Where two sets of coplanar faces overlap by more than min_area [model units^2], in 3D,
-    or None."""
-    import numpy as np
-    from shapely import Polygon, unary_union
+_MIN_AREA = 1e-8
+"""Least overlap of faces back to back that counts as touching [fraction of the mesh's
+largest extent, squared]."""
 
-    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    w = np.cross(normal, u)
 
-    def region(ids):
-        tris = mesh.triangles[ids]
-        return unary_union([Polygon(np.column_stack([t @ u, t @ w])).buffer(0) for t in tris])
+_SLIVER = 1e-14
+"""Area below which a piece of a face cut by merge_touching is float noise [fraction of the
+mesh's largest extent, squared]."""
 
-    common = region(faces).intersection(region(other))
-    if common.area <= min_area:
+
+def _plane_axes(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u, w): unit vectors spanning the plane of normal, u x w = normal. For a normal along
+    an axis they are axes too, so a point's 2-D coordinates are two of its own, exactly."""
+    k = int(np.argmax(np.abs(normal)))
+    axis = np.zeros(3)
+    if abs(abs(normal[k]) - 1.0) < 1e-12:  # along an axis: take the next two
+        axis[(k + 1) % 3] = 1.0
+        u = axis
+    else:
+        u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+    return u, np.cross(normal, u)
+
+
+MERGED = "merge_touching 1"
+"""What backend manifold's meshes are made with after the evaluator (merge_touching), in the
+render cache's key: a mesh cached, or a model refused, before it merged touching solids is
+rendered again."""
+
+
+def merge_touching(mesh_path: Path) -> int:
+    """Merge solids that touch face to face in backend manifold's mesh (an STL, rewritten in
+    place), as the binary's CGAL merges them; returns on how many planes (0: none touched,
+    or the merge did not come out a closed solid of the same volume, and the mesh is left as
+    it was).
+
+    openscad-evaluator joins a module's or a loop's solids without a boolean
+    (Manifold.compose), and Manifold keeps solids that only touch apart; so blocks side by
+    side, a procedural terrain's usual make, leave both walls where they meet inside the
+    solid (plywood_bridge: the plank's underside on its blocks' tops). Here the overlap of
+    each such pair of faces is cut out of both (shapely, in the plane), what is left of a
+    face is triangulated again, and faces are split where another face's corner lies on their
+    edge, so that the mesh is closed again (and, unless solids touch along an edge only,
+    watertight to trimesh). The STL's float32 coordinates put the two walls on exactly one
+    plane (the evaluator's may differ in the last bit of a double: 0.7 + 0.1
+    against 8 * 0.1). Then it is the binary's surface: the planner's height field sees no
+    upward face inside the solid (a slab's top under a tower on it, 0.5 m below the tower's
+    top, is ground under a shelf to its overhead rule), and the mesh cleaning of
+    scenes/_mesh.py gets a closed mesh (walls inside put four faces on an edge: not watertight
+    to trimesh, so the cleaning takes it for an open surface and turns it up by the sign of
+    its upward area, 0 for a closed one: 16 x 16 blocks came out upside down).
+
+    Written here because nothing at hand does it: Manifold's union, simplify() and
+    set_tolerance() of the evaluator's mesh keep the faces (it sees them as touching, not
+    overlapping), and trimesh has no boolean of coplanar faces nor a T-junction repair."""
+    import trimesh
+
+    mesh = trimesh.load_mesh(mesh_path)  # (vertices merged)
+    planes = list(_back_to_back(mesh))
+    if not planes:
+        return 0
+    merged = _merged(mesh, planes)
+    if merged is None:
+        return 0
+    tmp = mesh_path.with_name(f".{mesh_path.name}.merged")
+    merged.export(tmp, file_type="stl")
+    tmp.replace(mesh_path)
+    return len(planes)
+
+
+def _merged(mesh, planes: list[_Touching]):
+    """mesh (trimesh) with the overlap of each plane's faces cut out of them (_back_to_back),
+    closed again; None unless it comes out closed and wound outward (_closed), touching
+    nowhere and of the same volume (faces back to back add nothing to it)."""
+    import shapely
+    import trimesh
+    from shapely import Polygon
+
+    size = float(max(mesh.extents))
+    # A face cut by less than this, or what is left of it, is no face [model units^2]: any
+    # more, however small, must be cut or kept, or the mesh has a hole there.
+    min_area = _SLIVER * size * size
+    dropped: set[int] = set()
+    added: list[np.ndarray] = []
+    for plane in planes:
+        for f in plane.faces:
+            tri = mesh.triangles[f]
+            flat = np.column_stack([tri @ plane.u, tri @ plane.w])
+            face = Polygon(flat)
+            if face.intersection(plane.common).area <= min_area:
+                continue
+            dropped.add(f)
+            rest = face.difference(plane.common)
+            if rest.area <= min_area:
+                continue
+            pieces = shapely.constrained_delaunay_triangles(rest)
+            for piece in shapely.get_parts(pieces):
+                corners = np.asarray(piece.exterior.coords)[:3]
+                new = _lifted(corners, flat, tri)
+                if np.cross(new[1] - new[0], new[2] - new[0]) @ mesh.face_normals[f] < 0:
+                    new = new[::-1]
+                added.append(new)
+    keep = np.setdiff1d(np.arange(len(mesh.faces)), np.fromiter(dropped, dtype=np.int64))
+    triangles = np.concatenate([mesh.triangles[keep], np.asarray(added).reshape(-1, 3, 3)])
+    out = trimesh.Trimesh(**trimesh.triangles.to_kwargs(triangles))  # (vertices merged)
+    out = _split_at_corners(out)
+    out.update_faces(out.nondegenerate_faces())
+    out.remove_unreferenced_vertices()
+    if not _closed(out) or abs(out.volume - mesh.volume) > 1e-6 * abs(mesh.volume):
         return None
-    p = common.representative_point()
-    offset = float(mesh.triangles[faces[0]][0] @ normal)
-    x, y, z = (float(v) for v in p.x * u + p.y * w + offset * np.asarray(normal))
-    return (x, y, z)
+    if _touching_walls(out) is not None:
+        return None
+    return out
+
+
+def _closed(mesh) -> bool:
+    """Whether mesh bounds solids wound outward: each edge is crossed as often one way as the
+    other (so each face has its neighbours and is wound as they are) and the volume is
+    positive. Solids that touch along an edge only (voxel_wall's blocks corner to corner)
+    put four faces on it, which trimesh's is_watertight refuses and the binary's mesh has too."""
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if len(faces) == 0:
+        return False
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    n = int(faces.max()) + 1
+    forward = np.sort(edges[:, 0] * n + edges[:, 1])
+    backward = np.sort(edges[:, 1] * n + edges[:, 0])
+    return bool(np.array_equal(forward, backward)) and float(mesh.volume) > 0
+
+
+def _lifted(corners: np.ndarray, flat: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(3, 3): the points of the plane of triangle tri ((3, 3), at (3, 2) flat in the plane's
+    coordinates) at corners ((3, 2), in the same coordinates): a corner of tri itself exactly,
+    any other by its barycentric coordinates."""
+    out = np.empty((3, 3))
+    m = np.column_stack([flat[1] - flat[0], flat[2] - flat[0]])
+    for i, q in enumerate(corners):
+        same = np.flatnonzero(np.all(flat == q, axis=1))
+        if len(same):
+            out[i] = tri[same[0]]
+            continue
+        b, c = np.linalg.solve(m, q - flat[0])
+        out[i] = tri[0] + b * (tri[1] - tri[0]) + c * (tri[2] - tri[0])
+    return out
+
+
+def _split_at_corners(mesh, rounds: int = 4):
+    """mesh with each face split where a corner of another face lies inside one of its edges
+    (a T-junction: after the cut, a tall wall's edge runs past the corner of the short
+    block beside it), so that every edge has a face on each side."""
+    import trimesh
+    from scipy.spatial import KDTree
+
+    for _ in range(rounds):
+        faces = np.asarray(mesh.faces)
+        vertices = np.asarray(mesh.vertices)
+        edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        _, index, counts = np.unique(
+            np.sort(edges, axis=1), axis=0, return_inverse=True, return_counts=True
+        )
+        lone = np.flatnonzero(counts[index.reshape(-1)] == 1)  # edges of one face only
+        if len(lone) == 0:
+            return mesh
+        ends = np.unique(edges[lone])
+        tree = KDTree(vertices[ends])
+        tol = 1e-9 * float(max(mesh.extents))
+        splits: dict[int, list[tuple[int, list[int]]]] = {}
+        for e in lone:
+            a, b = edges[e]
+            pa, pb = vertices[a], vertices[b]
+            length = float(np.linalg.norm(pb - pa))
+            found = []
+            for j in tree.query_ball_point((pa + pb) / 2, length / 2 + tol):
+                v = int(ends[j])
+                if v in (a, b):
+                    continue
+                t = float((vertices[v] - pa) @ (pb - pa)) / (length * length)
+                off = np.linalg.norm(pa + t * (pb - pa) - vertices[v])
+                if 0 < t < 1 and off <= tol:
+                    found.append((t, v))
+            if found:
+                splits.setdefault(int(e) // 3, []).append(
+                    (int(e) % 3, [v for _, v in sorted(found)])
+                )
+        if not splits:
+            return mesh
+        new_faces = [np.delete(faces, list(splits), axis=0)]
+        new_vertices = [vertices]
+        count = len(vertices)
+        for f, cuts in splits.items():
+            ring: list[int] = []
+            inner = dict(cuts)
+            for k in range(3):  # the face's corners with the corners found on its edges
+                ring += [int(faces[f][k]), *inner.get(k, [])]
+            if len(cuts) == 1:  # a fan from the corner opposite the edge cut
+                k = cuts[0][0]
+                apex = int(faces[f][(k + 2) % 3])
+                start = ring.index(apex)
+                ring = ring[start:] + ring[:start]
+                fan = [[apex, ring[i], ring[i + 1]] for i in range(1, len(ring) - 1)]
+            else:  # a fan from the face's centre
+                new_vertices.append(vertices[faces[f]].mean(axis=0)[None])
+                fan = [[count, ring[i], ring[(i + 1) % len(ring)]] for i in range(len(ring))]
+                count += 1
+            new_faces.append(np.asarray(fan, dtype=np.int64))
+        mesh = trimesh.Trimesh(np.concatenate(new_vertices), np.concatenate(new_faces))
+    return mesh
 
 
 def _manifold_distributions() -> list:
