@@ -114,7 +114,8 @@ class GroundChoice:
     area: float
     """Area of the ground seen [m^2]."""
     planes: tuple[Plane, ...]
-    """Every plane that was found, in extraction order."""
+    """Every candidate plane, in extraction order, as settled on its own surface (_settle;
+    with the ground through a given point: as RANSAC found them)."""
     warnings: tuple[str, ...] = ()
     """Why the choice may be wrong, for the user to check."""
 
@@ -233,11 +234,13 @@ def choose_ground(
     2. Each is settled on its own surface (_settle): the points near it whose own normal
        agrees with it (not the foot of a wall or a person), in a band that grows with range as
        the sensor's noise does; its area is measured there, on all the points.
-    3. The largest group of mutually parallel surfaces gives the refined up (the floor and a
-       desk agree on it; a sloping surface does not).
+    3. The best group of mutually parallel surfaces gives the refined up (the floor and a
+       desk agree on it; a sloping surface does not): by area, near the prior, and with the
+       scene upright under it (_refined_up).
     4. The level surfaces (within parallel_deg of the refined up) at least min_area large are
-       ground candidates; the lowest one, its height taken where it lies
-       along the refined up, is the ground.
+       ground candidates; the lowest one, its height taken where it lies along the refined
+       up, is the ground.
+    5. The ground and the other level surfaces, piece by piece, are fitted jointly (_settle).
     near: a point ((3,), capture frame [m]) on the intended ground: then the plane through it
     is the ground whatever its orientation (the user's re-levelling click).
     """
@@ -306,7 +309,8 @@ def choose_ground(
                 level.append((n, float(-n @ points[own].mean(axis=0)), r & ~claimed))
                 claimed |= r
     spread = _narrow_spread(points[ground.on], ground.plane.normal)
-    n, offsets, _ = _settle(cloud, level, cfg, others=min(1.0, (STRIP / spread) ** 2))
+    others = 1.0 if spread <= STRIP else (STRIP / spread) ** 2
+    n, offsets, _ = _settle(cloud, level, cfg, others=others)
     d = offsets[0]
     support = int(np.sum(np.abs(points @ n + d) <= cfg.threshold))
     return GroundChoice(
@@ -391,7 +395,8 @@ def _fit(cloud: _Cloud, plane: Plane, up: np.ndarray, cfg: GroundConfig) -> _Fit
 def _pieces(cloud: _Cloud, f: _Fit) -> list[np.ndarray]:
     """(N,) bool regions, one per connected part (5 cm cells, 8-connected) of a settled
     surface at least MIN_PIECE large: the cloud's points near its plane whose cell is in that
-    part. None when the surface is too wide for a grid of cells (a survey's ground)."""
+    part. One piece, all its points near, when it is too wide for a grid of cells (a survey's
+    ground)."""
     from scipy import ndimage
 
     pts, n = cloud.points, f.plane.normal
@@ -431,7 +436,8 @@ def _settle(
     A plane's points are those within its band whose own normal is within surface_deg of the
     plane's: the foot of a wall, of a person or of a desk's legs lies within centimetres of
     the floor, and on a small floor such points outnumbered the floor's own near the band's
-    edge, tilting it (5 deg, 19 cm at the camera). The band settles on the plane's own scatter
+    edge, tilting it (a strip 15 cm deep at a wall's foot: 0.4 deg, 2 cm at the camera; an
+    office's floor behind desks and people: 5 cm). The band settles on the plane's own scatter
     as it grows with range (3 robust sigmas in bins of range, never less at a longer range;
     between threshold and MAX_BAND): a far, noisy floor is fitted on its whole band, a near
     one on its centimetre, and the near points, known better, weigh more."""
