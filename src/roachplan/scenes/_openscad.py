@@ -195,13 +195,14 @@ def _named(why: str, backend: str) -> str:
 
 # -- what the binary is expected to take ----------------------------------------------------------
 
-BINARY_PACE = (1e-3, 8e-3)
+BINARY_PACE = (5e-4, 8e-3)
 """How long the binary (OpenSCAD 2021.01's CGAL) takes per triangle of a model's solids, as
 its CSG tree lists them before any boolean (csg_size) [s]: the least and the most it is
 expected to take. Measured on a shared 2-core machine (docs/openscad.md, "Speed"): procedural
 terrains of 64-900 blocks, polyhedron columns or stacked voxels side by side, and 16-144
 hull()s of two spheres took 0.9-6.0 ms a triangle (median 2.9; 1.8 s for 768 triangles, 65 s
-for 10,800, 350 s for 73,740: the pace grows with the size), which this range holds."""
+for 10,800, 350 s for 73,740: the pace grows with the size), and a minkowski() of a box with 7
+holes and a sphere 0.95 ms for each of its 175,104 (166 s), which this range holds."""
 TREE_TIME = (0.05, 1.0, 10.0)
 """Time the binary is given to write a model's CSG tree, which the expectation counts: this
 share of the render's time limit, at least and at most these seconds [-, s, s]. It runs the
@@ -221,7 +222,8 @@ class CsgSize:
     children is n - 1 (a module's or a loop's children are a union too)."""
     triangles: int
     """The triangles of those solids, as the binary makes them ($fn, $fa, $fs); 12 for a
-    solid whose triangles are not listed (surface(), import(), an extrusion)."""
+    solid whose triangles are not listed (surface(), import(), an extrusion); a minkowski()
+    counts the product of its children's."""
 
 
 _NODE = re.compile(r"^\s*(\w+)\((.*)\)\s*([;{])\s*$")
@@ -231,28 +233,47 @@ _EXTRUSIONS = {"linear_extrude", "rotate_extrude"}
 
 def csg_size(tree: str) -> CsgSize:
     """The size of a model from its CSG tree (the text the binary writes with -o tree.csg:
-    a node a line, `name(arguments) {` or `name(arguments);`, `}` closing)."""
-    solids = booleans = triangles = 0
-    open_nodes: list[list] = [["", 0, False]]  # [name, children, inside an extrusion]
-    for line in [*tree.splitlines(), "}"]:  # (the top level is a union too)
+    a node a line, `name(arguments) {` or `name(arguments);`, `}` closing). A minkowski()
+    counts the product of its children's triangles: CGAL sums each convex part of one with
+    the other and joins all those (a non-convex solid and a sphere take it minutes)."""
+    solids = booleans = 0
+    # Open nodes: (name, its children's triangles, inside an extrusion, its own triangles);
+    # the first is the top level, a union too.
+    nodes: list[tuple[str, list[int], bool, int]] = [("", [], False, 0)]
+
+    def close() -> int:  # the last open node's triangles
+        nonlocal booleans
+        name, children, flat, own = nodes.pop()
+        if not flat and len(children) > 1:
+            booleans += len(children) - 1
+        if name in _EXTRUSIONS:
+            return own
+        if name == "minkowski" and children:
+            return math.prod(max(c, 1) for c in children)
+        return sum(children)
+
+    for line in tree.splitlines():
         if line.strip() == "}":
-            if not open_nodes:  # (a tree that closes more than it opened)
-                break
-            name, children, _ = open_nodes.pop()
-            if children > 1 and name not in _EXTRUSIONS:
-                booleans += children - 1
+            if len(nodes) > 1:
+                triangles = close()
+                nodes[-1][1].append(triangles)
             continue
         node = _NODE.match(line)
         if node is None:
             continue
         name, args, end = node.groups()
-        flat = open_nodes[-1][2]
-        open_nodes[-1][1] += 1
+        flat, own = nodes[-1][2], 0
         if not flat and (name in _SOLIDS or name in _EXTRUSIONS):
             solids += 1
-            triangles += _triangles(name, args)
+            own = _triangles(name, args)
         if end == "{":
-            open_nodes.append([name, 0, flat or name in _EXTRUSIONS])
+            nodes.append((name, [], flat or name in _EXTRUSIONS, own))
+        else:
+            nodes[-1][1].append(own)
+    while len(nodes) > 1:  # (a tree cut short)
+        triangles = close()
+        nodes[-1][1].append(triangles)
+    triangles = close()  # (the top level's booleans counted first)
     return CsgSize(solids=solids, booleans=booleans, triangles=triangles)
 
 
@@ -316,8 +337,8 @@ def binary_expectation(
     scad_file: Path, params: Mapping[str, ScadValue], *, memory: int, limit: float
 ) -> str:
     """How long the binary is expected to take on the model, and why, for the render's
-    progress line: e.g. "expected to take 11 s to 86 s (an estimate: 900 solids, 899
-    booleans, 10,800 triangles in its CSG tree, at 1-8 ms a triangle)"; "" when its CSG tree
+    progress line: e.g. "expected to take 5.4 s to 86 s (an estimate: 900 solids, 899
+    booleans, 10,800 triangles in its CSG tree, at 0.5-8 ms a triangle)"; "" when its CSG tree
     could not be written in its time (TREE_TIME). limit: the time the render is given [s]."""
     share, least, most = TREE_TIME
     tree_time = min(most, max(least, share * limit))
@@ -326,7 +347,7 @@ def binary_expectation(
         return ""
     size = csg_size(tree)
     lo, hi = (size.triangles * pace for pace in BINARY_PACE)
-    span = _duration(hi) if hi < 1 else f"{_duration(lo)} to {_duration(hi)}"
+    span = "under 1 s" if hi < 1 else f"{_duration(lo)} to {_duration(hi)}"
     text = (
         f"expected to take {span} (an estimate: {size.solids:,} solids, "
         f"{size.booleans:,} booleans, {size.triangles:,} triangles in its CSG tree, at "
@@ -338,8 +359,8 @@ def binary_expectation(
 
 
 def _duration(seconds: float) -> str:
-    if seconds < 1:
-        return "under 1 s"
+    if seconds < 10:
+        return f"{seconds:.1f} s"
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 600:
