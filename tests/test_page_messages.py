@@ -19,6 +19,7 @@ import re
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import pytest
@@ -26,6 +27,11 @@ import pytest
 from conftest import ROOT, free_port
 from test_app import CHROMIUM, browser_pages, upload
 from test_perception import REAL
+
+if TYPE_CHECKING:
+    from roachplan.app._app import App, Page
+    from roachplan.app._jobs import Child
+    from roachplan.app._loop import CommandLoop
 
 SAMP11 = REAL / "terrain_samp11-utm.pcd"
 NOT_PICKED = (
@@ -62,9 +68,14 @@ def test_an_unexpected_error_is_named_and_a_users_error_said_as_it_is():
     )
     said = raised_text(None, "no path", "Traceback ...\nroachplan.PlanningError: no path")
     assert said == "no path"
-    job = SimpleNamespace(outcome=Raised.of(KeyError("route")), task="planning")
-    assert "(KeyError)" in failure(job) and "route" not in failure(job)
-    job = SimpleNamespace(outcome=Raised.of(PlanningError("start invalid")), task="planning")
+    # A stand-in for a finished job: failure reads only its outcome and task.
+    job = cast("Child[Any]", SimpleNamespace(outcome=Raised.of(KeyError("route")), task="planning"))
+    said = failure(job)
+    assert said is not None and "(KeyError)" in said and "route" not in said, said
+    job = cast(
+        "Child[Any]",
+        SimpleNamespace(outcome=Raised.of(PlanningError("start invalid")), task="planning"),
+    )
     assert failure(job) == "start invalid"
 
 
@@ -97,20 +108,20 @@ class _Shell:
         pass
 
 
-@dataclasses.dataclass(frozen=True)
-class _BrokenCmd:
-    client_id: int | None
-
-
 def test_a_handler_that_breaks_says_which_command_failed_and_logs_the_traceback(capfd):
+    from roachplan.app._commands import Cmd
     from roachplan.app._loop import Command, CommandLoop
+
+    @dataclasses.dataclass(frozen=True)
+    class _BrokenCmd(Cmd):
+        pass
 
     def broken(app, cmd) -> None:
         np.zeros(0)[0]  # the user's IndexError: "index 0 is out of bounds ..."
 
     shell = _Shell()
     loop = CommandLoop({_BrokenCmd: Command(handler=broken, name="Plan")}, shell=shell)
-    loop.start(SimpleNamespace())
+    loop.start(cast("App", SimpleNamespace()))  # (a stand-in: the handler never uses its app)
     try:
         loop.put(_BrokenCmd(4))
         _until(lambda: shell.statuses, 10, "the command did not run")
@@ -130,8 +141,9 @@ def test_a_success_without_a_path_or_a_drive_is_never_recorded(world, tmp_path):
     from roachplan.app._app import App, unrecordable
 
     shown: list[str] = []
-    page = SimpleNamespace(set_status=shown.append, show_results=lambda trials: None)
-    app = App(world, page=page, loop=None, upload_dir=tmp_path)
+    # Stand-ins: record touches only the page's status line and results table, and no loop.
+    page = cast("Page", SimpleNamespace(set_status=shown.append, show_results=lambda trials: None))
+    app = App(world, page=page, loop=cast("CommandLoop", None), upload_dir=tmp_path)
     path = [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]]
     good = dict(outcome="success", reason="reached the goal", drive_time=3.2, energy=0.4)
     good |= dict(relative_energy=1.1, path=path)
@@ -139,7 +151,9 @@ def test_a_success_without_a_path_or_a_drive_is_never_recorded(world, tmp_path):
     no_drive = good | dict(drive_time=0.0)
     no_path = dict(good, outcome="no_path", reason="no path found", path=[], drive_time=0.0)
     assert unrecordable(good) is None and unrecordable(no_path) is None
-    assert "no path" in unrecordable(one_point) and "0 s" in unrecordable(no_drive)
+    why_one_point, why_no_drive = unrecordable(one_point), unrecordable(no_drive)
+    assert why_one_point is not None and "no path" in why_one_point, why_one_point
+    assert why_no_drive is not None and "0 s" in why_no_drive, why_no_drive
     assert not app.record(one_point, "") and not app.record(no_drive, "batch")
     assert app.scene_trials == [] and shown[-1].startswith("No trial recorded: ")
     assert app.record(no_path, "batch") and app.record(good, "")  # (a real failure is kept)
@@ -202,6 +216,7 @@ def test_a_click_lands_on_the_first_surface_along_its_ray():
     slab = trimesh.creation.box((0.6, 0.6, 0.05), transform=_at(0.0, 0.0, 0.5))
     wall = trimesh.creation.box((0.2, 4.0, 1.5), transform=_at(1.2, 0.0, 0.75))
     mesh = trimesh.util.concatenate([floor, slab, wall])
+    assert isinstance(mesh, trimesh.Trimesh)
     hf = heightfield_from_mesh(
         mesh.vertices,
         mesh.faces,
@@ -219,14 +234,14 @@ def test_a_click_lands_on_the_first_surface_along_its_ray():
     assert hit is not None and abs(hit[0] - 0.1) < 0.02 and abs(hit[1]) < 0.01, hit
     at_floor = np.array([-1.0, 0.5, 0.0]) - camera
     hit = click_point(mesh.vertices, mesh.faces, hf, camera, at_floor)
-    assert np.allclose(hit, (-1.0, 0.5, 0.0), atol=0.01), hit
+    assert hit is not None and np.allclose(hit, (-1.0, 0.5, 0.0), atol=0.01), hit
     # The ground plane as drawn (a scene's `ground`) is a surface too; nothing drawn: missed.
     up = np.array([0.0, 0.0, 1.0])
     assert click_point(mesh.vertices, mesh.faces, hf, camera, up) is None
     ground = (-0.2, (0.0, 0.0), (5.0, 5.0))
     beyond = np.array([-4.5, 0.0, -0.2]) - camera  # (past the floor box, on the plane)
     hit = click_point(mesh.vertices, mesh.faces, hf, camera, beyond, ground=ground)
-    assert np.allclose(hit, (-4.5, 0.0, -0.2), atol=1e-6), hit
+    assert hit is not None and np.allclose(hit, (-4.5, 0.0, -0.2), atol=1e-6), hit
 
 
 def _at(x: float, y: float, z: float) -> np.ndarray:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,6 +97,21 @@ def _points_in_square(app, centre, side: float) -> int:
     )
 
 
+def _check_csv(
+    page, path: Path, sizes: Sequence[float], shown: list[tuple[int, int, float]]
+) -> None:
+    """The study's CSV download, saved at path: a header, then one row per row of the table
+    shown ((points, kept, error) per row, as _check_rows returns them)."""
+    with page.expect_download() as dl:
+        page.get_by_role("button", name="Download study CSV").click()
+    dl.value.save_as(path)
+    lines = path.read_text().splitlines()
+    assert lines[0] == "voxel_cm,points,points_kept,error_mm" and len(lines) == len(sizes) + 2
+    csv_rows = [line.split(",") for line in lines[1:]]
+    assert [(int(p), int(k)) for _, p, k, _ in csv_rows] == [(p, k) for p, k, _ in shown]
+    assert all(abs(float(r[3]) - f[2]) < 1e-3 for r, f in zip(csv_rows, shown))
+
+
 @pytest.mark.slow
 def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artifacts, tmp_path):
     pcd = REAL / "tutorials_region_growing_rgb_tutorial.pcd"
@@ -123,15 +139,7 @@ def test_voxel_study_on_a_floor_square_the_ground_plane_and_the_chair(app, artif
         assert floor[0][0] == _points_in_square(app, centre, 0.5)  # the square clicked
         assert floor[0][2] < 20.0  # a Kinect's noise on a floor, not furniture [mm]
         assert NOT_FLAT not in app.voxel_panel.info.content
-        with page.expect_download() as dl:
-            page.get_by_role("button", name="Download study CSV").click()
-        path = tmp_path / "study.csv"
-        dl.value.save_as(path)
-        lines = path.read_text().splitlines()
-        assert lines[0] == "voxel_cm,points,points_kept,error_mm" and len(lines) == len(sizes) + 2
-        csv_rows = [line.split(",") for line in lines[1:]]
-        assert [(int(p), int(k)) for _, p, k, _ in csv_rows] == [(p, k) for p, k, _ in floor]
-        assert all(abs(float(r[3]) - f[2]) < 1e-3 for r, f in zip(csv_rows, floor))
+        _check_csv(page, tmp_path / "study.csv", sizes, floor)
 
         # The ground plane the load found: the whole floor, many more points than the square.
         page.locator("input[value='Square']").first.click()
