@@ -366,3 +366,50 @@ def test_solids_that_only_nearly_touch_are_left_as_they_are(tmp_path):
     # Apart by more, they do not touch at all.
     apart = _boxes(tmp_path / "a.stl", ((0, 0, 0), (1, 1, 1)), ((1.01, 0, 0), (2, 1, 2)))
     assert merge_touching(apart) == 0
+
+
+def test_the_pages_load_status_says_what_the_binary_expects_while_it_renders():
+    """The Scene folder's load status adds what a render says of itself when that is more
+    than the model's name (the binary's why and expectation), while it runs."""
+    from types import SimpleNamespace
+
+    from roachplan.app._loading import BackgroundLoad, Loading
+
+    said = (
+        "terrain.scad with the openscad binary (surface() is rendered differently by "
+        "manifold), expected to take 2.4 s to 38 s (an estimate: 401 solids, 400 booleans, "
+        "4,812 triangles in its CSG tree, at 0.5-8 ms a triangle)"
+    )
+
+    class Job:
+        elapsed, done, events = 12.0, False, []
+
+        def poll(self):
+            events, self.events = self.events, []
+            return events
+
+    gui = SimpleNamespace(
+        add_markdown=lambda content: SimpleNamespace(content=content),
+        add_button=lambda *a, **k: SimpleNamespace(on_click=lambda f: None, visible=False),
+    )
+    lane = BackgroundLoad(gui, put=None)
+    job = Job()
+    lane.current = Loading(
+        job=job,  # type: ignore[arg-type]
+        client_id=None,
+        ref="terrain.yaml",
+        label="terrain",
+        from_upload=False,
+        what="Rendering terrain.scad with Manifold or, where it must, OpenSCAD (limit 600 s)",
+    )
+    job.events = [Running(what="terrain.scad", elapsed=11.5, limit=600.0)]
+    assert lane.poll() is None
+    assert lane.status.content == (
+        "Rendering terrain.scad with Manifold or, where it must, OpenSCAD (limit 600 s) ... 12 s"
+    )
+    job.events = [Running(what=said, elapsed=0.5, limit=599.0)]
+    lane.poll()
+    assert lane.status.content.endswith(f" ... 12 s; OpenSCAD {said}")
+    job.elapsed = 20.0  # no word from the render for 8 s: it ended, the load goes on
+    lane.poll()
+    assert lane.status.content.endswith("OpenSCAD (limit 600 s) ... 20 s")
