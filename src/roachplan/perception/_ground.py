@@ -41,6 +41,9 @@ narrower in-plane direction [m]; 0.1 is a strip 35 cm deep) has its tilt across 
 other level surfaces as much as by itself; a wider one, less so, by (STRIP / its spread)^2 per
 point: its own tilt is then known better than a desk top is parallel to it (two desks 1 cm
 apart in height read as one plane tilted 1 deg, 4 cm at the camera)."""
+REACH = 0.25
+"""Farthest a point may lie from a plane [m] and still be in the rounds that settle it: its
+band is at most MAX_BAND, and it moves by centimetres."""
 MIN_PIECE = 0.05
 """Smallest connected part of another level surface that joins the ground's fit [m^2]."""
 SETTLE_ROUNDS = 10
@@ -200,7 +203,10 @@ def _area(points: np.ndarray, normal: np.ndarray, cell: float = 0.05) -> float:
     """Area [m^2] covered by points ((N, 3)) lying on a plane with this normal: occupied cells
     of a cell x cell grid in the plane."""
     uv = np.floor(points @ _in_plane(normal).T / cell).astype(np.int64)
-    return len(np.unique(uv, axis=0)) * cell * cell
+    if len(uv) == 0:
+        return 0.0
+    uv -= uv.min(axis=0)
+    return len(np.unique(uv[:, 0] * (int(uv[:, 1].max()) + 1) + uv[:, 1])) * cell * cell
 
 
 def _narrow_spread(points: np.ndarray, normal: np.ndarray) -> float:
@@ -357,7 +363,9 @@ class _Cloud:
         for p in planes:
             near |= np.abs(points @ p.normal + p.offset) <= MAX_BAND
         full = np.zeros_like(points)
-        if near.any():
+        if len(sub) == len(points):  # not subsampled: its own normals
+            full[near] = normals[near]
+        elif near.any():
             full[near] = normals[KDTree(sub).query(points[near], k=1)[1]]
         ranges = np.linalg.norm(points, axis=1) if toward_sensor else None
         return cls(points=points, normals=full, ranges=ranges)
@@ -441,15 +449,21 @@ def _settle(
     as it grows with range (3 robust sigmas in bins of range, never less at a longer range;
     between threshold and MAX_BAND): a far, noisy floor is fitted on its whole band, a near
     one on its centimetre, and the near points, known better, weigh more."""
-    pts, ranges = cloud.points, cloud.ranges
-    cos_s = np.cos(np.radians(cfg.surface_deg))
+    # Only points within REACH of a plane can join it as it settles: the rest are left out
+    # of the rounds (most of a room's points are walls and furniture).
     n = np.asarray(level[0][0], dtype=np.float64)
     offsets = [float(d) for _, d, _ in level]
-    regions = [r for _, _, r in level]
+    reach = np.zeros(len(cloud.points), dtype=bool)
+    for _, d, r in level:
+        reach |= (np.abs(cloud.points @ n + d) <= REACH) & (True if r is None else r)
+    pts, normals = cloud.points[reach], cloud.normals[reach]
+    ranges = None if cloud.ranges is None else cloud.ranges[reach]
+    regions = [None if r is None else r[reach] for _, _, r in level]
+    cos_s = np.cos(np.radians(cfg.surface_deg))
     bands = [np.full(len(pts), cfg.threshold) for _ in level]
     masks = [np.zeros(len(pts), dtype=bool) for _ in level]
     for _ in range(SETTLE_ROUNDS):
-        agree = cloud.normals @ n >= cos_s
+        agree = normals @ n >= cos_s
         heights = pts @ n
         masks = [
             agree & (np.abs(heights + dk) <= bk) & (True if rk is None else rk)
@@ -473,7 +487,10 @@ def _settle(
         ]
         if settled:
             break
-    return n, offsets, masks
+    full = [np.zeros(len(cloud.points), dtype=bool) for _ in masks]
+    for f, mk in zip(full, masks, strict=True):
+        f[reach] = mk
+    return n, offsets, full
 
 
 def _orthogonal(
