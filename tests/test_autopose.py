@@ -1,4 +1,4 @@
-"""Start and goal picked on a terrain nobody placed them on (scenes/_autopose.py, issue 30):
+"""Start and goal picked on a terrain nobody placed them on (scenes/_autopose.py):
 in the largest region where the robot can stand *and* move, as far apart as it allows, joined
 by a plan, within seconds; and where nothing can be joined, a message that says why and how
 far apart two places of the region are."""
@@ -200,7 +200,7 @@ def test_when_only_shorter_pairs_are_joined_the_longest_joined_is_picked_and_sai
 
 @pytest.mark.slow
 def test_a_kinect2_qhd_capture_of_a_library_scene_gets_a_joined_pick(tmp_path):
-    """The capture a user made (issue 30): the double bridge seen by a Kinect v2 in QHD from
+    """The capture a user made: the double bridge seen by a Kinect v2 in QHD from
     3.2 m behind and 1.8 m up, used directly as a scene: `plan` picks start and goal at least
     1 m apart and plans between them (it said "could not pick a start and goal the planner
     joins ... (31.74 m^2): 1.45 m apart: prm found no path within its time limit")."""

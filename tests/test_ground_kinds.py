@@ -1,4 +1,4 @@
-"""The ground on small, far and tilted floors (issue 30, item 3).
+"""The ground on small, far and tilted floors.
 
 On held-out real rooms the ground was wrong on a floor that held few of the points (5.2 cm too
 high) and beside a person standing in front of a wall (5.5 deg and 19 cm off). These are

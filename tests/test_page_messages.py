@@ -1,4 +1,4 @@
-"""No result without a run, and messages a person can act on (issue 30, items 6 and 7).
+"""No result without a run, and messages a person can act on.
 
 A world whose start and goal nobody could pick (build_world leaves both at one placeholder
 point) is never "valid": Plan refuses it in a sentence, Drive stays disabled, and no trial row is

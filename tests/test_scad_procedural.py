@@ -1,4 +1,4 @@
-"""Procedural terrains (issue 30, item 8): many solids side by side or stacked, touching face
+"""Procedural terrains: many solids side by side or stacked, touching face
 to face, as public terrain generators make them. The binary's CGAL takes minutes on them (a
 public one: 21 min); backend auto renders them with manifold, merging the solids that touch
 (openscad-evaluator joins a loop's solids without a boolean, which leaves both walls inside the

@@ -327,7 +327,7 @@ def unrecordable(trial: dict) -> str | None:
     """Why a trial's record (TrialResult.to_json()) is not one to keep, or None: a "success"
     with no path to drive (fewer than two waypoints: start and goal one point) or no drive
     (0 s simulated) is no run at all, and a results table that counted it would count a
-    success that never happened (issue 30). A failure without a path ("no_path") is a real
+    success that never happened. A failure without a path ("no_path") is a real
     outcome of planning, and is kept."""
     if trial.get("outcome") != "success":
         return None

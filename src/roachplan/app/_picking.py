@@ -2,7 +2,7 @@
 draws - the terrain's triangles and its ground plane - and take the first surface the ray meets,
 the one under the cursor. The planner's height field is only the fallback: it holds each
 place's top surface, so a ray that passes just over a standable patch (drawn a few millimetres
-above it, or grazing rough ground) met the first wall behind it (issue 30).
+above it, or grazing rough ground) met the first wall behind it.
 """
 
 from __future__ import annotations

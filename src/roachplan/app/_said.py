@@ -4,7 +4,7 @@ An error written for the user (an InputError: SceneError, PlanningError, Capture
 child process's ChildError; an OSError's own words) is said as it is. Any other exception is a
 fault of the app: its text ("index 0 is out of bounds for axis 0 with size 0") means nothing to
 the user, so the page says that an internal error happened, and of what kind, and the server's
-log gets the traceback (issue 30).
+log gets the traceback.
 """
 
 from __future__ import annotations
