@@ -393,3 +393,24 @@ def test_scene_build_takes_scale_and_scad_timeout(tmp_path, millimetre_stl):
         out = roachplan("scene", "build", str(path), "-o", str(tmp_path / "x.stl"), flag, value)
         assert out.returncode == 2 and f"roachplan: error: {expected}" in out.stderr
         assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("inside_out", [False, True])
+def test_solids_meeting_along_an_edge_are_wound_outward(inside_out):
+    """Two blocks sharing an edge: closed, yet not watertight to trimesh, so its up and down
+    faces cancel and the sign of their rounding noise once chose which way it faced."""
+    from roachplan.scenes._mesh import clean_terrain_mesh
+
+    a = trimesh.creation.box((0.2, 0.2, 0.1))
+    b = trimesh.creation.box((0.2, 0.2, 0.1))
+    b.apply_translation((0.2, 0.2, 0.0))
+    pair = trimesh.util.concatenate([a, b])
+    assert isinstance(pair, trimesh.Trimesh)
+    if inside_out:
+        pair.invert()
+    out = clean_terrain_mesh(pair, "edge blocks")
+    assert not out.is_watertight
+    assert out.volume == pytest.approx(2 * 0.2 * 0.2 * 0.1)
+    t = out.triangles  # (normals from the winding itself: trimesh's cache of them may lag it)
+    up = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])[:, 2] > 0
+    assert np.allclose(out.triangles_center[up][:, 2], 0.05)  # the tops face up

@@ -125,7 +125,14 @@ def clean_terrain_mesh(
         # An open surface (a capture, a height map patch): wind it consistently, then turn it
         # so its normals face up on the whole, as the top of a terrain does.
         trimesh.repair.fix_winding(out)
-        if float((out.face_normals[:, 2] * out.area_faces).sum()) < 0:
+        up = float((out.face_normals[:, 2] * out.area_faces).sum())
+        if abs(up) <= 1e-9 * float(out.area_faces.sum()):
+            # Closed after all (solids meeting along an edge, which trimesh does not call
+            # watertight): its up and down faces cancel, and the sign of that rounding noise
+            # would decide. Outward is where its volume is positive.
+            if float(out.volume) < 0:
+                out.invert()
+        elif up < 0:
             out.invert()
     return out
 
