@@ -365,15 +365,17 @@ def test_summary_statistics_on_known_records():
 def test_a_workers_trial_does_not_depend_on_what_it_drove_before():
     """A worker's trial equals the same trial in a worker that ran nothing before. The case is
     one that broke a reused PyBullet client: on the kinect_bridge capture, with the report's
-    driver, seed 26 flips and seed 27 then drove differently (energy 2.49 J instead of 2.70 J)."""
+    driver, seed 26 flipped and seed 27 then drove differently (energy 2.49 J instead of 2.70 J).
+    Since the ground is fitted on its own surface (perception/_ground.py) the capture's mesh
+    differs by millimetres, and seed 29 is the one that flips."""
     from roachplan.experiments import load_experiment
     from roachplan.experiments._workers import TrialWorker
 
     spec = load_experiment("kinect_bridge")
     busy, clean = TrialWorker(spec), TrialWorker(spec)
-    before = busy.trial(0, 26, "", None)
-    after = busy.trial(1, 27, "", None)
-    alone = clean.trial(1, 27, "", None)
+    before = busy.trial(0, 29, "", None)
+    after = busy.trial(1, 30, "", None)
+    alone = clean.trial(1, 30, "", None)
     assert before["outcome"] == "flipped"  # the history that mattered
     for key in ("outcome", "energy", "drive_time", "trajectory", "path"):
         assert after[key] == alone[key], key
