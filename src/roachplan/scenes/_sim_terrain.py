@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from roachplan.planning import HeightField
 
@@ -286,8 +285,3 @@ def _blocks_mesh(hf: HeightField, blocks: np.ndarray) -> tuple[np.ndarray, np.nd
     jj, ii = np.divmod(used, nx)
     vertices = np.column_stack([hf.x0 + ii * hf.resolution, hf.y0 + jj * hf.resolution, h[jj, ii]])
     return vertices, inverse.reshape(-1, 3).astype(np.int64)
-
-
-def sim_terrain_mesh(terrain: SimTerrain) -> trimesh.Trimesh:
-    """The terrain as a trimesh (for display and checks), not processed."""
-    return trimesh.Trimesh(terrain.vertices, terrain.faces, process=False)
