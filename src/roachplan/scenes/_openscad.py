@@ -128,23 +128,56 @@ def _backend_key(backend: str, defines: list[str]) -> bytes:
 
 
 def _render_argv(
-    backend: str, scad_file: Path, params: Mapping[str, ScadValue], work: Path, jail: bool
+    backend: str,
+    scad_file: Path,
+    params: Mapping[str, ScadValue],
+    work: Path,
+    jail: bool,
+    *,
+    name: str = "mesh.stl",
 ) -> tuple[list[str], tuple[dict, dict] | None]:
-    """The render's command line (writing work/out/mesh.stl, as the jail shows it when jail)
-    and its jail layout (None: the program's own, _jail_layout)."""
-    target = f"{JAIL_OUT}/mesh.stl" if jail else str(work / "out" / "mesh.stl")
+    """The command line of backend writing work/out/NAME (as the jail shows it when jail) and
+    its jail layout (None: the program's own, _jail_layout). NAME's suffix says what is
+    written: mesh.stl the render, drawing.svg the evaluator's 2-D drawing, tree.csg the
+    binary's CSG tree."""
+    target = f"{JAIL_OUT}/{name}" if jail else str(work / "out" / name)
     if backend == "manifold":
         return manifold_argv(manifold_input(scad_file, params, work, jail), target)
     defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={scad_literal(v)}")]
-    return [
-        openscad_binary(),
-        "--export-format",
-        "binstl",
-        "-o",
-        target,
-        *defines,
-        scad_file.name,
-    ], None
+    export = ["--export-format", "binstl"] if name.endswith(".stl") else []
+    return [openscad_binary(), *export, "-o", target, *defines, scad_file.name], None
+
+
+def _side_output(
+    backend: str,
+    scad_file: Path,
+    params: Mapping[str, ScadValue],
+    name: str,
+    *,
+    memory: int,
+    timeout: float,
+    what: str = "",
+) -> str | None:
+    """The text of the file NAME backend writes of the model (_render_argv), run in the jail
+    beside the cache under the render's limits, or None when it did not write it within
+    timeout [s]. what: the model as a progress line names it ("": no progress line)."""
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(dir=cache, prefix=".render-"))
+    try:
+        (work / "out").mkdir()
+        jail = jail_wanted()
+        argv, layout = _render_argv(backend, scad_file, params, work, jail, name=name)
+        cmd = confined(
+            argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail, layout=layout
+        )
+        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what=what)
+        out = work / "out" / name
+        if run.timed_out or run.status != 0 or not out.is_file():
+            return None
+        return out.read_text(errors="replace")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 NOT_3D = "Current top level object is not a 3D object"
@@ -168,22 +201,11 @@ def _drawn_flat(
     """Whether openscad-evaluator draws the model as SVG, which it writes of a 2-D top level
     only (a 3-D one fails: "not a 2D object"): run in the jail, under the render's limits, to
     tell its stand-in for a 2-D model from a solid of the same shape (flat_stand_in)."""
-    cache = cache_dir()
-    cache.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(dir=cache, prefix=".render-"))
-    try:
-        (work / "out").mkdir()
-        jail = jail_wanted()
-        target = f"{JAIL_OUT}/drawing.svg" if jail else str(work / "out" / "drawing.svg")
-        argv, layout = manifold_argv(manifold_input(scad_file, params, work, jail), target)
-        cmd = confined(
-            argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail, layout=layout
-        )
-        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what=scad_file.name)
-        drawing = work / "out" / "drawing.svg"
-        return not run.timed_out and run.status == 0 and drawing.is_file()
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+    name = scad_file.name
+    svg = _side_output(
+        "manifold", scad_file, params, "drawing.svg", memory=memory, timeout=timeout, what=name
+    )
+    return svg is not None
 
 
 def _named(why: str, backend: str) -> str:
@@ -314,23 +336,7 @@ def _csg_tree(
 ) -> str | None:
     """The model's CSG tree as the binary writes it (in the jail, under the render's limits),
     or None when it did not write one within timeout [s]."""
-    cache = cache_dir()
-    cache.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(dir=cache, prefix=".render-"))
-    try:
-        (work / "out").mkdir()
-        jail = jail_wanted()
-        target = f"{JAIL_OUT}/tree.csg" if jail else str(work / "out" / "tree.csg")
-        defines = [a for k, v in sorted(params.items()) for a in ("-D", f"{k}={scad_literal(v)}")]
-        argv = [openscad_binary(), "-o", target, *defines, scad_file.name]
-        cmd = confined(argv, scad_file.parent, work, memory=memory, cpu=timeout, jail=jail)
-        run = run_confined(cmd, model_dir=scad_file.parent, timeout=timeout, what="")
-        tree = work / "out" / "tree.csg"
-        if run.timed_out or run.status != 0 or not tree.is_file():
-            return None
-        return tree.read_text(errors="replace")
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+    return _side_output("cgal", scad_file, params, "tree.csg", memory=memory, timeout=timeout)
 
 
 def binary_expectation(
