@@ -56,23 +56,14 @@ class FakeMarkers:
         return tuple(world.scene.start), tuple(world.scene.goal)
 
 
-class FakePage:
-    """The loop's Shell and the handlers' Page without a browser: what the page was told, in
-    order, and the controls as a test sets them."""
+class FakeShell:
+    """The loop's Shell without a browser: what the page was told, in order."""
 
-    def __init__(self, world) -> None:
-        self.view = FakeView()
-        self.markers = FakeMarkers(world)
-        self.settings = PlanSettings(planner=world.scene.planner.name, time_limit=20.0, count=1)
-        self.speed = 10.0
+    def __init__(self) -> None:
         self.statuses: list[str] = []
         self.notes: list[tuple[int | None, str, str, bool]] = []
-        self.trials: list[dict] = []
-        self.marker_checks = 0
-        self.frames = 0
         self.commands_done = 0
 
-    # Shell
     def set_status(self, text: str) -> None:
         self.statuses.append(text)
 
@@ -93,6 +84,21 @@ class FakePage:
 
     def command_done(self) -> None:
         self.commands_done += 1
+
+
+class FakePage(FakeShell):
+    """The loop's Shell and the handlers' Page without a browser: what the page was told, in
+    order, and the controls as a test sets them."""
+
+    def __init__(self, world) -> None:
+        super().__init__()
+        self.view = FakeView()
+        self.markers = FakeMarkers(world)
+        self.settings = PlanSettings(planner=world.scene.planner.name, time_limit=20.0, count=1)
+        self.speed = 10.0
+        self.trials: list[dict] = []
+        self.marker_checks = 0
+        self.frames = 0
 
     # Page
     def plan_settings(self) -> PlanSettings:

@@ -79,35 +79,6 @@ def test_an_unexpected_error_is_named_and_a_users_error_said_as_it_is():
     assert failure(job) == "start invalid"
 
 
-class _Shell:
-    """The loop's Shell, recording what the page was told."""
-
-    def __init__(self) -> None:
-        self.statuses: list[str] = []
-        self.notes: list[tuple] = []
-
-    def set_status(self, text: str) -> None:
-        self.statuses.append(text)
-
-    def notify(self, client_id, title: str, body: str, *, error: bool = False) -> None:
-        self.notes.append((client_id, title, body, error))
-
-    def public(self, text: str) -> str:
-        return text
-
-    def show_job(self, running: bool) -> None:
-        pass
-
-    def set_job_progress(self, percent: float) -> None:
-        pass
-
-    def between(self, *, idle: bool) -> None:
-        pass
-
-    def command_done(self) -> None:
-        pass
-
-
 def test_a_handler_that_breaks_says_which_command_failed_and_logs_the_traceback(capfd):
     from roachplan.app._commands import Cmd
     from roachplan.app._loop import Command, CommandLoop
@@ -119,7 +90,9 @@ def test_a_handler_that_breaks_says_which_command_failed_and_logs_the_traceback(
     def broken(app, cmd) -> None:
         np.zeros(0)[0]  # the user's IndexError: "index 0 is out of bounds ..."
 
-    shell = _Shell()
+    from test_loop import FakeShell
+
+    shell = FakeShell()
     loop = CommandLoop({_BrokenCmd: Command(handler=broken, name="Plan")}, shell=shell)
     loop.start(cast("App", SimpleNamespace()))  # (a stand-in: the handler never uses its app)
     try:
