@@ -77,6 +77,24 @@ def _render(node: ast.Constant | ast.JoinedStr, constants: dict[str, str]) -> st
     return "".join(out)
 
 
+def message_literals(tree: ast.AST) -> list[ast.JoinedStr | ast.Constant]:
+    """The string literals of a module that may be messages: whole f-strings (not their
+    parts) and plain strings, not docstrings."""
+    skip = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.JoinedStr):
+            skip.update(id(v) for v in n.values)
+        if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant):
+            skip.add(id(n.value))  # docstrings
+    return [
+        n
+        for n in ast.walk(tree)
+        if isinstance(n, ast.JoinedStr | ast.Constant)
+        and id(n) not in skip
+        and (isinstance(n, ast.JoinedStr) or isinstance(n.value, str))  # (not a number, None)
+    ]
+
+
 def advice_in_the_code() -> list[tuple[str, str]]:
     """(where, message) of every string literal in PACKAGES that gives advice (FLAG,
     SCENE_SYNTAX, INSTRUCTION): whole f-strings (not their parts), not docstrings."""
@@ -96,17 +114,7 @@ def advice_in_the_code() -> list[tuple[str, str]]:
                 for t in n.targets
                 if isinstance(t, ast.Name)
             }
-            skip = set()
-            for n in ast.walk(tree):
-                if isinstance(n, ast.JoinedStr):
-                    skip.update(id(v) for v in n.values)
-                if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant):
-                    skip.add(id(n.value))  # docstrings
-            for n in ast.walk(tree):
-                if not isinstance(n, ast.JoinedStr | ast.Constant) or id(n) in skip:
-                    continue
-                if isinstance(n, ast.Constant) and not isinstance(n.value, str):
-                    continue  # a number, bytes, None, ...: no message
+            for n in message_literals(tree):
                 text = _render(n, constants)
                 if len(text.split()) >= 3 and any(
                     p.search(text) for p in (FLAG, SCENE_SYNTAX, INSTRUCTION)

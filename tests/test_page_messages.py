@@ -311,24 +311,14 @@ TERMINAL = {"cli.py", "_parser.py", "_flags.py"} | {
 def app_messages() -> list[tuple[str, str]]:
     """(where, text) of every string literal in the page's modules of app/ (f-strings whole,
     their fields as a number), docstrings and comments left out."""
-    from test_page_advice import _render
+    from test_page_advice import _render, message_literals
 
     found = []
     for path in sorted((ROOT / "src" / "roachplan" / "app").glob("*.py")):
         if path.name in TERMINAL:
             continue
-        tree = ast.parse(path.read_text())
-        skip = set()
-        for n in ast.walk(tree):
-            if isinstance(n, ast.JoinedStr):
-                skip.update(id(v) for v in n.values)
-            if isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant):
-                skip.add(id(n.value))  # docstrings
-        for n in ast.walk(tree):
-            if isinstance(n, ast.JoinedStr | ast.Constant) and id(n) not in skip:
-                if isinstance(n, ast.Constant) and not isinstance(n.value, str):
-                    continue
-                found.append((f"{path.name}:{n.lineno}", _render(n, {})))
+        for n in message_literals(ast.parse(path.read_text())):
+            found.append((f"{path.name}:{n.lineno}", _render(n, {})))
     return found
 
 
