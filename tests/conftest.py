@@ -41,6 +41,21 @@ def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     )
 
 
+def synth_capture(
+    out: Path, scene: str, intrinsics: str, eye=(0.0, -3.2, 1.8), target=(0.0, 0.0, 0.0)
+) -> Path:
+    """`roachplan synth-capture` of scene from eye to target (x, y, z [m]; by default the
+    report's Kinect view of the double bridge, 3.2 m behind it and 1.8 m up) into out; the
+    test fails if the command does."""
+    made = roachplan(
+        "synth-capture", scene, "--intrinsics", intrinsics, "-o", str(out),
+        "--eye", ",".join(f"{v:.4f}" for v in eye),
+        "--target", ",".join(f"{v:.4f}" for v in target),
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    return out
+
+
 @pytest.fixture(scope="session")
 def world():
     from roachplan.scenes import build_world, load_scene

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from conftest import roachplan
+from conftest import roachplan, synth_capture
 from roachplan.planning import HeightField, PlanResult, check_states, standable_map
 from roachplan.scenes import World, load_scene, pose_problem
 from roachplan.scenes import _autopose as autopose
@@ -204,12 +204,7 @@ def test_a_kinect2_qhd_capture_of_a_library_scene_gets_a_joined_pick(tmp_path):
     3.2 m behind and 1.8 m up, used directly as a scene: `plan` picks start and goal at least
     1 m apart and plans between them (it said "could not pick a start and goal the planner
     joins ... (31.74 m^2): 1.45 m apart: prm found no path within its time limit")."""
-    png = tmp_path / "qhd.png"
-    made = roachplan(
-        "synth-capture", "double_bridge", "--eye", "0,-3.2,1.8", "--target", "0,0,0",
-        "--intrinsics", "kinect2-qhd", "-o", str(png),
-    )  # fmt: skip
-    assert made.returncode == 0, made.stderr
+    png = synth_capture(tmp_path / "qhd.png", "double_bridge", "kinect2-qhd")
     done = roachplan("plan", "--scene", str(png), "--json", timeout=600)
     assert done.returncode == 0, done.stderr
     r = json.loads(done.stdout)

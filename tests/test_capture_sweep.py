@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from conftest import roachplan
+from conftest import roachplan, synth_capture
 from roachplan.perception import survey_views
 from roachplan.scenes import build_terrain_mesh, load_scene
 
@@ -27,13 +27,7 @@ SAMPLE = [
 @pytest.mark.parametrize(("scene", "camera", "view"), SAMPLE)
 def test_a_synthetic_capture_is_planned_and_driven(tmp_path, scene, camera, view):
     eye, target = survey_views(build_terrain_mesh(load_scene(scene)).bounds)[view]
-    cap = tmp_path / "cap.png"
-    made = roachplan(
-        "synth-capture", scene, "--intrinsics", camera, "-o", str(cap),
-        "--eye", ",".join(f"{v:.4f}" for v in eye),
-        "--target", ",".join(f"{v:.4f}" for v in target),
-    )  # fmt: skip
-    assert made.returncode == 0, made.stderr
+    cap = synth_capture(tmp_path / "cap.png", scene, camera, eye, target)
     done = roachplan("trial", "--scene", str(cap), "--seed", "1", "--json", timeout=600)
     assert "internal error" not in done.stderr
     assert done.returncode == 0, done.stderr

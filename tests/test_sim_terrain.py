@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import roachplan
+from conftest import roachplan, synth_capture
 from roachplan.planning import HeightField, heightfield_from_mesh
 from roachplan.scenes import (
     SIM_MAX_TOLERANCE,
@@ -167,12 +167,7 @@ def test_a_wide_kinect_capture_is_planned_and_driven_with_json_alone_on_stdout(t
     """The report's setting (a Kinect 2 looking down at the double bridge from 3.2 m) at the
     sensor's own 512 x 424: its mesh (~300k triangles) was refused by PyBullet as "internal
     error", and PyBullet's warnings broke --json."""
-    cap = tmp_path / "cap.png"
-    made = roachplan(
-        "synth-capture", "double_bridge", "--eye", "0,-3.2,1.8", "--target", "0,0,0",
-        "--intrinsics", "kinect2-sd", "-o", str(cap),
-    )  # fmt: skip
-    assert made.returncode == 0, made.stderr
+    cap = synth_capture(tmp_path / "cap.png", "double_bridge", "kinect2-sd")
     done = roachplan("trial", "--scene", str(cap), "--seed", "1", "--json")
     assert done.returncode == 0, done.stderr
     trial = json.loads(done.stdout)  # nothing but the JSON on stdout
