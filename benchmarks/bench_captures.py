@@ -33,7 +33,14 @@ from roachplan.perception import (
     save_depth,
     survey_views,
 )
-from roachplan.scenes import LIBRARY, build_terrain_mesh, build_world, library_names, load_scene
+from roachplan.scenes import (
+    LIBRARY,
+    build_terrain_mesh,
+    build_world,
+    library_names,
+    load_scene,
+    seen_mesh,
+)
 
 CAMERAS = ("kinect2-sd", "kinect2-qhd", "kinect2-hd", "realsense-d435-1280x720")
 
@@ -49,12 +56,7 @@ def scene_mesh(name: str) -> tuple[trimesh.Trimesh, dict]:
         assert scene.bounds is not None  # (a scene without terrain gives its bounds)
         (x0, y0), (x1, y1) = scene.bounds
         views = survey_views([[x0, y0, scene.ground or 0.0], [x1, y1, scene.ground or 0.0]])
-    if scene.ground is not None:
-        g = trimesh.creation.box((100.0, 100.0, 0.01))
-        g.apply_translation((0, 0, scene.ground - 0.005))
-        mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
-    assert isinstance(mesh, trimesh.Trimesh)  # (meshes concatenate to a mesh)
-    return mesh, views
+    return seen_mesh(scene), views
 
 
 def run(png: Path) -> dict:

@@ -166,8 +166,6 @@ def cmd_voxel_study(args: argparse.Namespace) -> int:
 
 
 def cmd_synth_capture(args: argparse.Namespace) -> int:
-    import trimesh
-
     from roachplan.perception import (
         NO_NOISE,
         NoiseModel,
@@ -176,7 +174,7 @@ def cmd_synth_capture(args: argparse.Namespace) -> int:
         render_depth,
         save_depth,
     )
-    from roachplan.scenes import build_terrain_mesh, load_scene
+    from roachplan.scenes import load_scene, seen_mesh
 
     scene = load_scene(args.scene)
     eye = numbers(args.eye, "--eye", (3,))
@@ -200,12 +198,7 @@ def cmd_synth_capture(args: argparse.Namespace) -> int:
             kind="a capture's calibration is replaced only with --force",
             force=args.force,
         )
-    mesh = build_terrain_mesh(scene)
-    if scene.ground is not None:  # the endless floor, as a big square
-        g = trimesh.creation.box((100.0, 100.0, 0.01))
-        g.apply_translation((0, 0, scene.ground - 0.005))
-        mesh = trimesh.util.concatenate([m for m in (mesh, g) if len(m.faces)])
-        assert isinstance(mesh, trimesh.Trimesh)  # (meshes concatenate to a mesh)
+    mesh = seen_mesh(scene)  # (the endless floor as a big square)
     intr = load_intrinsics(args.intrinsics)
     pose = look_at(eye, target)
     noise = NO_NOISE if args.no_noise else NoiseModel()

@@ -54,6 +54,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "footprint_of": "._world",
         "pose_problem": "._world",
         "route_of": "._world",
+        "seen_mesh": "._world",
     },
 )
 if not TYPE_CHECKING:  # (a type checker sees the names imported below instead, and so
@@ -109,3 +110,4 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._world import footprint_of as footprint_of
     from ._world import pose_problem as pose_problem
     from ._world import route_of as route_of
+    from ._world import seen_mesh as seen_mesh

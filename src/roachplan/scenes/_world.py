@@ -368,6 +368,19 @@ def build_terrain_mesh(scene: Scene) -> trimesh.Trimesh:
     return build_terrain(scene).mesh
 
 
+def seen_mesh(scene: Scene) -> trimesh.Trimesh:
+    """What a camera sees of a scene, world frame [m]: its terrain objects and, where it has a
+    ground plane, the ground as a 100 m square slab (synthetic captures)."""
+    mesh = build_terrain_mesh(scene)
+    if scene.ground is None:
+        return mesh
+    slab = trimesh.creation.box((100.0, 100.0, 0.01))
+    slab.apply_translation((0, 0, scene.ground - 0.005))
+    seen = trimesh.util.concatenate([m for m in (mesh, slab) if len(m.faces)])
+    assert isinstance(seen, trimesh.Trimesh)  # (meshes concatenate to a mesh)
+    return seen
+
+
 _RAISE_IT = "raise it with `position: [x, y, z]`, or give `ground: null` if it has its own floor"
 
 
