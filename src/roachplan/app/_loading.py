@@ -113,7 +113,8 @@ def _rendering(ld: Loading) -> str:
     """What the OpenSCAD render running says of itself, when it says more than the model's
     name (the binary: why it renders, how long it is expected to take), else ""."""
     said, when = ld.rendering
-    if not said or said.lower().endswith(".scad") or ld.job.elapsed - when > 2:  # (none yet, a name, or it ended)
+    # (none yet, a name, or it ended)
+    if not said or said.lower().endswith(".scad") or ld.job.elapsed - when > 2:
         return ""
     return f"; OpenSCAD {said}"
 
