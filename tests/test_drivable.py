@@ -205,9 +205,8 @@ def _on_the_floor(world, states: np.ndarray) -> bool:
         axis=-1,
     ).reshape(-1, 2)
     with world.simulation() as sim:
-        sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, -100), (0, 0, 0, 1))
-        hits = sim._bc.rayTestBatch([(x, y, 2.0) for x, y in pts], [(x, y, -2.0) for x, y in pts])
-    return bool(np.all(np.array([h[3][2] for h in hits]) < 0.005))
+        z, _ = sim.surface_heights(pts, top=2.0)
+    return bool(np.all(z < 0.005))
 
 
 def _spins_are_valid(world, planned) -> bool:

@@ -12,10 +12,10 @@ from roachplan.sim import (
     DriverConfig,
     RobotConfig,
     SimConfig,
-    Simulation,
     heading_error,
     motor_speeds,
     next_waypoint,
+    open_floor,
     quat_to_matrix,
 )
 
@@ -53,7 +53,7 @@ def test_next_waypoint_follows_algorithm_1():
 def test_roach_walks_forward_on_flat_ground_and_turns_toward_the_faster_side():
     results = {}
     for name, (left, right) in {"straight": (20.0, 20.0), "left": (20.0, 40.0)}.items():
-        with Simulation.open_floor(RobotConfig(), SimConfig()) as sim:
+        with open_floor(RobotConfig(), SimConfig()) as sim:
             sim.reset(0.0, 0.0, 0.0)
             sim.set_leg_speeds(left, right)
             while sim.time < 3.0:
@@ -117,7 +117,7 @@ def _floor_drive(path_xy: np.ndarray, start_yaw: float, cfg: DriverConfig, spins
     from roachplan.sim import drive_path
 
     path = np.column_stack([path_xy, np.zeros(len(path_xy))])
-    with Simulation.open_floor(RobotConfig(), SimConfig()) as sim:
+    with open_floor(RobotConfig(), SimConfig()) as sim:
         sim.reset(float(path_xy[0, 0]), float(path_xy[0, 1]), start_yaw)
         return drive_path(sim, path, cfg, on_frame=frames, spins=spins)
 
@@ -187,7 +187,7 @@ def test_a_path_of_one_waypoint_is_reached_where_the_robot_stands():
 def test_spins_that_name_no_waypoint_are_refused():
     from roachplan.sim import drive_path
 
-    with Simulation.open_floor(RobotConfig(), SimConfig()) as sim:
+    with open_floor(RobotConfig(), SimConfig()) as sim:
         sim.reset(0.0, 0.0, 0.0)
         for bad in [((5, 0.0),), ((-1, 0.0),), ((0.5, 0.0),), ((0, float("nan")),), ((0,),)]:
             with pytest.raises(ValueError, match="waypoint index from 0 to 1"):

@@ -47,16 +47,9 @@ def independent_check(world, states: np.ndarray) -> list[str]:
     patch = np.array([[0, 0], [0.005, 0], [-0.005, 0], [0, 0.005], [0, -0.005]])
     pts = (centres + patch).reshape(-1, 2)
     with world.simulation() as sim:
-        sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, -100), (0, 0, 0, 1))
-        hits = []
-        for k in range(0, len(pts), 8000):
-            chunk = pts[k : k + 8000]
-            hits += sim._bc.rayTestBatch(
-                [(x, y, 2.0) for x, y in chunk], [(x, y, -2.0) for x, y in chunk]
-            )
-        terrain_id = sim.terrain_id
-    z = np.array([h[3][2] if h[0] >= 0 else -np.inf for h in hits]).reshape(len(dense), 6, 5)
-    on_terrain = np.array([h[0] == terrain_id for h in hits]).reshape(len(dense), 6, 5)
+        z, on_terrain = sim.surface_heights(pts, top=2.0)
+    z = z.reshape(len(dense), 6, 5)
+    on_terrain = on_terrain.reshape(len(dense), 6, 5)
     best = np.argmax(z, axis=2)[..., None]
     z = np.take_along_axis(z, best, axis=2)[..., 0]
     z[np.isinf(z)] = np.nan

@@ -8,14 +8,15 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from conftest import roachplan
-from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path
+from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path, open_floor
 from roachplan.sim._calibration import walk
 
 
 def flat_sim(robot: RobotConfig | None = None, cfg: SimConfig | None = None) -> Simulation:
-    return Simulation.open_floor(robot or RobotConfig(), cfg or SimConfig())
+    return open_floor(robot or RobotConfig(), cfg or SimConfig())
 
 
 def test_energy_meter_matches_a_leg_spinning_against_viscous_damping():
@@ -26,9 +27,8 @@ def test_energy_meter_matches_a_leg_spinning_against_viscous_damping():
     c, omega, seconds = 5e-4, 20.0, 2.0
     with flat_sim(robot) as sim:
         sim.reset(0.0, 0.0, 0.0)
-        sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, 0.5), (0, 0, 0, 1))
-        for j in range(6):
-            sim._bc.changeDynamics(sim.robot_id, j, jointDamping=c)
+        sim.place((0, 0, 0.5), (0, 0, 0, 1))
+        sim.set_joint_damping(c)
         sim.set_leg_speeds(omega, omega)
         sim.advance(250)  # up to speed
         sim.energy_per_leg[:] = 0.0
@@ -220,8 +220,8 @@ STRAIGHT = np.array([[0.0, y, 0.0] for y in np.linspace(0.0, 1.0, 21)])
 def test_an_upturned_robot_is_flipped():
     with flat_sim() as sim:
         sim.reset(0.0, 0.0, math.pi / 2)
-        upside_down = sim._bc.getQuaternionFromEuler((math.pi, 0.0, math.pi / 2))
-        sim._bc.resetBasePositionAndOrientation(sim.robot_id, (0, 0, 0.03), upside_down)
+        upside_down = Rotation.from_euler("xyz", (math.pi, 0.0, math.pi / 2)).as_quat()
+        sim.place((0, 0, 0.03), tuple(upside_down))
         result = drive_path(sim, STRAIGHT, DriverConfig())
     assert result.outcome == "flipped" and result.reason.startswith("flipped over")
 

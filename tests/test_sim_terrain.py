@@ -20,7 +20,7 @@ from roachplan.scenes import (
     sim_terrain,
     simplified_heightfield_mesh,
 )
-from roachplan.sim import RobotConfig, SimConfig, SimError, Simulation
+from roachplan.sim import RobotConfig, SimConfig, SimError, make_simulation
 
 
 def grid_mesh(n: int, spacing: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
@@ -137,7 +137,7 @@ def test_a_large_mesh_is_given_to_the_engine_in_a_size_it_takes():
     assert terrain.kind == "heightfield" and len(terrain.faces) <= SIM_MAX_TRIANGLES
     assert terrain.max_error == 0.0
     assert "height field" in terrain.note()
-    with Simulation(
+    with make_simulation(
         terrain.vertices, terrain.faces, ground_height=None, robot=RobotConfig(), cfg=SimConfig()
     ) as sim:
         sim.reset(2.0, 2.0, 0.0)
@@ -148,7 +148,7 @@ def test_a_large_mesh_is_given_to_the_engine_in_a_size_it_takes():
 def test_a_mesh_the_engine_refuses_is_a_clear_error_and_nothing_on_stdout(capfd):
     v, f = grid_mesh(401)
     with pytest.raises(SimError, match="PyBullet refused the terrain mesh .* smaller bounds"):
-        Simulation(v, f, ground_height=None, robot=RobotConfig(), cfg=SimConfig())
+        make_simulation(v, f, ground_height=None, robot=RobotConfig(), cfg=SimConfig())
     assert capfd.readouterr().out == ""
 
 

@@ -29,7 +29,11 @@ Pose = tuple[float, float, float]
 
 
 def load(
-    scene: str | os.PathLike, *, scale: float | None = None, scad_backend: str | None = None
+    scene: str | os.PathLike,
+    *,
+    scale: float | None = None,
+    scad_backend: str | None = None,
+    engine: str | None = None,
 ) -> World:
     """A world ready to plan and drive on: a library scene's name ("double_bridge"), a scene
     .yaml, or any terrain file (a capture: .pcd .ply .xyz .npy, a 16-bit depth PNG, a ROS bag;
@@ -37,14 +41,23 @@ def load(
     (`world.notes` says how, and who rendered an OpenSCAD model). scale: multiplies the
     terrain (0.001 for a model in millimetres). scad_backend: who renders every OpenSCAD
     model, `--scad-backend` ("auto", "cgal" or "manifold"; default: each object's `backend:`,
-    else "auto")."""
-    from roachplan.scenes import build_world, load_scene, scaled_scene, with_scad_backend
+    else "auto"). engine: the physics engine of its drives and choices, `--engine`
+    ("pybullet", the reference, or "mujoco", the fast one; default: the scene's `sim.engine`)."""
+    from roachplan.scenes import (
+        build_world,
+        load_scene,
+        scaled_scene,
+        with_engine,
+        with_scad_backend,
+    )
 
     loaded = load_scene(os.fspath(scene))
     if scale is not None:
         loaded = scaled_scene(loaded, scale)
     if scad_backend is not None:
         loaded = with_scad_backend(loaded, scad_backend)
+    if engine is not None:
+        loaded = with_engine(loaded, engine)
     return build_world(loaded)
 
 
@@ -76,7 +89,7 @@ def plan(
 def drive(
     world: World, planned: PlanResult, *, start: Pose | None = None, goal: Pose | None = None
 ) -> TrialResult:
-    """Drive a plan in a fresh PyBullet world and record the trial: `outcome` ("success",
+    """Drive a plan in a fresh world of the scene's engine and record the trial: `outcome` ("success",
     "fell", "flipped", "stuck", "timeout", "no_path"), `drive_time` [s], `energy` [J],
     `relative_energy` (1.0 = walking straight on a floor), `trajectory` (world frame [m])."""
     from roachplan.experiments import finish_trial
@@ -141,14 +154,18 @@ def experiment(
     workers: int = 2,
     resume: bool = False,
     progress: bool = False,
+    engine: str | None = None,
 ) -> ExperimentReport:
     """A batch of trials in parallel with its tables and figures (`roachplan experiment`):
     a library spec's name ("bridge_rough") or a spec .yaml; results in `out` (new, empty, or
-    an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`."""
+    an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`.
+    engine: `--engine` (default: the spec's `sim.engine`)."""
     from roachplan.experiments import load_experiment, run_experiment
+    from roachplan.scenes import with_engine
 
+    loaded = load_experiment(os.fspath(spec))
     return run_experiment(
-        load_experiment(os.fspath(spec)),
+        loaded if engine is None else with_engine(loaded, engine),
         trials=trials,
         out=Path(out),
         workers=workers,

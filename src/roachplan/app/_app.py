@@ -148,9 +148,20 @@ class App:
     """The app's state and services, handed to every command's handler. Owned by the loop
     thread: only handlers (and what the loop runs between commands) touch it."""
 
-    def __init__(self, world: World, *, page: Page, loop: CommandLoop, upload_dir: Path) -> None:
+    def __init__(
+        self,
+        world: World,
+        *,
+        page: Page,
+        loop: CommandLoop,
+        upload_dir: Path,
+        engine: str | None = None,
+    ) -> None:
         self.world = world
         """The world shown, planned and driven on."""
+        self.engine = engine
+        """The physics engine of every drive and choice ("pybullet", "mujoco"; None: each
+        scene's own sim.engine): `serve --engine`, the Physics engine picker."""
         self.page = page
         self.loop = loop
         self.upload_dir = upload_dir

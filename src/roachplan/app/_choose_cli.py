@@ -11,7 +11,7 @@ import json
 import math
 from typing import Any
 
-from ._flags import as_reference, refused, setting_flag
+from ._flags import engine_flag, refused, scene_options, setting_flag
 
 
 def add_choose_parser(sub, terrain_help: str) -> None:
@@ -83,6 +83,7 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         help="the report's raw paths and algorithms 1-2 instead of drivable plans "
         "and the tracking driver",
     )
+    engine_flag(p)
     p.add_argument("--backend", choices=("local", "ray"), default="local")
     p.add_argument(
         "--address",
@@ -252,9 +253,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
             owned=lambda p: (p / "choice.json").is_file(),
             accepts="a new or empty folder, or one an earlier `roachplan choose` wrote",
         )
-    scene = load_scene(args.scene)
-    if args.reference:
-        scene = as_reference(scene)
+    scene = scene_options(load_scene(args.scene), args)  # (--engine, --reference)
     cfg = dataclasses.replace(
         cfg,
         seed=scene.seed if args.seed is None else args.seed,

@@ -25,6 +25,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         read_manifest,
         run_experiment,
     )
+    from roachplan.scenes import with_engine
 
     cores = os.cpu_count() or 1
     cluster = args.backend == "ray" and args.address is not None
@@ -36,6 +37,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.out is not None:  # refused before the spec's work, not after it
         check_results_folder(Path(args.out), create=False)
     spec = load_experiment(args.spec)
+    if args.engine is not None:
+        spec = with_engine(spec, args.engine)
     if args.reference:
         spec = as_reference(spec)
     out = Path(args.out) if args.out else Path("results") / spec.name
@@ -112,6 +115,7 @@ CALIBRATION_FILES = ("turning.csv", "turning.png", "turning_model.json", "spin.c
 
 def cmd_calibrate_turning(args: argparse.Namespace) -> int:
     from roachplan.experiments import is_partial, prepare_output_folder
+    from roachplan.sim import SimConfig, engine_settings
 
     from ._calibrate import DEFAULT_RATIOS, calibrate_turning
 
@@ -137,7 +141,10 @@ def cmd_calibrate_turning(args: argparse.Namespace) -> int:
         accepts=f"--out takes a new or empty folder, or one holding only an earlier "
         f"calibration ({', '.join(CALIBRATION_FILES)})",
     )
-    samples, model, fit, spins = calibrate_turning(out, ratios=ratios, duration=args.duration)
+    sim = engine_settings(SimConfig(), args.engine) if args.engine is not None else None
+    samples, model, fit, spins = calibrate_turning(
+        out, ratios=ratios, duration=args.duration, sim=sim
+    )
     print(f"{'ratio':>6} {'distance m':>10} {'turns':>7} {'curvature 1/m':>13}")
     for s in samples:
         print(f"{s.ratio:6.2f} {s.distance:10.3f} {s.revolutions:7.3f} {s.curvature:13.3f}")

@@ -251,10 +251,24 @@ def as_reference(scene_or_spec):
     return dataclasses.replace(scene_or_spec, planner=planner, driver=driver)
 
 
+def engine_flag(p: argparse.ArgumentParser) -> None:
+    """--engine: every command that simulates takes it (applied by scene_options)."""
+    from roachplan.sim import ENGINES
+
+    p.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default=None,
+        help="physics engine, as calibrated (its timestep with it): pybullet, the reference "
+        "the report's tables were reproduced with, or mujoco, the fast one (default: the "
+        "scene's sim.engine, else pybullet)",
+    )
+
+
 def scene_options(scene, args: argparse.Namespace):
-    """The scene with the command line's --scale, --scad-timeout, --scad-backend and
+    """The scene with the command line's --scale, --scad-timeout, --scad-backend, --engine and
     --reference applied, where given (their values checked by check_flags)."""
-    from roachplan.scenes import scaled_scene, with_scad_backend, with_scad_timeout
+    from roachplan.scenes import scaled_scene, with_engine, with_scad_backend, with_scad_timeout
 
     if getattr(args, "scale", None) is not None:
         scene = scaled_scene(scene, args.scale)
@@ -262,6 +276,8 @@ def scene_options(scene, args: argparse.Namespace):
         scene = with_scad_timeout(scene, args.scad_timeout)
     if getattr(args, "scad_backend", None) is not None:
         scene = with_scad_backend(scene, args.scad_backend)
+    if getattr(args, "engine", None) is not None:
+        scene = with_engine(scene, args.engine)
     if getattr(args, "reference", False):
         scene = as_reference(scene)
     return scene

@@ -30,7 +30,7 @@ from roachplan.processes import (
     Returned,
     preload,
 )
-from roachplan.scenes import World, build_world, load_scene
+from roachplan.scenes import World, build_world, load_scene, with_engine
 
 from ._relevel import CaptureView
 from ._said import INTERNAL_LEAD, log_internal, raised_text
@@ -185,6 +185,14 @@ def capture_view(scene, made=()) -> CaptureView | None:
     return CaptureView(
         scene_path=Path(scene.path), world_from_camera=rec.world_from_camera, report=rec.report()
     )
+
+
+def with_page_engine(world: World, engine: str | None) -> World:
+    """world simulated by the page's physics engine (None: its scene's own), as calibrated
+    (scenes.with_engine); what the world computed is kept."""
+    if engine is None or engine == world.scene.sim.engine:
+        return world
+    return world.with_sim(with_engine(world.scene, engine).sim)
 
 
 def load_world(

@@ -16,7 +16,7 @@ from roachplan.scenes import World, list_scenes
 
 from ._app import App
 from ._commands import CancelLoadCmd, Cmd, LoadSceneCmd
-from ._jobs import Job, _load_job, load_outcome
+from ._jobs import Job, _load_job, load_outcome, with_page_engine
 from ._load_panel import needs_millimetre_scale
 from ._placement import model_view
 from ._relevel import CaptureView
@@ -190,6 +190,7 @@ def swap_in(app: App, ld: Loading) -> None:
     """The loaded world replaces the current one."""
     assert ld.result is not None
     world, view = ld.result
+    world = with_page_engine(world, app.engine)
     app.page.load_panel.offer_scale(None)
     app.next_seeds[str(app.world.scene.path)] = app.next_seed
     app.world = world

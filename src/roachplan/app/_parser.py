@@ -13,7 +13,7 @@ from roachplan.perception import DEPTH_UNITS, FRAMES, METHODS, PRESETS
 from roachplan.planning import PLANNER_NAMES
 
 from ._choose_cli import add_choose_parser
-from ._flags import clip
+from ._flags import clip, engine_flag
 
 FORCE_HELP = (
     "replace an existing output file roachplan did not write (never an input of the command)"
@@ -154,6 +154,7 @@ def _add_experiment_parser(sub) -> None:
         "--address", default=None, help="Ray cluster address (default: start a local Ray instance)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    engine_flag(p)
     _runs(p, "_experiment_cli:cmd_experiment")
 
 
@@ -334,6 +335,7 @@ def _add_serve_parser(sub) -> None:
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default: loopback only)")
     p.add_argument("--port", type=int, default=8080)
+    engine_flag(p)
     _runs(p, "cli:cmd_serve")
 
 
@@ -362,6 +364,7 @@ def _add_planning_parsers(sub) -> None:
     p.add_argument("--trial", type=int, default=None, metavar="K", help="trial number in DIR")
     p.add_argument("--reference", action="store_true", help=REFERENCE_HELP)
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    engine_flag(p)
     _runs(p, "_plan_cli:cmd_trial")
 
     p = sub.add_parser("plan", help="plan paths with OMPL over a scene's terrain (no driving)")
@@ -438,6 +441,7 @@ def _add_planning_parsers(sub) -> None:
     )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    engine_flag(p)
     _runs(p, "_plan_cli:cmd_benchmark")
 
 
@@ -463,6 +467,7 @@ def _add_calibrate_parser(sub) -> None:
         default=10.0,
         help="simulated seconds per ratio and per steady spin",
     )
+    engine_flag(p)
     _runs(p, "_experiment_cli:cmd_calibrate_turning")
 
 

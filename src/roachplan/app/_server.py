@@ -58,7 +58,7 @@ from ._draw import (
     wxyz_from_xyzw,
     yaw_wxyz,
 )
-from ._jobs import load_world
+from ._jobs import load_world, with_page_engine
 from ._load_panel import LoadPanel
 from ._loading import BackgroundLoad, follow_load
 from ._loop import CommandLoop
@@ -90,15 +90,19 @@ class RoachApp:
         upload_dir: Path | None = None,
         max_upload_bytes: int = MAX_UPLOAD_BYTES,
         view: CaptureView | None = None,
+        engine: str | None = None,
     ):
-        """view: the capture view of world (load_world), to re-mesh and re-level it."""
+        """view: the capture view of world (load_world), to re-mesh and re-level it. engine:
+        the physics engine of every drive, this world's and every one loaded (None: each
+        scene's own sim.engine); the page's Physics engine picker changes it."""
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.loop = CommandLoop(COMMANDS, shell=self)
         self.core = App(
-            world,
+            with_page_engine(world, engine),
             page=self,
             loop=self.loop,
             upload_dir=Path(upload_dir or tempfile.mkdtemp(prefix="roachplan-uploads-")),
+            engine=engine,
         )
         """The state and services the command handlers get."""
         self._standable = None
@@ -580,9 +584,9 @@ class RoachApp:
         self.server.stop()
 
 
-def serve(*, scene: str, host: str, port: int) -> None:
+def serve(*, scene: str, host: str, port: int, engine: str | None = None) -> None:
     """Build the world (a library scene, a scene file or any terrain file) and serve the app
-    until interrupted."""
+    until interrupted. engine: the physics engine of every drive (None: each scene's)."""
     import sys
 
     from roachplan.processes import call
@@ -598,7 +602,7 @@ def serve(*, scene: str, host: str, port: int) -> None:
     )
     for note in world.notes:
         print(f"roachplan: {note}", file=sys.stderr)
-    app = RoachApp(world, host=host, port=port, view=view)
+    app = RoachApp(world, host=host, port=port, view=view, engine=engine)
     print(f"roachplan: serving scene {world.scene.name!r} at http://{host}:{app.port}", flush=True)
     try:
         while True:

@@ -37,7 +37,7 @@ that failed (exit 1)."""
 def cmd_serve(args: argparse.Namespace) -> int:
     from ._server import serve  # viser only when serving
 
-    serve(scene=args.scene, host=args.host, port=args.port)
+    serve(scene=args.scene, host=args.host, port=args.port, engine=args.engine)
     return 0
 
 

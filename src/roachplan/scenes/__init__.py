@@ -11,6 +11,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "scaled_scene": "._adjust",
         "with_scad_timeout": "._adjust",
         "with_scad_backend": "._adjust",
+        "with_engine": "._adjust",
         "SceneError": "._errors",
         "looks_like_millimetres": "._mesh",
         "BACKENDS": "._openscad",
@@ -66,6 +67,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from roachplan._settings import MAX_SEED as MAX_SEED
 
     from ._adjust import scaled_scene as scaled_scene
+    from ._adjust import with_engine as with_engine
     from ._adjust import with_scad_backend as with_scad_backend
     from ._adjust import with_scad_timeout as with_scad_timeout
     from ._errors import SceneError as SceneError

@@ -1,11 +1,13 @@
 """Scene-wide changes a command line asks for: scale every model, give renders more time, pick
-who renders them."""
+who renders them, pick the physics engine."""
 
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, TypeVar
 
-from roachplan._settings import SettingError
+from roachplan._settings import SettingError, setting_problem
+from roachplan.sim import SimConfig, engine_settings
 
 from ._errors import SceneError
 from ._scene import Scene, backend_check, scale_problem, timeout_check
@@ -53,3 +55,16 @@ def _every_scad(scene: Scene, **change) -> Scene:
             dataclasses.replace(o, **change) if o.kind == "scad" else o for o in scene.terrain
         ),
     )
+
+
+_Sims = TypeVar("_Sims")
+
+
+def with_engine(scene_or_spec: _Sims, engine: str) -> _Sims:
+    """The scene (or experiment spec: anything with a `sim:` SimConfig) simulated by engine
+    ("pybullet" or "mujoco") as that engine was calibrated: its timestep with it
+    (sim/_engine.py engine_settings). A scene file's `sim: {engine: ..., timestep: ...}` sets
+    other combinations."""
+    _refuse("--engine", engine, setting_problem(SimConfig, "engine", engine))
+    held: Any = scene_or_spec
+    return dataclasses.replace(held, sim=engine_settings(held.sim, engine))

@@ -25,7 +25,15 @@ from roachplan.planning import (
     signature_label,
     standable_map,
 )
-from roachplan.sim import LEG_NAMES, RobotConfig, SimConfig, SimError, Simulation, quat_to_matrix
+from roachplan.sim import (
+    LEG_NAMES,
+    RobotConfig,
+    SimConfig,
+    SimError,
+    Simulation,
+    make_simulation,
+    quat_to_matrix,
+)
 
 from ._autopose import auto_bounds, pick_start_goal
 from ._errors import SceneError
@@ -165,6 +173,15 @@ class World:
         )
         return world
 
+    def with_sim(self, sim: SimConfig) -> World:
+        """This world simulated with other physics settings (another engine): what it has
+        computed (regions, sim_terrain: neither depends on the physics) kept."""
+        world = dataclasses.replace(self, scene=dataclasses.replace(self.scene, sim=sim))
+        world.__dict__.update(
+            {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
+        )
+        return world
+
     def with_scene(self, scene: Scene) -> World:
         """This terrain, height field and robot with scene: the same scene with what was picked
         for it written down (start, goal, bounds as the page writes them). The simulator's
@@ -181,12 +198,13 @@ class World:
         robot: RobotConfig | None = None,
         cfg: SimConfig | None = None,
     ) -> Simulation:
-        """A fresh PyBullet world of this terrain (sim_terrain), ground and robot (the caller
-        closes it). vertices: the terrain's vertices moved ((V, 3) [m], as sim_terrain's: a
-        rollout's drawn sensor error); robot, cfg: other than the scene's (a fitted robot)."""
+        """A fresh world of this terrain (sim_terrain), ground and robot in the engine cfg names
+        (sim.engine; the caller closes it). vertices: the terrain's vertices moved ((V, 3) [m],
+        as sim_terrain's: a rollout's drawn sensor error); robot, cfg: other than the scene's
+        (a fitted robot, another engine)."""
         terrain = self.sim_terrain
         try:
-            return Simulation(
+            return make_simulation(
                 terrain.vertices if vertices is None else vertices,
                 terrain.faces,
                 ground_height=self.scene.ground,

@@ -1,4 +1,5 @@
-"""Headless PyBullet simulation of a VelociRoACH-like hexapod and its path-following driver."""
+"""Headless physics simulation of a VelociRoACH-like hexapod (PyBullet, the reference, or
+MuJoCo, behind one seam) and its path-following driver."""
 
 from typing import TYPE_CHECKING
 
@@ -42,7 +43,13 @@ _getattr, __dir__, __all__ = lazy_exports(
         "LEG_NAMES": "._robot",
         "RobotConfig": "._robot",
         "SimError": "._errors",
-        "Simulation": "._simulation",
+        "ENGINES": "._config",
+        "Simulation": "._engine",
+        "make_simulation": "._engine",
+        "engine_settings": "._engine",
+        "CALIBRATED_TIMESTEP": "._engine",
+        "open_floor": "._engine",
+        "PyBulletSimulation": "._simulation",
         "UNCERTAINTY_RANGES": "._uncertainty",
         "UncertaintyConfig": "._uncertainty",
         "uncertainty_problem": "._uncertainty",
@@ -64,6 +71,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._calibration import reference_energy_per_metre as reference_energy_per_metre
     from ._calibration import spin_calibration as spin_calibration
     from ._calibration import turning_sweep as turning_sweep
+    from ._config import ENGINES as ENGINES
     from ._config import DriverConfig as DriverConfig
     from ._config import SimConfig as SimConfig
     from ._driver import DriveResult as DriveResult
@@ -79,10 +87,15 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._driver import next_waypoint as next_waypoint
     from ._driver import omega_limit as omega_limit
     from ._driver import quat_to_matrix as quat_to_matrix
+    from ._engine import CALIBRATED_TIMESTEP as CALIBRATED_TIMESTEP
+    from ._engine import Simulation as Simulation
+    from ._engine import engine_settings as engine_settings
+    from ._engine import make_simulation as make_simulation
+    from ._engine import open_floor as open_floor
     from ._errors import SimError as SimError
     from ._robot import LEG_NAMES as LEG_NAMES
     from ._robot import RobotConfig as RobotConfig
-    from ._simulation import Simulation as Simulation
+    from ._simulation import PyBulletSimulation as PyBulletSimulation
     from ._turning import CALIBRATED_SPIN as CALIBRATED_SPIN
     from ._turning import CALIBRATED_SPINS as CALIBRATED_SPINS
     from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._config import SimConfig
+from ._engine import open_floor
+from ._errors import SimError
 from ._robot import RobotConfig
-from ._simulation import SimError, Simulation
 from ._turning import SpinTurn, TurningCurve
 
 
@@ -67,7 +68,7 @@ def walk(
     robot: RobotConfig, cfg: SimConfig, left: float, right: float, duration: float
 ) -> TurningSample:
     """Walk on an open floor at fixed motor speeds [rad/s]; measure distance and turning."""
-    with Simulation.open_floor(robot, cfg) as sim:
+    with open_floor(robot, cfg) as sim:
         sim.reset(0.0, 0.0, 0.0)
         sim.set_leg_speeds(left, right)
         steps = max(1, round(0.02 / cfg.timestep))  # sample the pose every 20 ms
@@ -233,7 +234,7 @@ def spin(
     """Spin on an open floor with the left motor at -omega and the right at +omega [rad/s] for
     `duration` [s], or until `until` [rad] is turned; first walk straight for `lead_in` [s]
     at `walk_speed` [rad/s] (0: the spin starts from rest, legs in tripod stance)."""
-    with Simulation.open_floor(robot, cfg) as sim:
+    with open_floor(robot, cfg) as sim:
         sim.reset(0.0, 0.0, 0.0)
         if lead_in > 0:
             sim.set_leg_speeds(walk_speed, walk_speed)
@@ -313,7 +314,7 @@ def reference_energy_per_metre(robot: RobotConfig, cfg: SimConfig, omega0: float
     distance is ~1.0 when the trial cost as much as walking straight on the floor.
     Cached per configuration (10 simulated seconds, about 0.2 s of wall time).
     """
-    with Simulation.open_floor(robot, cfg) as sim:
+    with open_floor(robot, cfg) as sim:
         sim.reset(0.0, 0.0, 0.0)
         sim.set_leg_speeds(omega0, omega0)
         start, _ = sim.pose()

@@ -10,11 +10,18 @@ from roachplan._settings import setting as s
 
 from ._turning import CALIBRATED_SPIN, CALIBRATED_TURNING, TurningCurve
 
+ENGINES = ("pybullet", "mujoco")
+"""The physics engines behind the seam (sim/_engine.py): PyBullet, the default and the
+reference every table was measured with, and MuJoCo, the fast one."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class SimConfig:
     """Physics settings of one simulated world."""
 
+    engine: Literal["pybullet", "mujoco"] = s("pybullet", one_of(ENGINES))
+    """Physics engine: pybullet (the reference: the project's tables were measured with it) or
+    mujoco (faster; what it was calibrated to is sim/_engine_calibration.py's)."""
     timestep: float = s(1.0 / 1000.0, positive("s"))
     """Fixed physics step [s]. Halving it changes a 10 s floor walk by < 0.5 % in distance and
     < 2.5 % in energy (README, timestep study)."""

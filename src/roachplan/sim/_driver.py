@@ -22,7 +22,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from ._config import DriverConfig
-from ._simulation import Simulation
+from ._engine import Simulation
 
 Outcome = Literal["success", "fell", "flipped", "stuck", "timeout", "missed"]
 

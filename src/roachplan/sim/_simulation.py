@@ -1,4 +1,5 @@
-"""The one stateful shell around PyBullet: a static terrain and one roach."""
+"""The PyBullet engine behind the physics seam (sim/_engine.py): a static terrain and one roach
+in one headless client. The reference engine: the project's tables were measured with it."""
 
 from __future__ import annotations
 
@@ -43,8 +44,9 @@ with _c_stdout_silenced((1, 2)):
     from pybullet_utils.bullet_client import BulletClient
 
 
-class Simulation:
-    """Owns one headless PyBullet client holding a terrain and a roach.
+class PyBulletSimulation:
+    """Owns one headless PyBullet client holding a terrain and a roach (sim/_engine.py's
+    Simulation).
 
     Never sleeps or reads the clock: `step()` advances exactly `cfg.timestep` seconds.
     Legs are commanded per side (differential drive); the three legs of a side follow one
@@ -105,7 +107,7 @@ class Simulation:
         self.energy_per_leg = np.zeros(6)
 
     @classmethod
-    def open_floor(cls, robot: RobotConfig, cfg: SimConfig) -> Simulation:
+    def open_floor(cls, robot: RobotConfig, cfg: SimConfig) -> PyBulletSimulation:
         """A world with nothing but an endless floor at z = 0: calibration and reference walks."""
         no_terrain = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
         return cls(*no_terrain, ground_height=0.0, robot=robot, cfg=cfg)
@@ -191,6 +193,30 @@ class Simulation:
         hit = self._bc.rayTest((x, y, below), (x, y, -50.0))[0]
         return hit[3][2] if hit[0] >= 0 else -np.inf
 
+    def surface_heights(self, xy: np.ndarray, top: float = 50.0) -> tuple[np.ndarray, np.ndarray]:
+        """For points xy (N, 2) [m]: the highest surface under z = top ((N,) [m], -inf where
+        none) and whether it is the terrain rather than the ground plane ((N,) bool). The robot
+        is parked out of the rays' way meanwhile and put back as it was."""
+        bc, rid = self._bc, self.robot_id
+        pos, quat = bc.getBasePositionAndOrientation(rid)
+        vel = bc.getBaseVelocity(rid)
+        bc.resetBasePositionAndOrientation(rid, (0, 0, -1000.0), (0, 0, 0, 1))
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        z = np.full(len(xy), -np.inf)
+        on_terrain = np.zeros(len(xy), dtype=bool)
+        for k in range(0, len(xy), 8000):  # (PyBullet's batch limit is about 16k rays)
+            chunk = xy[k : k + 8000]
+            hits = bc.rayTestBatch(
+                [(x, y, top) for x, y in chunk], [(x, y, -50.0) for x, y in chunk]
+            )
+            for i, h in enumerate(hits):
+                if h[0] >= 0:
+                    z[k + i] = h[3][2]
+                    on_terrain[k + i] = h[0] == self.terrain_id
+        bc.resetBasePositionAndOrientation(rid, pos, quat)
+        bc.resetBaseVelocity(rid, *vel)
+        return z, on_terrain
+
     def _ground_height(self, x: float, y: float, surface: float | None) -> float:
         """The surface the robot stands on at (x, y) [m]: the highest, unless the planner's
         surface [m] there lies more than 10 cm under it (a table over the floor): then the
@@ -265,6 +291,22 @@ class Simulation:
         from scipy.spatial.transform import Rotation
 
         return tuple(centre.tolist()), tuple(Rotation.from_matrix(rot).as_quat().tolist())
+
+    def place(
+        self,
+        position: tuple[float, float, float],
+        quat: tuple[float, float, float, float],
+    ) -> None:
+        """Put the body at position [m] with orientation quat (xyzw, world from body), at rest,
+        legs as they are."""
+        self._bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
+        self._bc.resetBaseVelocity(self.robot_id, (0, 0, 0), (0, 0, 0))
+
+    def set_joint_damping(self, damping: float) -> None:
+        """Viscous damping at every hip [N m s / rad] (0 on the robot: a test of the energy
+        meter drives the legs against it)."""
+        for j in self._joints:
+            self._bc.changeDynamics(self.robot_id, j, jointDamping=damping)
 
     def set_leg_speeds(self, left: float, right: float) -> None:
         """Command the left and right motors [rad/s], clipped to the motor's speed limit. With
@@ -367,7 +409,7 @@ class Simulation:
             self._bc.disconnect()
             self._open = False
 
-    def __enter__(self) -> Simulation:
+    def __enter__(self) -> PyBulletSimulation:
         return self
 
     def __exit__(self, *exc: object) -> None:
