@@ -129,6 +129,9 @@ class FakePage(FakeShell):
     def show_results(self, trials: list[dict]) -> None:
         self.trials = list(trials)
 
+    def show_engine(self, engine: str) -> None:
+        pass
+
     # what the test reads
     def titles(self, client_id: int) -> list[str]:
         return [title for cid, title, _, _ in self.notes if cid == client_id]

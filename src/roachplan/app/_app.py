@@ -97,6 +97,10 @@ class Page(Protocol):
         """The scene picker shows label (labels: its choices, when they changed)."""
         ...
 
+    def show_engine(self, engine: str) -> None:
+        """The Physics engine picker shows engine (the world's)."""
+        ...
+
     def show_world(self) -> None:
         """Draw the app's world afresh (a new world): terrain, markers at its start and goal,
         the folders that held something of the last world cleared, every view framing it."""

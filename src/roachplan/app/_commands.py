@@ -110,6 +110,15 @@ class ViewCmd(Cmd):
     what: Literal["roadmap", "paths", "trajectories", "standable", "drive_path", "follow", "zoom"]
 
 
+@dataclass(frozen=True)
+class EngineCmd(Cmd):
+    """The Physics engine picker changed: every drive, batch and Choose from now on, on this
+    scene and those loaded after it, runs in this engine."""
+
+    engine: str
+    """"pybullet" or "mujoco" (sim.ENGINES)."""
+
+
 # -- Scene, loading --------------------------------------------------------------------------------
 
 

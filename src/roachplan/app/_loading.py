@@ -200,6 +200,7 @@ def swap_in(app: App, ld: Loading) -> None:
         app.files[ld.label] = (ld.ref, ld.from_upload)
         labels = (*list_scenes(), *app.files)
     app.page.set_scene_picker(app.picker_label(), labels)
+    app.page.show_engine(world.scene.sim.engine)
     app.next_seed = next_seed(app, world)
     app.show_world()
     app.page.load_panel.show_loaded(world, view)

@@ -21,13 +21,14 @@ from ._commands import (
     BestPathCmd,
     Cmd,
     DriveCmd,
+    EngineCmd,
     ExportCmd,
     PlanCmd,
     ResetCmd,
     ShowTrialCmd,
 )
 from ._draw import BLACK, BLUE, path_fraction
-from ._jobs import Attempt, _drive_job, _plan_job, failure
+from ._jobs import Attempt, _drive_job, _plan_job, failure, with_page_engine
 from ._panel import trials_csv
 
 PLAN_GRACE = 0.8
@@ -240,3 +241,16 @@ def do_export(app: App, cmd: ExportCmd) -> None:
         f"{app.world.scene.name}-trials.csv",
         trials_csv(app.scene_trials).encode(),
     )
+
+
+def do_engine(app: App, cmd: EngineCmd) -> None:
+    """The Physics engine picker: this world, and every one loaded after it, simulated by the
+    engine chosen (as it was calibrated); its host restarted with it, so that the next drive
+    runs there. Plans, trials and markers stay: a plan does not depend on the engine."""
+    if cmd.engine == app.world.scene.sim.engine:
+        return  # (the picker set to show the world's engine calls back)
+    app.engine = cmd.engine
+    app.world = with_page_engine(app.world, cmd.engine)
+    app.host_world()
+    sim = app.world.scene.sim
+    app.page.set_status(f"Drives now run in {cmd.engine} ({sim.timestep * 1000:g} ms steps).")

@@ -20,6 +20,7 @@ from ._commands import (
     ChooseCmd,
     Cmd,
     DriveCmd,
+    EngineCmd,
     ExportCmd,
     LoadSceneCmd,
     MarkersCmd,
@@ -41,7 +42,15 @@ from ._load_panel import do_panel, do_upload
 from ._loading import do_cancel_load, do_load_scene
 from ._loop import Command
 from ._markers import click_while_busy, do_check_markers, do_place
-from ._plan_drive import do_best_path, do_drive, do_export, do_plan, do_reset, show_trial
+from ._plan_drive import (
+    do_best_path,
+    do_drive,
+    do_engine,
+    do_export,
+    do_plan,
+    do_reset,
+    show_trial,
+)
 from ._replay import share_trial
 from ._robot_panel import do_robot_go, do_robot_plan, do_robot_stop
 from ._voxel_panel import do_voxel
@@ -80,6 +89,7 @@ COMMANDS: dict[type[Cmd], Command[Any]] = {
     PanelCmd: Command(handler=do_panel, name="Load panel", while_busy="run"),
     ExportCmd: Command(handler=do_export, name="Export CSV", while_busy="run"),
     ViewCmd: Command(handler=change_view, name="View", while_busy="run"),
+    EngineCmd: Command(handler=do_engine, name="Physics engine", while_busy="queue"),
     CancelCmd: Command(handler=cancel_running, name="Cancel", while_busy="run"),
     RobotStopCmd: Command(handler=do_robot_stop, name="Stop robot", while_busy="run"),
     CancelLoadCmd: Command(handler=do_cancel_load, name="Cancel load", while_busy="run"),

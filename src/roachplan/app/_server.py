@@ -27,7 +27,7 @@ import viser
 from roachplan.experiments import LabelledPlan
 from roachplan.planning import PLANNER_NAMES, standable_map
 from roachplan.scenes import LIBRARY, World, list_scenes
-from roachplan.sim import Frame
+from roachplan.sim import ENGINES, Frame
 
 from ._app import App, PlanSettings
 from ._batch import Batch, BatchPanel
@@ -36,6 +36,7 @@ from ._commands import (
     BestPathCmd,
     CancelCmd,
     DriveCmd,
+    EngineCmd,
     ExportCmd,
     LoadSceneCmd,
     MarkersCmd,
@@ -229,6 +230,13 @@ class RoachApp:
                 hint="For the whole Plan: every try at every path",
             )
             self.count = gui.add_number("Paths (K)", 1, min=1, max=20, step=1)
+            self.engine: viser.GuiDropdownHandle[str] = gui.add_dropdown(
+                "Physics engine",
+                ENGINES,
+                initial_value=self.core.world.scene.sim.engine,
+                hint="Who simulates every drive, batch and Choose: pybullet (the reference) "
+                "or mujoco (faster), each at the timestep it was calibrated at",
+            )
             self.show_roadmap = gui.add_checkbox("Show roadmap", False)
             self.drive_path_picker: viser.GuiDropdownHandle[str] = gui.add_dropdown(
                 "Drive path",
@@ -274,6 +282,7 @@ class RoachApp:
         self.click_mode.on_update(lambda ev: self._set_click_mode())
         self.load_panel.pick_ground.on_update(lambda ev: self._set_click_mode())
         self.voxel_panel.pick_centre.on_update(lambda ev: self._set_click_mode())
+        self.engine.on_update(lambda ev: put(EngineCmd(ev.client_id, self.engine.value)))
         self.plan_button.on_click(lambda ev: put(PlanCmd(ev.client_id)))
         self.drive_button.on_click(lambda ev: put(DriveCmd(ev.client_id)))
         self.reset_button.on_click(lambda ev: put(ResetCmd(ev.client_id)))
@@ -388,6 +397,10 @@ class RoachApp:
         if self.load_panel.pick_ground.value:
             return "ground"
         return self.click_mode.value
+
+    def show_engine(self, engine: str) -> None:
+        if self.engine.value != engine:
+            self.engine.value = engine  # (its callback's EngineCmd finds nothing to change)
 
     def set_scene_picker(self, label: str, labels: tuple[str, ...] | None = None) -> None:
         if labels is not None:

@@ -10,7 +10,7 @@ from roachplan._settings import setting as s
 
 from ._turning import CALIBRATED_SPIN, CALIBRATED_TURNING, TurningCurve
 
-ENGINES = ("pybullet", "mujoco")
+ENGINES: tuple[str, ...] = ("pybullet", "mujoco")
 """The physics engines behind the seam (sim/_engine.py): PyBullet, the default and the
 reference every table was measured with, and MuJoCo, the fast one."""
 

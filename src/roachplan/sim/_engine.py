@@ -92,6 +92,11 @@ class Simulation(Protocol):
         """Command the left and right motors [rad/s] (clipped to the motor's limit)."""
         ...
 
+    def set_joint_damping(self, damping: float) -> None:
+        """Viscous damping at every hip [N m s / rad] (0 on the robot: the energy meter's test
+        drives the legs against it, in either engine)."""
+        ...
+
     def perturb(
         self, *, friction: float, mass_scale: float, motor_gain: tuple[float, float]
     ) -> None:
