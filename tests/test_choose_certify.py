@@ -180,6 +180,29 @@ def test_a_race_cut_short_states_the_guarantee_it_reached():
     assert "time budget of 1.5 s spent" in timed.stopped
 
 
+def test_a_budget_spent_before_any_fresh_rollout_says_what_the_rollouts_showed():
+    """Every rollout a success, but the cap ends the race in its screening: the words give the
+    successes seen and what was not yet shown, never "at least 0%"."""
+    truths = [(1.0, 1.8, 0.1), (1.0, 1.9, 0.1)]
+    capped = _certify(truths, seed=1, rollouts=8)
+    g = capped.guarantee
+    assert g is not None and not g.certified and g.fresh_rollouts == 0
+    words = g.sentence(capped.chosen)
+    assert f"it succeeded in {g.successes} of its {g.rollouts} rollouts" in words
+    assert g.successes == g.rollouts > 0 and "at least 0%" not in words
+
+
+def test_when_no_path_is_safe_enough_the_one_that_succeeds_most_is_named():
+    """Neither path can meet the claim (both far below 95 %): the choice is the one that
+    succeeded more often, and the ranking lists it first."""
+    truths = [(0.25, 1.5, 0.1), (0.5, 1.6, 0.1), (0.1, 1.4, 0.1)]
+    for seed in range(3):
+        capped = _certify(truths, seed=seed, rollouts=60)
+        rate = {s.candidate: s.successes / s.rollouts for s in capped.standings}
+        assert capped.chosen == max(rate, key=rate.__getitem__), rate
+        assert capped.standings[0].candidate == capped.chosen
+
+
 FLAT = (
     "terrain: []\nground: 0.0\nrobot: {start: [0.0, 0.0, 0]}\ngoal: [0.5, 0.0, 0]\n"
     "bounds: [[-0.4, -0.4], [0.9, 0.4]]\nplanner: {name: rrtconnect}\n"
