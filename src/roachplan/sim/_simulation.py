@@ -13,6 +13,7 @@ import numpy as np
 
 from ._config import SimConfig
 from ._errors import SimError
+from ._placement import DROP_CLEARANCE, ground_height, start_height, support_plane_pose
 from ._robot import RobotConfig
 
 
@@ -217,16 +218,6 @@ class PyBulletSimulation:
         bc.resetBaseVelocity(rid, *vel)
         return z, on_terrain
 
-    def _ground_height(self, x: float, y: float, surface: float | None) -> float:
-        """The surface the robot stands on at (x, y) [m]: the highest, unless the planner's
-        surface [m] there lies more than 10 cm under it (a table over the floor): then the
-        highest just above the planner's (cast from the top first, so that a start with
-        nothing over it is placed exactly as without a surface given)."""
-        z = self.surface_height(x, y)
-        if surface is not None and np.isfinite(surface) and z > surface + 0.1:
-            z = self.surface_height(x, y, surface + 0.1)
-        return z
-
     def reset(
         self,
         x: float,
@@ -244,18 +235,14 @@ class PyBulletSimulation:
         bc, r = self._bc, self.robot
         # Park the robot out of the ray's way before looking for the ground under the start.
         bc.resetBasePositionAndOrientation(self.robot_id, (0, 0, -1000.0), (0, 0, 0, 1))
-        z0 = self._ground_height(x, y, surface)
-        if not np.isfinite(z0):
-            # A capture's mesh may have a sensor dropout under the centre alone: the highest
-            # surface under the feet then (the planner checked that the feet stand).
-            c, s = np.cos(yaw), np.sin(yaw)
-            feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-            z0 = max(self._ground_height(f[0], f[1], surface) for f in feet)
-        if not np.isfinite(z0):
-            raise SimError(f"no terrain under the start position ({x:.3f}, {y:.3f})")
+
+        def ground(gx: float, gy: float) -> float:
+            return ground_height(self.surface_height, gx, gy, surface)
+
+        z0 = start_height(ground, r, x, y, yaw)
         quat = bc.getQuaternionFromEuler((0.0, 0.0, yaw))
-        position = (x, y, z0 + r.standing_height + 0.004)
-        tilted = self._on_support_plane(x, y, yaw, surface)
+        position = (x, y, z0 + r.standing_height + DROP_CLEARANCE)
+        tilted = support_plane_pose(ground, r, x, y, yaw)
         if tilted is not None:
             position, quat = tilted
         bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
@@ -268,29 +255,6 @@ class PyBulletSimulation:
         self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
         self.time = 0.0
         self.energy_per_leg[:] = 0.0
-
-    def _on_support_plane(self, x: float, y: float, yaw: float, surface: float | None):
-        """(position (3,), quaternion xyzw) of the body standing on the plane fitted to the
-        terrain under its feet (_ground_height, surface [m] the planner's) at (x, y) [m],
-        heading yaw [rad], 4 mm above its stance: on a
-        slope a level body would put its uphill feet into the ground (an 11 deg lidar slope
-        flipped it within 0.2 s). None when the ground under the feet is level (the body is
-        then placed exactly as on flat ground) or a foot has no ground."""
-        r = self.robot
-        c, s = np.cos(yaw), np.sin(yaw)
-        feet = np.asarray(r.foot_points_xy) @ np.array([[c, s], [-s, c]]) + (x, y)
-        z = np.array([self._ground_height(f[0], f[1], surface) for f in feet])
-        if not np.all(np.isfinite(z)) or np.ptp(z) < 1e-6:
-            return None
-        a, b, cy = np.linalg.lstsq(np.column_stack([np.ones(6), feet]), z, rcond=None)[0]
-        up = np.array([-b, -cy, 1.0]) / np.linalg.norm([-b, -cy, 1.0])
-        forward = np.array([c, s, 0.0]) - up * (up @ np.array([c, s, 0.0]))
-        forward /= np.linalg.norm(forward)
-        rot = np.column_stack([forward, np.cross(up, forward), up])  # body axes in the world
-        centre = np.array([x, y, a + b * x + cy * y]) + up * (r.standing_height + 0.004)
-        from scipy.spatial.transform import Rotation
-
-        return tuple(centre.tolist()), tuple(Rotation.from_matrix(rot).as_quat().tolist())
 
     def place(
         self,
