@@ -50,6 +50,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "CALIBRATED_TIMESTEP": "._engine",
         "open_floor": "._engine",
         "PyBulletSimulation": "._simulation",
+        "MujocoSimulation": "._mujoco",
         "UNCERTAINTY_RANGES": "._uncertainty",
         "UncertaintyConfig": "._uncertainty",
         "uncertainty_problem": "._uncertainty",
@@ -93,6 +94,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._engine import make_simulation as make_simulation
     from ._engine import open_floor as open_floor
     from ._errors import SimError as SimError
+    from ._mujoco import MujocoSimulation as MujocoSimulation
     from ._robot import LEG_NAMES as LEG_NAMES
     from ._robot import RobotConfig as RobotConfig
     from ._simulation import PyBulletSimulation as PyBulletSimulation

@@ -1,0 +1,610 @@
+"""The MuJoCo engine behind the physics seam (sim/_engine.py): the same terrain, ground and roach
+as the PyBullet engine (sim/_simulation.py), its MJCF model generated from RobotConfig.
+
+The model (`build_spec`):
+  - world: the terrain as a height field (`hfield` geom, below) and, when the world has one,
+    the ground as an infinite plane at z = ground_height. Both static, in geom group 0.
+  - `body`: a free body, the box of RobotConfig's body (its frame RobotConfig's: x forward,
+    y left, z up, origin at the box centre); its mass spread over the box.
+  - `leg_L1` ... `leg_R3`: one body per leg at `robot.hip_positions`, a hinge `hip_*` about
+    the body's +y there (q = 0: the leg points straight down; continuous, no limits), a capsule
+    from the hip to leg_length below it, radius leg_radius: its rounded tip is the foot. The
+    leg's mass over the capsule; the rest of `drive_inertia` (a leg with its share of motor
+    and gearbox, about the hip) is the hinge's `armature`: a geared motor's reflected inertia
+    acts on the joint's axis alone. Robot geoms are in group 1 and collide with the world's,
+    not with each other (PyBullet's multibody has no self-collision either).
+  - `servo_*`: a general actuator per hip, force = ctrl - kp q - kd dq clamped to
+    +-max_motor_torque (forcerange); advance() sets ctrl = kp q_target + kd dq_target, so the
+    force is RobotConfig's PD servo kp (q_target - q) + kd (dq_target - dq). Sensors read
+    each servo's force and each hip's speed for the energy meter.
+
+The terrain: MuJoCo collides a mesh as its convex hull, so a terrain (a bridge over a floor,
+a hole) cannot be a mesh geom. Its top surface is rasterised (planning's heightfield_from_mesh,
+the planner's rasteriser, with the planner's rule for surfaces overhead) into an hfield of
+FIELD_RESOLUTION. Frames: grid point (i, j) of the HeightField is at world (x0 + i r,
+y0 + j r); the hfield geom sits at the grid's centre, z at the field's lowest level, and its
+elevation row j, column i (row-major, rows along +y) is that point's height over it; MuJoCo
+joins the points into two triangles a cell and fills the solid under them down to FIELD_BASE
+below the lowest level.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from ._config import SimConfig
+from ._errors import SimError
+from ._placement import DROP_CLEARANCE, ground_height, start_height, support_plane_pose
+from ._robot import LEG_NAMES, RobotConfig
+
+FIELD_RESOLUTION = 0.005
+"""Grid spacing of the terrain's height field [m]. MuJoCo joins the grid points into flat
+triangles, so an edge (a bridge's side, a step) is a slope one cell wide, and a foot (radius
+3 mm) feels it within a cell of where the mesh has it: at 5 mm, less than a foot's width. A
+coarser grid rounds a bridge's edge into a ramp the feet climb down (at 1 cm, the planner's
+grid, an edge is a 1 cm slope); a finer one costs collision time for nothing on a flat floor
+(a 10 s walk on a flat field: 2.5 mm took twice the time of 5 mm and walked the same
+distance within 0.1 %)."""
+MAX_FIELD_POINTS = 4_000_000
+"""Most grid points of the height field (16 MB in MuJoCo): over it (a capture's terrain more
+than 10 m x 10 m at 5 mm), the spacing grows until it fits."""
+OVERHEAD = 0.3
+"""A surface more than this above the lowest one at the same place is overhead, not ground
+[m]: the planner's rule (scenes/_world.py OVERHEAD, the same value: tests/test_mujoco_engine.py
+checks that they agree). A height field has one surface per point, so the engine keeps the
+one the planner stands the robot on: a floor seen under a table top, not the top (3.5 cm
+tall, the robot walks under it)."""
+GROUND_CLEARANCE = 0.005
+"""Field points whose top surface is the ground plane are sunk this far under it [m], so that
+a foot on the floor touches the plane alone: a plane and a field at the same height would
+both push on it and make the floor twice as stiff inside the field as outside."""
+HOLE_DEPTH = 0.3
+"""Field points with no surface (a hole, no ground plane) lie this far under the lowest
+surface [m]: deep enough for the driver to call a robot in one fallen (DriverConfig.fall_drop),
+shallow enough to keep the field's height resolution. A ray finds no surface there."""
+FIELD_BASE = 0.05
+"""Thickness of the solid under the field's lowest level [m]."""
+CONTACT_TIMECONST = 0.005
+"""Time constant of every contact [s] (MuJoCo's solref; damping ratio 1). MuJoCo's default,
+0.02 s, is soft for a 30 g robot: on it the body rode 1.5 mm lower while walking at 20 rad/s
+and walked 5 % less far than on 5 ms, closer to PyBullet's near-rigid contacts. MuJoCo needs
+at least two timesteps (4 ms at the 2 ms step); 5 ms is the same contact at 1 and 2 ms."""
+INTEGRATOR = mujoco.mjtIntegrator.mjINT_EULER
+"""MuJoCo's semi-implicit Euler. The servo is stable with it at 2 ms (kd dt / I = 0.6 and
+kp dt^2 / I = 0.08 with I = drive_inertia, the bounds RobotConfig.motor_kd gives for Bullet),
+and it is the faithful one: a 10 s walk at 20 rad/s at 2 ms was within 5 % in distance and 2 %
+in energy of the same walk at 0.25 ms, where implicitfast (which takes the servo's damping
+implicitly, and so lags the Buehler clock's jumps in speed) spent 20 % more energy."""
+
+BODY_SLOPE_DEG = 30.0
+"""Steepest slope [deg] under which the body's box, cut into pieces along its length for the
+height field (build_spec), clears the field's cells: over it a piece's lowest corner is above
+every cell under it, and MuJoCo skips those cells without a collision test. (The planner
+stands the robot on slopes up to 25 deg.)"""
+
+_TERRAIN_GROUP, _ROBOT_GROUP = 0, 1
+_PLANE_BIT, _FIELD_BIT = 1, 2  # contype/conaffinity: what collides with the plane, the field
+_RAY_GROUPS = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # rays see the terrain alone
+_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
+
+
+@functools.cache
+def leg_inertia_about_hip(robot: RobotConfig) -> float:
+    """Moment of inertia of a leg's capsule alone (mass leg_mass) about its hinge axis [kg m^2],
+    as MuJoCo computes it from the geom."""
+    spec = mujoco.MjSpec()
+    leg = spec.worldbody.add_body(name="leg")
+    leg.add_joint(type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
+    _leg_geom(leg, robot)
+    m = spec.compile()
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, m.body_iquat[1])
+    rot = rot.reshape(3, 3)
+    inertia = rot @ np.diag(m.body_inertia[1]) @ rot.T  # about the centre of mass, leg frame
+    cx, _, cz = m.body_ipos[1]
+    return float(inertia[1, 1] + m.body_mass[1] * (cx * cx + cz * cz))
+
+
+def _leg_geom(leg, robot: RobotConfig):
+    return leg.add_geom(
+        name=f"{leg.name}_capsule",
+        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        fromto=[0.0, 0.0, 0.0, 0.0, 0.0, -robot.leg_length],
+        size=[robot.leg_radius, 0.0, 0.0],
+        mass=robot.leg_mass,
+    )
+
+
+def terrain_field(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    ground_height: float | None,
+    *,
+    resolution: float = FIELD_RESOLUTION,
+    max_points: int = MAX_FIELD_POINTS,
+):
+    """The terrain's top surface (vertices (V, 3) [m] world frame, faces (F, 3)) as a
+    planning HeightField over its xy extent, at `resolution` [m] or coarser to keep within
+    max_points: each point the highest surface within OVERHEAD of the lowest there, at least
+    the ground's (ground_height [m], None: no plane), NaN where there is none. None when no
+    upward face covers a grid point (no faces, or only walls)."""
+    from roachplan.planning import heightfield_from_mesh
+
+    if len(faces) == 0:
+        return None
+    corners = vertices[faces].reshape(-1, 3)
+    lo, hi = corners[:, :2].min(axis=0), corners[:, :2].max(axis=0)
+    width, depth = hi - lo
+    while (width / resolution + 1) * (depth / resolution + 1) > max_points:
+        resolution *= 1.25
+    field = heightfield_from_mesh(
+        vertices,
+        faces,
+        xy_min=(float(lo[0]), float(lo[1])),
+        xy_max=(float(hi[0]), float(hi[1])),
+        resolution=resolution,
+        ground_height=ground_height,
+        overhead=OVERHEAD,
+    )
+    if min(field.heights.shape) < 2 or not np.any(np.isfinite(field.heights)):
+        return None
+    return field
+
+
+_FIELDS: dict[tuple, object] = {}
+_FIELDS_KEPT = 4
+
+
+def _cached_field(vertices: np.ndarray, faces: np.ndarray, ground_height: float | None):
+    """terrain_field, kept for the last _FIELDS_KEPT terrains by their content: a drive makes a
+    fresh simulation of the same world each time, and the rasterising takes most of building
+    one (0.7 s on double_bridge at 5 mm; compiling the model takes 20 ms)."""
+    digest = hashlib.blake2b(np.ascontiguousarray(vertices).tobytes(), digest_size=16)
+    digest.update(np.ascontiguousarray(faces).tobytes())
+    key = (digest.hexdigest(), vertices.shape, faces.shape, ground_height)
+    if key not in _FIELDS:
+        while len(_FIELDS) >= _FIELDS_KEPT:
+            _FIELDS.pop(next(iter(_FIELDS)))
+        _FIELDS[key] = terrain_field(vertices, faces, ground_height)
+    return _FIELDS[key]
+
+
+def field_elevation(heights: np.ndarray, ground_height: float | None) -> tuple[np.ndarray, float]:
+    """(the field's heights over its lowest level ((ny, nx) float [m]), that lowest level's
+    height [m]): heights ((ny, nx) [m], NaN: no surface) with the points the ground plane tops
+    sunk GROUND_CLEARANCE under it and those with no surface HOLE_DEPTH under the lowest."""
+    h = np.array(heights, dtype=np.float64)
+    if ground_height is not None:
+        h[h <= ground_height + 1e-9] = ground_height - GROUND_CLEARANCE
+    hole = ~np.isfinite(h)
+    low = float(np.min(h[~hole]))
+    if hole.any():
+        low -= HOLE_DEPTH
+        h[hole] = low
+    return h - low, low
+
+
+def build_spec(
+    robot: RobotConfig,
+    cfg: SimConfig,
+    *,
+    field=None,
+    ground_height: float | None = None,
+) -> tuple[mujoco.MjSpec, float | None]:
+    """(the MJCF model of the world: the terrain's height field (a planning HeightField, or
+    None), a ground plane at ground_height [m] (None: none) and the roach, standing at the
+    origin; the height of the field's hole level [m], None without holes)."""
+    spec = mujoco.MjSpec()
+    spec.modelname = "roach"
+    opt = spec.option
+    opt.timestep = cfg.timestep
+    opt.integrator = INTEGRATOR
+    opt.iterations = cfg.solver_iterations
+    opt.gravity = [0.0, 0.0, -9.81]
+    contact = {
+        "friction": [cfg.friction, 0.005, 0.0001],  # (torsion, rolling: MuJoCo's, unused)
+        "solref": [CONTACT_TIMECONST, 1.0],
+    }
+    hole_level = _add_terrain(spec, field, ground_height, contact)
+    _add_robot(spec, robot, contact, on_field=field is not None)
+    return spec, hole_level
+
+
+def _add_terrain(spec: mujoco.MjSpec, field, ground_height: float | None, contact: dict):
+    """Add the field (a planning HeightField, or None) and the ground plane at ground_height
+    [m] (None: none) to spec's world; the field's hole level [m], None without holes."""
+    world = spec.worldbody
+    hole_level = None
+    if field is not None:
+        elevation, low = field_elevation(field.heights, ground_height)
+        ny, nx = elevation.shape
+        rise = float(elevation.max())
+        if np.any(~np.isfinite(field.heights)):
+            hole_level = low
+        half = ((nx - 1) * field.resolution / 2, (ny - 1) * field.resolution / 2)
+        hfield = spec.add_hfield(
+            name="terrain",
+            nrow=ny,
+            ncol=nx,
+            size=[half[0], half[1], max(rise, 1e-6), FIELD_BASE],
+        )
+        # MuJoCo scales the elevation to [0, 1] of size[2]; given so, it stays as it is.
+        hfield.userdata = (elevation / rise if rise > 0 else elevation).astype(np.float32).ravel()
+        world.add_geom(
+            name="terrain",
+            type=mujoco.mjtGeom.mjGEOM_HFIELD,
+            hfieldname="terrain",
+            pos=[field.x0 + half[0], field.y0 + half[1], low],
+            group=_TERRAIN_GROUP,
+            contype=0,
+            conaffinity=_FIELD_BIT,
+            **contact,
+        )
+    if ground_height is not None:
+        world.add_geom(
+            name="ground",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[0.0, 0.0, 1.0],
+            pos=[0.0, 0.0, ground_height],
+            group=_TERRAIN_GROUP,
+            contype=0,
+            conaffinity=_PLANE_BIT,
+            **contact,
+        )
+    return hole_level
+
+
+def _add_robot(spec: mujoco.MjSpec, robot: RobotConfig, contact: dict, *, on_field: bool):
+    """Add the roach (module docstring) to spec, standing at the origin; on_field: the world
+    has a height field (the body's box then meets it in pieces)."""
+    body = spec.worldbody.add_body(name="body", pos=[0.0, 0.0, robot.standing_height])
+    if robot.body_mass > 0:  # (of mass 0 it is fixed in the world, as PyBullet fixes a base)
+        body.add_freejoint(name="root")
+    robot_geom = {"group": _ROBOT_GROUP, "conaffinity": 0, **contact}
+    half = (robot.body_length / 2, robot.body_width / 2, robot.body_height / 2)
+    box = body.add_geom(name="body_box", type=mujoco.mjtGeom.mjGEOM_BOX, size=half, **robot_geom)
+    box.mass = robot.body_mass
+    box.contype = _PLANE_BIT | (0 if on_field else _FIELD_BIT)
+    if on_field:
+        # The box against the field: MuJoCo tests each of the field's cells under the box's
+        # bounding box that rises above the box's lowest corner, so on a ramp, where that
+        # corner is the box's downhill end, it tests hundreds a step. The same box cut along
+        # its length into pieces short enough that each clears the slope under it tests next
+        # to none (the body's collisions on the double bridge's drive: 67 -> 19 us a step).
+        # Massless: the whole box carries the mass, and meets the plane.
+        clearance = robot.standing_height - robot.body_height / 2
+        rise = robot.body_length * math.tan(math.radians(BODY_SLOPE_DEG))
+        pieces = max(1, math.ceil(rise / clearance))
+        length = robot.body_length / pieces
+        for k in range(pieces):
+            piece = body.add_geom(
+                name=f"body_box_{k}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                size=[length / 2, half[1], half[2]],
+                pos=[-half[0] + length * (k + 0.5), 0.0, 0.0],
+                **robot_geom,
+            )
+            piece.mass = 0.0
+            piece.density = 0.0
+            piece.contype = _FIELD_BIT
+    armature = max(robot.drive_inertia - leg_inertia_about_hip(robot), 0.0)
+    for name, hip in zip(LEG_NAMES, robot.hip_positions.tolist(), strict=True):
+        leg = body.add_body(name=f"leg_{name}", pos=hip)
+        leg.add_joint(
+            name=f"hip_{name}",
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=[0.0, 1.0, 0.0],
+            armature=armature,
+        )
+        geom = _leg_geom(leg, robot)
+        for key, value in robot_geom.items():
+            setattr(geom, key, value)
+        geom.contype = _PLANE_BIT | _FIELD_BIT
+        servo = spec.add_actuator(
+            name=f"servo_{name}", target=f"hip_{name}", trntype=mujoco.mjtTrn.mjTRN_JOINT
+        )
+        servo.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+        servo.gainprm[0] = 1.0
+        servo.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+        servo.biasprm[1] = -robot.motor_kp
+        servo.biasprm[2] = -robot.motor_kd
+        servo.forcelimited = True
+        servo.forcerange = [-robot.max_motor_torque, robot.max_motor_torque]
+    for kind, what, prefix, sensor in (
+        ("torque", mujoco.mjtObj.mjOBJ_ACTUATOR, "servo", mujoco.mjtSensor.mjSENS_ACTUATORFRC),
+        ("speed", mujoco.mjtObj.mjOBJ_JOINT, "hip", mujoco.mjtSensor.mjSENS_JOINTVEL),
+    ):
+        for name in LEG_NAMES:
+            spec.add_sensor(
+                name=f"{kind}_{name}", type=sensor, objtype=what, objname=f"{prefix}_{name}"
+            )
+
+
+class MujocoSimulation:
+    """One MuJoCo model and data holding a terrain and a roach (sim/_engine.py's Simulation).
+
+    Never sleeps or reads the clock: `step()` advances exactly `cfg.timestep` seconds. Legs
+    are commanded per side (differential drive); the three legs of a side follow one motor
+    phase, as the real robot's linkage makes them. `model` and `data` are MuJoCo's, for
+    reading (a viewer, a test).
+    """
+
+    def __init__(
+        self,
+        terrain_vertices: np.ndarray,
+        terrain_faces: np.ndarray,
+        *,
+        ground_height: float | None,
+        robot: RobotConfig,
+        cfg: SimConfig,
+    ) -> None:
+        """terrain_vertices: (V, 3) float world frame [m]; terrain_faces: (F, 3) int."""
+        terrain_vertices = np.asarray(terrain_vertices, dtype=np.float64)
+        terrain_faces = np.asarray(terrain_faces, dtype=np.int64)
+        if terrain_vertices.ndim != 2 or terrain_vertices.shape[1] != 3:
+            raise SimError(f"terrain vertices must be (V, 3), got {terrain_vertices.shape}")
+        if terrain_faces.ndim != 2 or terrain_faces.shape[1] != 3:
+            raise SimError(f"terrain faces must be (F, 3), got {terrain_faces.shape}")
+        if len(terrain_faces) == 0 and ground_height is None:
+            raise SimError("a world needs terrain triangles or a ground plane; it has neither")
+        self.robot = robot
+        self.cfg = cfg
+        field = _cached_field(terrain_vertices, terrain_faces, ground_height)
+        spec, self._hole_level = build_spec(robot, cfg, field=field, ground_height=ground_height)
+        self.model: mujoco.MjModel = spec.compile()
+        self.data: mujoco.MjData = mujoco.MjData(self.model)
+        m = self.model
+        self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "terrain")
+        self._body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "body")
+        self._nominal = (float(m.body_mass[self._body]), m.body_inertia[self._body].copy())
+        self._free = robot.body_mass > 0  # the body has its free joint (build_spec)
+        self._legs_q = slice(7, 13) if self._free else slice(0, 6)  # the hips' qpos
+        self._legs_dq = slice(6, 12) if self._free else slice(0, 6)  # and qvel
+        self._rollout: rollout.Rollout | None = rollout.Rollout(nthread=0)
+        self._state = np.empty((1, mujoco.mj_stateSize(m, _STATE)))
+        self._sensors: dict[int, np.ndarray] = {}  # sensordata buffers by step count
+        self._sides = robot.leg_sides
+        self._offsets = robot.leg_phase_offsets
+        self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
+        self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
+        self._motor_gain = robot.motor_gain  # each side's speed / its command [-]
+        self._diverged = False
+        self._hit = np.zeros(1, dtype=np.int32)
+        self.time = 0.0
+        self.energy_per_leg = np.zeros(6)
+        mujoco.mj_forward(m, self.data)  # (places the static geoms for the rays)
+
+    @classmethod
+    def open_floor(cls, robot: RobotConfig, cfg: SimConfig) -> MujocoSimulation:
+        """A world with nothing but an endless floor at z = 0: calibration and reference walks."""
+        no_terrain = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        return cls(*no_terrain, ground_height=0.0, robot=robot, cfg=cfg)
+
+    # -- state ----------------------------------------------------------------------------------
+
+    def _ray_down(self, x: float, y: float, top: float) -> tuple[float, int]:
+        """(height of the first terrain or ground surface under (x, y, top) [m], -inf if none
+        down to z = -50; the geom it is on, -1 if none)."""
+        dist = mujoco.mj_ray(
+            self.model,
+            self.data,
+            np.array([x, y, top], dtype=np.float64),
+            np.array([0.0, 0.0, -1.0]),
+            _RAY_GROUPS,
+            1,
+            -1,
+            self._hit,
+        )
+        z = top - dist
+        if dist < 0 or z < -50.0:
+            return -math.inf, -1
+        geom = int(self._hit[0])
+        if geom == self._terrain_geom and self._hole_level is not None:
+            if z <= self._hole_level + 1e-6:  # the bottom of a hole stands for no surface
+                return -math.inf, -1
+        return z, geom
+
+    def surface_height(self, x: float, y: float, below: float = 50.0) -> float:
+        """Height of the highest terrain or ground surface at (x, y) [m] under z = below [m],
+        -inf if none."""
+        return self._ray_down(x, y, below)[0]
+
+    def surface_heights(self, xy: np.ndarray, top: float = 50.0) -> tuple[np.ndarray, np.ndarray]:
+        """For points xy (N, 2) [m]: the highest surface under z = top ((N,) [m], -inf where
+        none) and whether it is the terrain rather than the ground plane ((N,) bool). The rays
+        see no part of the robot, so it stays as it is."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        z = np.full(len(xy), -np.inf)
+        on_terrain = np.zeros(len(xy), dtype=bool)
+        for k, (x, y) in enumerate(xy.tolist()):
+            z[k], geom = self._ray_down(x, y, top)
+            on_terrain[k] = geom == self._terrain_geom and geom >= 0
+        return z, on_terrain
+
+    def reset(
+        self,
+        x: float,
+        y: float,
+        yaw: float,
+        surface: float | None = None,
+        *,
+        phase: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
+        """Drop the robot at (x, y) [m] heading yaw [rad], legs in tripod stance, and settle.
+        surface: the height the planner stands it on there [m]; the ground is then looked for
+        just above it (under a table, the floor the plan is on, not the table top). phase: the
+        (left, right) motors' phase to stand at [rad] (0: the tripod stance; a robot caught
+        mid-stride). Everything else starts afresh (MuJoCo's mj_resetData): a reset world
+        steps exactly as a new one."""
+        r, m, d = self.robot, self.model, self.data
+        mujoco.mj_resetData(m, d)
+        mujoco.mj_kinematics(m, d)  # (the static geoms' frames, which the rays need)
+        self._diverged = False
+
+        def ground(gx: float, gy: float) -> float:
+            return ground_height(self.surface_height, gx, gy, surface)
+
+        z0 = start_height(ground, r, x, y, yaw)
+        position = (x, y, z0 + r.standing_height + DROP_CLEARANCE)
+        quat = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        tilted = support_plane_pose(ground, r, x, y, yaw)
+        if tilted is not None:
+            position, quat = tilted
+        self._phase[:] = phase
+        self._omega[:] = 0.0
+        q0, _ = r.leg_angle(self._phase[self._sides] + self._offsets)
+        d.qpos[self._legs_q] = q0
+        self.place(position, quat)
+        self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
+        self.time = 0.0
+        d.time = 0.0
+        self.energy_per_leg[:] = 0.0
+
+    def place(
+        self,
+        position: tuple[float, float, float],
+        quat: tuple[float, float, float, float],
+    ) -> None:
+        """Put the body at position [m] with orientation quat (xyzw, world from body), at rest,
+        legs as they are."""
+        m, d = self.model, self.data
+        qx, qy, qz, qw = quat
+        if self._free:
+            d.qpos[0:3] = position
+            d.qpos[3:7] = (qw, qx, qy, qz)  # MuJoCo's quaternions are wxyz
+            d.qvel[0:6] = 0.0
+        else:  # a fixed body is where the model has it
+            m.body_pos[self._body] = position
+            m.body_quat[self._body] = (qw, qx, qy, qz)
+        mujoco.mj_forward(m, d)
+
+    def set_joint_damping(self, damping: float) -> None:
+        """Viscous damping at every hip [N m s / rad] (0 on the robot: a test of the energy
+        meter drives the legs against it)."""
+        self.model.dof_damping[self._legs_dq] = damping
+
+    def set_leg_speeds(self, left: float, right: float) -> None:
+        """Command the left and right motors [rad/s], clipped to the motor's speed limit. With
+        perturb()'s motor gains, each side then runs at gain x the command (a real motor's
+        speed differs from what it is told)."""
+        lim = self.robot.max_motor_speed
+        self._omega[0] = min(max(left * self._motor_gain[0], -lim), lim)
+        self._omega[1] = min(max(right * self._motor_gain[1], -lim), lim)
+
+    def perturb(
+        self, *, friction: float, mass_scale: float, motor_gain: tuple[float, float]
+    ) -> None:
+        """Set this world's physical uncertainty for the next drives (choose's rollouts):
+        the Coulomb friction of terrain, ground and robot [-], the body's mass as a multiple
+        of the robot's [-], and the (left, right) motors' speed gains [-] as multiples of the
+        robot's own (RobotConfig.motor_gain, 1 on the nominal robot).
+        perturb(friction=cfg.friction, mass_scale=1, motor_gain=(1, 1)) is the nominal world."""
+        m, d = self.model, self.data
+        m.geom_friction[:, 0] = friction
+        # The body (a payload on it) only: the legs' inertia is their motors' reflected one.
+        mass, inertia = self._nominal
+        m.body_mass[self._body] = mass * mass_scale
+        m.body_inertia[self._body] = inertia * mass_scale
+        # The constants MuJoCo derives from the masses (the contacts' softness scales with the
+        # inverse inertia); mj_setConst works on the data, so its state is kept round it.
+        state = np.empty(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_INTEGRATION.value))
+        mujoco.mj_getState(m, d, state, mujoco.mjtState.mjSTATE_INTEGRATION.value)
+        mujoco.mj_setConst(m, d)
+        mujoco.mj_setState(m, d, state, mujoco.mjtState.mjSTATE_INTEGRATION.value)
+        mujoco.mj_forward(m, d)
+        own = self.robot.motor_gain
+        self._motor_gain = (float(motor_gain[0]) * own[0], float(motor_gain[1]) * own[1])
+
+    def step(self) -> None:
+        """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
+        self.advance(1)
+
+    def advance(self, n: int) -> None:
+        """Advance n timesteps at the current leg speeds, metering the motors' energy.
+
+        The hot loop of every drive: the legs' servo inputs for all n steps are computed at
+        once and MuJoCo steps them in one call (mujoco.rollout, from the data's own state and
+        solver warm start: the same steps as mj_step n times, bit for bit).
+        """
+        if n <= 0:
+            return
+        r, m, d, dt = self.robot, self.model, self.data, self.cfg.timestep
+        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
+        leg_phase = self._phase[self._sides] + self._offsets
+        ahead = np.arange(1, n + 1)[:, None] * dt
+        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
+        # Each leg is a PD servo on its share of its side's motor phase: the legs of a side
+        # stay in phase like the real linkage. ctrl carries the targets' part of the force.
+        ctrl = (r.motor_kp * q + r.motor_kd * (dq_dphase * omega))[None]
+        sensors = self._sensors.get(n)
+        if sensors is None:
+            sensors = self._sensors[n] = np.empty((1, n, m.nsensordata))
+        mujoco.mj_getState(m, d, self._state[0], _STATE)
+        unstable = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+        assert self._rollout is not None, "advance() after close()"
+        self._rollout.rollout(
+            [m],
+            [d],
+            self._state,
+            ctrl,
+            skip_checks=True,
+            nstep=n,
+            initial_warmstart=d.qacc_warmstart[None].copy(),
+            state=None,
+            sensordata=sensors,
+        )
+        if d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number != unstable:
+            # MuJoCo resets a diverged world to its model's pose and goes on; what diverged
+            # is reported as PyBullet's would be, a body at no finite place.
+            self._diverged = True
+        # The meter: E += |tau dq/dt| dt per leg (Tong 2018, 3.4), tau the servo's force as
+        # applied (after the torque limit), dq/dt the hip's speed as the step began (both are
+        # the sensors of the step's forward pass, as PyBullet's meter reads them).
+        tau, dq = sensors[0, :, :6], sensors[0, :, 6:12]
+        self.energy_per_leg += np.abs(tau * dq).sum(axis=0) * dt
+        self._phase += self._omega * (n * dt)
+        self.time += n * dt
+
+    def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """(p_world_body [m], quat_world_body xyzw) as plain tuples: the controller's fast read."""
+        if self._diverged:
+            nan = math.nan
+            return (nan, nan, nan), (nan, nan, nan, nan)
+        if self._free:
+            x, y, z, qw, qx, qy, qz = self.data.qpos[0:7].tolist()
+        else:
+            x, y, z = self.model.body_pos[self._body].tolist()
+            qw, qx, qy, qz = self.model.body_quat[self._body].tolist()
+        return (x, y, z), (qx, qy, qz, qw)
+
+    def body_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(p_world_body (3,) [m], quat_world_body (4,) xyzw)."""
+        pos, quat = self.pose()
+        return np.array(pos), np.array(quat)
+
+    def joint_angles(self) -> np.ndarray:
+        """(6,) leg angles [rad], hip order L1 L2 L3 R1 R2 R3."""
+        return self.data.qpos[self._legs_q].copy()
+
+    @property
+    def energy(self) -> float:
+        """Energy spent by all leg motors since reset [J]."""
+        return float(self.energy_per_leg.sum())
+
+    def close(self) -> None:
+        """Free the rollout's worker (once); the model and data go with the object."""
+        if self._rollout is not None:
+            self._rollout.close()
+            self._rollout = None
+
+    def __enter__(self) -> MujocoSimulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
