@@ -1,0 +1,159 @@
+"""PyBullet and MuJoCo side by side, in one run: what the same roach does under each engine,
+and how fast each steps it. Prints numbers and ratios (MuJoCo / PyBullet); a busy machine shows
+in the wall times (each the best of --repeat runs; the load average is printed), less in the
+CPU times printed beside them.
+
+    .venv/bin/python benchmarks/bench_engines.py [--quick] [--repeat 3] [--seed 3]
+
+Open floor: a 10 s walk at 20 rad/s on both sides, and a turn with the right side at 1.5 times
+the left (as the turning calibration walks them: the path summed every 20 ms), under PyBullet
+at 1 ms and MuJoCo at 1 ms and 2 ms: distance, mean speed, curvature, energy per metre and wall
+time per simulated second. Then one path the planner gives on the double bridge, driven by the
+tracking driver under each: outcome, time and energy. --quick: 3 s walks, one repeat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import time
+
+from roachplan.sim import RobotConfig, SimConfig, drive_path, open_floor
+
+ENGINES = (("pybullet", 0.001), ("mujoco", 0.001), ("mujoco", 0.002))
+"""(engine, timestep [s]) compared; the first is the reference of every ratio."""
+WALKS = (("straight", 1.0), ("turn 1.5", 1.5))
+"""(name, right / left motor speed) of the floor walks, the left side at OMEGA."""
+OMEGA = 20.0
+"""The slow side's motor speed [rad/s] (the driver's omega0)."""
+
+
+def _yaw(quat_xyzw) -> float:
+    x, y, z, w = quat_xyzw
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def floor_walk(cfg: SimConfig, ratio: float, seconds: float) -> dict[str, float]:
+    """A walk on the open floor at (OMEGA, ratio OMEGA): distance summed every 20 ms [m], mean
+    speed [m/s], curvature 2 pi turns / distance [1/m], energy per metre [J/m], and the wall and
+    CPU time of its stepping per simulated second [s/s]."""
+    with open_floor(RobotConfig(), cfg) as sim:
+        sim.reset(0.0, 0.0, 0.0)
+        sim.set_leg_speeds(OMEGA, OMEGA * ratio)
+        steps = max(1, round(0.02 / cfg.timestep))
+        (x, y, _), quat = sim.pose()
+        yaw, distance, turned = _yaw(quat), 0.0, 0.0
+        wall = cpu = 0.0
+        for _ in range(round(seconds / (steps * cfg.timestep))):
+            t0, c0 = time.perf_counter(), time.process_time()
+            sim.advance(steps)
+            wall += time.perf_counter() - t0
+            cpu += time.process_time() - c0
+            (nx, ny, _), quat = sim.pose()
+            new_yaw = _yaw(quat)
+            distance += math.hypot(nx - x, ny - y)
+            turned += (new_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
+            x, y, yaw = nx, ny, new_yaw
+        return {
+            "distance": distance,
+            "speed": distance / sim.time,
+            "curvature": turned / distance,
+            "energy_per_m": sim.energy / distance,
+            "wall_per_s": wall / sim.time,
+            "cpu_per_s": cpu / sim.time,
+        }
+
+
+def bridge_drive(world, planned, cfg: SimConfig) -> tuple[object, float, float]:
+    """(DriveResult, wall time of the drive [s], its CPU time [s]) of the planned path on world
+    under cfg."""
+    x, y, yaw = world.start
+    with world.simulation(cfg=cfg) as sim:
+        sim.reset(x, y, yaw, surface=float(world.heightfield.sample([x, y])))
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = drive_path(sim, planned.path_xyz, world.scene.driver, spins=planned.spins)
+        return result, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _label(engine: str, dt: float) -> str:
+    return f"{engine} {dt * 1000:g} ms"
+
+
+def walks(seconds: float, repeat: int) -> None:
+    """The floor walks' table (module docstring)."""
+    print(f"\nopen floor, {seconds:g} s walks, left motor at {OMEGA:g} rad/s")
+    units = ("[m]", "[m/s]", "[1/m]", "[J/m]", "[s/s]", "[s/s]")
+    names = ("distance", "speed", "curv", "E/m", "wall/s", "cpu/s")
+    print(f"{'walk':9s} {'engine':14s}" + "".join(f"{n:>9s}" for n in names))
+    print(f"{'':24s}" + "".join(f"{u:>9s}" for u in units))
+    ratios = []
+    for name, ratio in WALKS:
+        rows = []
+        for engine, dt in ENGINES:
+            cfg = SimConfig(engine=engine, timestep=dt)
+            runs = [floor_walk(cfg, ratio, seconds) for _ in range(repeat)]
+            row = dict(runs[0])  # (the physics is the same every run: deterministic)
+            row["wall_per_s"] = min(r["wall_per_s"] for r in runs)
+            row["cpu_per_s"] = min(r["cpu_per_s"] for r in runs)
+            rows.append(row)
+            keys = ("distance", "speed", "curvature", "energy_per_m", "wall_per_s", "cpu_per_s")
+            print(f"{name:9s} {_label(engine, dt):14s}" + "".join(f"{row[k]:9.4f}" for k in keys))
+        ref = rows[0]
+        for (engine, dt), row in list(zip(ENGINES, rows, strict=True))[1:]:
+            ratios.append(
+                f"{name:9s} {_label(engine, dt):14s}"
+                f"{row['distance'] / ref['distance']:9.3f}"
+                f"{row['energy_per_m'] / ref['energy_per_m']:9.3f}"
+                f"{row['curvature'] - ref['curvature']:+9.2f}"
+                f"{ref['wall_per_s'] / row['wall_per_s']:8.2f}x"
+                f"{ref['cpu_per_s'] / row['cpu_per_s']:8.2f}x"
+            )
+    print(f"\nratios to {_label(*ENGINES[0])} (curvature: the difference [1/m]; speed-up: its")
+    print("time / this one's)")
+    heads = ("distance", "E/m", "curv", "wall up", "cpu up")
+    print(f"{'walk':9s} {'engine':14s}" + "".join(f"{h:>9s}" for h in heads))
+    print("\n".join(ratios))
+
+
+def bridge(seed: int, repeat: int) -> None:
+    """The double bridge's drive under each engine (module docstring)."""
+    from roachplan.experiments import plan
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene("double_bridge"))
+    planned = plan(world, seed=seed)
+    assert planned.found, planned.message
+    route = world.route(planned.path_xyz[:, :2])
+    print(f"\ndouble_bridge, the plan of seed {seed} ({route}), tracking driver")
+    heads = ("outcome", "time [s]", "energy [J]", "wall [s]", "cpu [s]", "wall up", "cpu up")
+    print(f"{'engine':14s}" + "".join(f"{h:>11s}" for h in heads))
+    ref = None
+    for engine, dt in ENGINES:
+        cfg = dataclasses.replace(world.scene.sim, engine=engine, timestep=dt)
+        runs = [bridge_drive(world, planned, cfg) for _ in range(repeat)]
+        result = runs[0][0]
+        wall, cpu = min(r[1] for r in runs), min(r[2] for r in runs)
+        ref = (wall, cpu) if ref is None else ref
+        print(
+            f"{_label(engine, dt):14s}{result.outcome:>11s}{result.drive_time:11.2f}"
+            f"{result.energy:11.3f}{wall:11.2f}{cpu:11.2f}"
+            f"{ref[0] / wall:10.2f}x{ref[1] / cpu:10.2f}x"
+        )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="3 s walks, one repeat")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per time (the best)")
+    ap.add_argument("--seed", type=int, default=3, help="the double bridge plan's seed")
+    args = ap.parse_args()
+    seconds, repeat = (3.0, 1) if args.quick else (10.0, args.repeat)
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; best of {repeat}")
+    walks(seconds, repeat)
+    bridge(args.seed, repeat)
+
+
+if __name__ == "__main__":
+    main()
