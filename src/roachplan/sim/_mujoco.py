@@ -368,7 +368,8 @@ class MujocoSimulation:
         self._legs_dq = slice(6, 12) if self._free else slice(0, 6)  # and qvel
         self._rollout: rollout.Rollout | None = rollout.Rollout(nthread=0)
         self._state = np.empty((1, mujoco.mj_stateSize(m, _STATE)))
-        self._sensors: dict[int, np.ndarray] = {}  # sensordata buffers by step count
+        self._warmstart = np.empty((1, m.nv))  # the solver's warm start, for the rollout
+        self._buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # advance()'s, by n
         self._sides = robot.leg_sides
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
@@ -537,15 +538,17 @@ class MujocoSimulation:
         r, m, d, dt = self.robot, self.model, self.data, self.cfg.timestep
         omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
         leg_phase = self._phase[self._sides] + self._offsets
-        ahead = np.arange(1, n + 1)[:, None] * dt
+        buffers = self._buffers.get(n)
+        if buffers is None:  # (time ahead of the phase [s], sensor readings): kept per n
+            ahead = np.arange(1, n + 1)[:, None] * dt
+            buffers = self._buffers[n] = (ahead, np.empty((1, n, m.nsensordata)))
+        ahead, sensors = buffers
         q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
         # Each leg is a PD servo on its share of its side's motor phase: the legs of a side
         # stay in phase like the real linkage. ctrl carries the targets' part of the force.
         ctrl = (r.motor_kp * q + r.motor_kd * (dq_dphase * omega))[None]
-        sensors = self._sensors.get(n)
-        if sensors is None:
-            sensors = self._sensors[n] = np.empty((1, n, m.nsensordata))
         mujoco.mj_getState(m, d, self._state[0], _STATE)
+        self._warmstart[0] = d.qacc_warmstart
         unstable = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
         assert self._rollout is not None, "advance() after close()"
         self._rollout.rollout(
@@ -555,7 +558,7 @@ class MujocoSimulation:
             ctrl,
             skip_checks=True,
             nstep=n,
-            initial_warmstart=d.qacc_warmstart[None].copy(),
+            initial_warmstart=self._warmstart,
             state=None,
             sensordata=sensors,
         )
