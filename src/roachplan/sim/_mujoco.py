@@ -72,9 +72,10 @@ FIELD_BASE = 0.05
 """Thickness of the solid under the field's lowest level [m]."""
 CONTACT_TIMECONST = 0.005
 """Time constant of every contact [s] (MuJoCo's solref; damping ratio 1). MuJoCo's default,
-0.02 s, is soft for a 30 g robot: on it the body rode 1.5 mm lower while walking at 20 rad/s
-and walked 5 % less far than on 5 ms, closer to PyBullet's near-rigid contacts. MuJoCo needs
-at least two timesteps (4 ms at the 2 ms step); 5 ms is the same contact at 1 and 2 ms."""
+0.02 s, is soft for a 30 g robot: on it the robot stood 0.4 mm into the floor, rode 0.5 mm
+lower while walking at 20 rad/s and walked 5 % less far than on 5 ms, which is closer to
+PyBullet's near-rigid contacts. MuJoCo needs at least two timesteps (4 ms at the 2 ms step);
+5 ms is the same contact at 1 and 2 ms."""
 INTEGRATOR = mujoco.mjtIntegrator.mjINT_EULER
 """MuJoCo's semi-implicit Euler. The servo is stable with it at 2 ms (kd dt / I = 0.6 and
 kp dt^2 / I = 0.08 with I = drive_inertia, the bounds RobotConfig.motor_kd gives for Bullet),
@@ -164,7 +165,7 @@ _FIELDS_KEPT = 4
 def _cached_field(vertices: np.ndarray, faces: np.ndarray, ground_height: float | None):
     """terrain_field, kept for the last _FIELDS_KEPT terrains by their content: a drive makes a
     fresh simulation of the same world each time, and the rasterising takes most of building
-    one (0.7 s on double_bridge at 5 mm; compiling the model takes 20 ms)."""
+    one (0.2-0.7 s on double_bridge at 5 mm; compiling the model about 20 ms)."""
     digest = hashlib.blake2b(np.ascontiguousarray(vertices).tobytes(), digest_size=16)
     digest.update(np.ascontiguousarray(faces).tobytes())
     key = (digest.hexdigest(), vertices.shape, faces.shape, ground_height)
