@@ -19,10 +19,16 @@ import dataclasses
 import math
 import os
 import time
+from typing import Literal
 
-from roachplan.sim import RobotConfig, SimConfig, drive_path, open_floor
+from roachplan.sim import DriveResult, RobotConfig, SimConfig, drive_path, open_floor
 
-ENGINES = (("pybullet", 0.001), ("mujoco", 0.001), ("mujoco", 0.002))
+Engine = Literal["pybullet", "mujoco"]
+ENGINES: tuple[tuple[Engine, float], ...] = (
+    ("pybullet", 0.001),
+    ("mujoco", 0.001),
+    ("mujoco", 0.002),
+)
 """(engine, timestep [s]) compared; the first is the reference of every ratio."""
 WALKS = (("straight", 1.0), ("turn 1.5", 1.5))
 """(name, right / left motor speed) of the floor walks, the left side at OMEGA."""
@@ -66,7 +72,7 @@ def floor_walk(cfg: SimConfig, ratio: float, seconds: float) -> dict[str, float]
         }
 
 
-def bridge_drive(world, planned, cfg: SimConfig) -> tuple[object, float, float]:
+def bridge_drive(world, planned, cfg: SimConfig) -> tuple[DriveResult, float, float]:
     """(DriveResult, wall time of the drive [s], its CPU time [s]) of the planned path on world
     under cfg."""
     x, y, yaw = world.start

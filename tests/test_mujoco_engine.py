@@ -8,7 +8,6 @@ import math
 import subprocess
 import sys
 
-import mujoco
 import numpy as np
 import pytest
 import trimesh
@@ -16,6 +15,7 @@ import trimesh
 from roachplan.planning import heightfield_from_mesh
 from roachplan.sim import LEG_NAMES, RobotConfig, SimConfig
 from roachplan.sim._mujoco import (
+    INTEGRATOR,
     OVERHEAD,
     MujocoSimulation,
     leg_inertia_about_hip,
@@ -249,4 +249,4 @@ def test_the_engine_steps_at_its_configured_timestep():
         sim.reset(0.0, 0.0, 0.0)
         sim.advance(10)
         assert sim.data.time == pytest.approx(0.02) and sim.time == pytest.approx(0.02)
-        assert sim.model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
+        assert sim.model.opt.integrator == INTEGRATOR

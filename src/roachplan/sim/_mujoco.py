@@ -28,6 +28,10 @@ joins the points into two triangles a cell and fills the solid under them down t
 below the lowest level.
 """
 
+# pyright: reportAttributeAccessIssue=false
+# (mujoco's names come from its compiled modules, which pyright cannot read: every mujoco.* is
+# unknown to it; the tests run each of them.)
+
 from __future__ import annotations
 
 import functools

@@ -62,7 +62,7 @@ def start_height(ground: Ground, robot: RobotConfig, x: float, y: float, yaw: fl
 
 def support_plane_pose(
     ground: Ground, robot: RobotConfig, x: float, y: float, yaw: float
-) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+) -> tuple[tuple[float, float, float], tuple[float, float, float, float]] | None:
     """(p_world_body (3,) [m], quat_world_body xyzw) of the body standing on the plane fitted
     (least squares) to the ground under its feet at (x, y) [m], heading yaw [rad],
     DROP_CLEARANCE above its stance: on a slope a level body would put its uphill feet into the
@@ -82,4 +82,6 @@ def support_plane_pose(
     centre = np.array([x, y, a + b * x + cy * y]) + up * (robot.standing_height + DROP_CLEARANCE)
     from scipy.spatial.transform import Rotation
 
-    return tuple(centre.tolist()), tuple(Rotation.from_matrix(rot).as_quat().tolist())
+    px, py, pz = centre.tolist()
+    qx, qy, qz, qw = Rotation.from_matrix(rot).as_quat().tolist()
+    return (px, py, pz), (qx, qy, qz, qw)
