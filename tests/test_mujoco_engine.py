@@ -250,3 +250,21 @@ def test_the_engine_steps_at_its_configured_timestep():
         sim.advance(10)
         assert sim.data.time == pytest.approx(0.02) and sim.time == pytest.approx(0.02)
         assert sim.model.opt.integrator == INTEGRATOR
+
+
+def test_a_diverged_world_is_at_no_finite_place_and_says_so_off_stdout(
+    tmp_path, monkeypatch, capfd
+):
+    """A leg of next to no inertia under a stiff servo at a 10 ms step diverges: MuJoCo resets
+    such a state and goes on; the engine reports the body at NaN (the driver's "fell: the
+    simulation diverged"), with nothing on standard output and no MUJOCO_LOG.TXT written."""
+    monkeypatch.chdir(tmp_path)
+    robot = RobotConfig(drive_inertia=1e-12, leg_mass=1e-6, motor_kd=1.0, max_motor_torque=1e3)
+    with MujocoSimulation.open_floor(robot, SimConfig(timestep=0.01)) as sim:
+        sim.reset(0.0, 0.0, 0.0)
+        sim.set_leg_speeds(60.0, 60.0)
+        sim.advance(100)
+        (x, _, _), _ = sim.pose()
+        assert math.isnan(x)
+    assert capfd.readouterr().out == ""
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

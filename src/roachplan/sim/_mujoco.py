@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import logging
 import math
 
 import mujoco
@@ -93,10 +94,28 @@ height field (build_spec), clears the field's cells: over it a piece's lowest co
 every cell under it, and MuJoCo skips those cells without a collision test. (The planner
 stands the robot on slopes up to 25 deg.)"""
 
+_log = logging.getLogger(__name__)
+
+
+def _warned(message: str) -> None:
+    _log.warning("MuJoCo: %s", message)
+
+
+if mujoco.get_mju_user_warning() is None:
+    # MuJoCo prints its warnings on standard output (which `--json` keeps for JSON alone) and
+    # appends them to a MUJOCO_LOG.TXT in the working directory: ours go to the logger. What a
+    # warning means for a drive (a state that diverged) is read from the data's counters.
+    mujoco.set_mju_user_warning(_warned)
+
 _TERRAIN_GROUP, _ROBOT_GROUP = 0, 1
 _PLANE_BIT, _FIELD_BIT = 1, 2  # contype/conaffinity: what collides with the plane, the field
 _RAY_GROUPS = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # rays see the terrain alone
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
+_DIVERGED = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
 
 
 @functools.cache
@@ -554,7 +573,7 @@ class MujocoSimulation:
         ctrl = (r.motor_kp * q + r.motor_kd * (dq_dphase * omega))[None]
         mujoco.mj_getState(m, d, self._state[0], _STATE)
         self._warmstart[0] = d.qacc_warmstart
-        unstable = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+        unstable = self._resets()
         assert self._rollout is not None, "advance() after close()"
         self._rollout.rollout(
             [m],
@@ -567,7 +586,7 @@ class MujocoSimulation:
             state=None,
             sensordata=sensors,
         )
-        if d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number != unstable:
+        if self._resets() != unstable:
             # MuJoCo resets a diverged world to its model's pose and goes on; what diverged
             # is reported as PyBullet's would be, a body at no finite place.
             self._diverged = True
@@ -578,6 +597,11 @@ class MujocoSimulation:
         self.energy_per_leg += np.abs(tau * dq).sum(axis=0) * dt
         self._phase += self._omega * (n * dt)
         self.time += n * dt
+
+    def _resets(self) -> int:
+        """How many times MuJoCo has found the state not finite (or huge) and reset it."""
+        w = self.data.warning
+        return sum(w[k].number for k in _DIVERGED)
 
     def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """(p_world_body [m], quat_world_body xyzw) as plain tuples: the controller's fast read."""
