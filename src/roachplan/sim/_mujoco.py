@@ -5,7 +5,10 @@ The model (`build_spec`):
   - world: the terrain as a height field (`hfield` geom, below) and, when the world has one,
     the ground as an infinite plane at z = ground_height. Both static, in geom group 0.
   - `body`: a free body, the box of RobotConfig's body (its frame RobotConfig's: x forward,
-    y left, z up, origin at the box centre); its mass spread over the box.
+    y left, z up, origin at the box centre); its mass spread over the box (a body of mass 0
+    is fixed in the world, as PyBullet fixes a base of mass 0). Against a height field the box
+    collides as four massless pieces along its length (_add_robot says why), with the plane
+    as itself.
   - `leg_L1` ... `leg_R3`: one body per leg at `robot.hip_positions`, a hinge `hip_*` about
     the body's +y there (q = 0: the leg points straight down; continuous, no limits), a capsule
     from the hip to leg_length below it, radius leg_radius: its rounded tip is the foot. The
@@ -38,6 +41,7 @@ import functools
 import hashlib
 import logging
 import math
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -47,6 +51,9 @@ from ._config import SimConfig
 from ._errors import SimError
 from ._placement import DROP_CLEARANCE, ground_height, start_height, support_plane_pose
 from ._robot import LEG_NAMES, RobotConfig
+
+if TYPE_CHECKING:
+    from roachplan.planning import HeightField
 
 FIELD_RESOLUTION = 0.005
 """Grid spacing of the terrain's height field [m]. MuJoCo joins the grid points into flat
@@ -78,9 +85,9 @@ FIELD_BASE = 0.05
 CONTACT_TIMECONST = 0.005
 """Time constant of every contact [s] (MuJoCo's solref; damping ratio 1). MuJoCo's default,
 0.02 s, is soft for a 30 g robot: on it the robot stood 0.4 mm into the floor, rode 0.5 mm
-lower while walking at 20 rad/s and walked 5 % less far than on 5 ms, which is closer to
-PyBullet's near-rigid contacts. MuJoCo needs at least two timesteps (4 ms at the 2 ms step);
-5 ms is the same contact at 1 and 2 ms."""
+lower while walking at 20 rad/s and walked 5 % less far than on 5 ms (the stiffer contact is
+also the nearer to PyBullet's, which are close to rigid). MuJoCo needs at least two timesteps
+(4 ms at the 2 ms step); 5 ms is the same contact at 1 and 2 ms."""
 INTEGRATOR = mujoco.mjtIntegrator.mjINT_EULER
 """MuJoCo's semi-implicit Euler. The servo is stable with it at 2 ms (kd dt / I = 0.6 and
 kp dt^2 / I = 0.08 with I = drive_inertia, the bounds RobotConfig.motor_kd gives for Bullet),
@@ -152,7 +159,7 @@ def terrain_field(
     *,
     resolution: float = FIELD_RESOLUTION,
     max_points: int = MAX_FIELD_POINTS,
-):
+) -> HeightField | None:
     """The terrain's top surface (vertices (V, 3) [m] world frame, faces (F, 3)) as a
     planning HeightField over its xy extent, at `resolution` [m] or coarser to keep within
     max_points: each point the highest surface within OVERHEAD of the lowest there, at least
@@ -181,11 +188,13 @@ def terrain_field(
     return field
 
 
-_FIELDS: dict[tuple, object] = {}
+_FIELDS: dict[tuple, HeightField | None] = {}
 _FIELDS_KEPT = 4
 
 
-def _cached_field(vertices: np.ndarray, faces: np.ndarray, ground_height: float | None):
+def _cached_field(
+    vertices: np.ndarray, faces: np.ndarray, ground_height: float | None
+) -> HeightField | None:
     """terrain_field, kept for the last _FIELDS_KEPT terrains by their content: a drive makes a
     fresh simulation of the same world each time, and the rasterising takes most of building
     one (0.2-0.7 s on double_bridge at 5 mm; compiling the model about 20 ms)."""
@@ -218,7 +227,7 @@ def build_spec(
     robot: RobotConfig,
     cfg: SimConfig,
     *,
-    field=None,
+    field: HeightField | None = None,
     ground_height: float | None = None,
 ) -> tuple[mujoco.MjSpec, float | None]:
     """(the MJCF model of the world: the terrain's height field (a planning HeightField, or
@@ -240,7 +249,9 @@ def build_spec(
     return spec, hole_level
 
 
-def _add_terrain(spec: mujoco.MjSpec, field, ground_height: float | None, contact: dict):
+def _add_terrain(
+    spec: mujoco.MjSpec, field: HeightField | None, ground_height: float | None, contact: dict
+) -> float | None:
     """Add the field (a planning HeightField, or None) and the ground plane at ground_height
     [m] (None: none) to spec's world; the field's hole level [m], None without holes."""
     world = spec.worldbody
