@@ -192,7 +192,8 @@ def with_page_engine(world: World, engine: str | None) -> World:
     (scenes.with_engine); what the world computed is kept."""
     if engine is None or engine == world.scene.sim.engine:
         return world
-    return world.with_sim(with_engine(world.scene, engine).sim)
+    scene = with_engine(world.scene, engine)
+    return world.with_sim(scene.sim, scene.driver)
 
 
 def load_world(

@@ -7,7 +7,7 @@ import dataclasses
 from typing import Any, TypeVar
 
 from roachplan._settings import SettingError, setting_problem
-from roachplan.sim import SimConfig, engine_settings
+from roachplan.sim import SimConfig, engine_driver, engine_settings
 
 from ._errors import SceneError
 from ._scene import Scene, backend_check, scale_problem, timeout_check
@@ -61,10 +61,12 @@ _Sims = TypeVar("_Sims")
 
 
 def with_engine(scene_or_spec: _Sims, engine: str) -> _Sims:
-    """The scene (or experiment spec: anything with a `sim:` SimConfig) simulated by engine
-    ("pybullet" or "mujoco") as that engine was calibrated: its timestep with it
-    (sim/_engine.py engine_settings). A scene file's `sim: {engine: ..., timestep: ...}` sets
-    other combinations."""
+    """The scene (or experiment spec: anything with `sim:` and `driver:` configs) simulated by
+    engine ("pybullet" or "mujoco") as that engine was calibrated: its timestep, and its turning
+    curve for the driver (sim/_engine.py engine_settings, engine_driver). A scene file's
+    `sim: {engine: ..., timestep: ...}` sets other combinations."""
     _refuse("--engine", engine, setting_problem(SimConfig, "engine", engine))
     held: Any = scene_or_spec
-    return dataclasses.replace(held, sim=engine_settings(held.sim, engine))
+    return dataclasses.replace(
+        held, sim=engine_settings(held.sim, engine), driver=engine_driver(held.driver, engine)
+    )

@@ -36,7 +36,15 @@ from roachplan.perception import (
     short_repr,
 )
 from roachplan.planning import PlannerConfig
-from roachplan.sim import DriverConfig, RobotConfig, SimConfig, UncertaintyConfig
+from roachplan.sim import (
+    ENGINES,
+    DriverConfig,
+    RobotConfig,
+    SimConfig,
+    UncertaintyConfig,
+    engine_driver,
+    engine_settings,
+)
 
 from ._errors import SceneError
 from ._library import LIBRARY, library_names
@@ -354,6 +362,28 @@ class YamlFields:
         return self.config(UncertaintyConfig, value, key, base=base)
 
 
+def _engine_named(data: dict) -> str | None:
+    """The engine a scene file's `sim.engine` names, when it names one (its validator refuses
+    anything else)."""
+    sim = data.get("sim")
+    engine = sim.get("engine") if isinstance(sim, dict) else None
+    return engine if isinstance(engine, str) and engine in ENGINES else None
+
+
+def _engine_sim(data: dict) -> SimConfig | None:
+    """The physics settings a scene file's `sim:` is read over: the engine it names as that
+    engine was calibrated (its timestep), so `sim: {engine: mujoco}` alone is MuJoCo at 2 ms."""
+    engine = _engine_named(data)
+    return None if engine is None else engine_settings(SimConfig(), engine)
+
+
+def _engine_driver(data: dict) -> DriverConfig | None:
+    """The driver settings a scene file's `driver:` is read over: asking the engine `sim:`
+    names for arcs by that engine's turning curve."""
+    engine = _engine_named(data)
+    return None if engine is None else engine_driver(DriverConfig(), engine)
+
+
 def _existing_file(ctx: YamlFields, name: str, key: str) -> Path:
     """The file `name` (relative to the scene's folder) resolves to; refused when it is missing,
     a folder, or no usable name (a NUL character, too long)."""
@@ -515,8 +545,10 @@ def load_scene(name_or_path: str | Path) -> Scene:
         bounds=None if data.get("bounds") is None else ctx.box(data["bounds"], "bounds"),
         routes=tuple((str(k), ctx.box(v, f"routes.{k}")) for k, v in routes.items()),
         planner=ctx.config(PlannerConfig, data.get("planner") or {}, "planner"),
-        sim=ctx.config(SimConfig, data.get("sim") or {}, "sim"),
-        driver=ctx.config(DriverConfig, data.get("driver") or {}, "driver"),
+        sim=ctx.config(SimConfig, data.get("sim") or {}, "sim", base=_engine_sim(data)),
+        driver=ctx.config(
+            DriverConfig, data.get("driver") or {}, "driver", base=_engine_driver(data)
+        ),
         uncertainty=ctx.uncertainty(
             {} if data.get("uncertainty") is None else data["uncertainty"], "uncertainty"
         ),

@@ -27,6 +27,7 @@ from roachplan.planning import (
 )
 from roachplan.sim import (
     LEG_NAMES,
+    DriverConfig,
     RobotConfig,
     SimConfig,
     SimError,
@@ -173,10 +174,12 @@ class World:
         )
         return world
 
-    def with_sim(self, sim: SimConfig) -> World:
-        """This world simulated with other physics settings (another engine): what it has
-        computed (regions, sim_terrain: neither depends on the physics) kept."""
-        world = dataclasses.replace(self, scene=dataclasses.replace(self.scene, sim=sim))
+    def with_sim(self, sim: SimConfig, driver: DriverConfig) -> World:
+        """This world simulated with other physics and driver settings (another engine, its
+        turning curve): what it has computed (regions, sim_terrain: neither depends on them)
+        kept."""
+        scene = dataclasses.replace(self.scene, sim=sim, driver=driver)
+        world = dataclasses.replace(self, scene=scene)
         world.__dict__.update(
             {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
         )

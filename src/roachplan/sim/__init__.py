@@ -47,6 +47,11 @@ _getattr, __dir__, __all__ = lazy_exports(
         "Simulation": "._engine",
         "make_simulation": "._engine",
         "engine_settings": "._engine",
+        "engine_driver": "._engine",
+        "ENGINE_TURNING": "._turning",
+        "ENGINE_SPINS": "._turning",
+        "MUJOCO_TURNING": "._turning",
+        "MUJOCO_SPINS": "._turning",
         "CALIBRATED_TIMESTEP": "._engine",
         "open_floor": "._engine",
         "PyBulletSimulation": "._simulation",
@@ -90,6 +95,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._driver import quat_to_matrix as quat_to_matrix
     from ._engine import CALIBRATED_TIMESTEP as CALIBRATED_TIMESTEP
     from ._engine import Simulation as Simulation
+    from ._engine import engine_driver as engine_driver
     from ._engine import engine_settings as engine_settings
     from ._engine import make_simulation as make_simulation
     from ._engine import open_floor as open_floor
@@ -101,6 +107,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._turning import CALIBRATED_SPIN as CALIBRATED_SPIN
     from ._turning import CALIBRATED_SPINS as CALIBRATED_SPINS
     from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING
+    from ._turning import ENGINE_SPINS as ENGINE_SPINS
+    from ._turning import ENGINE_TURNING as ENGINE_TURNING
+    from ._turning import MUJOCO_SPINS as MUJOCO_SPINS
+    from ._turning import MUJOCO_TURNING as MUJOCO_TURNING
     from ._turning import PLAN_HEADROOM as PLAN_HEADROOM
     from ._turning import SpinTurn as SpinTurn
     from ._turning import TurningCurve as TurningCurve

@@ -21,7 +21,8 @@ class SimConfig:
 
     engine: Literal["pybullet", "mujoco"] = s("pybullet", one_of(ENGINES))
     """Physics engine: pybullet (the reference: the project's tables were measured with it) or
-    mujoco (faster; what it was calibrated to is sim/_engine_calibration.py's)."""
+    mujoco (faster). What each was calibrated to (timestep, turning curve, spins) is data in
+    sim/_engine.py (CALIBRATED_TIMESTEP) and sim/_turning.py (ENGINE_TURNING, ENGINE_SPINS)."""
     timestep: float = s(1.0 / 1000.0, positive("s"))
     """Fixed physics step [s]. Halving it changes a 10 s floor walk by < 0.5 % in distance and
     < 2.5 % in energy (README, timestep study)."""

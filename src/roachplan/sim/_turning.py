@@ -137,3 +137,28 @@ CALIBRATED_SPIN = CALIBRATED_SPINS[1]
 """The spin the tracking driver makes (DriverConfig.spin_speed, 10 rad/s): 1.44 rad/s, within
 4 % of the cheapest energy per radian (5 rad/s: 0.0112 J/rad) at twice its rate; 20 rad/s turns
 twice as fast for a third more energy per radian and wanders 2.9 cm instead of 2.1 cm."""
+
+
+MUJOCO_TURNING = TurningCurve(kappa_sat=3.077, rate=3.529, lock=0.3448, lock_ratio=4.3238)
+"""The MuJoCo roach's turning curve (sim/_mujoco.py at its calibrated 2 ms step), as
+`roachplan calibrate-turning --engine mujoco` fits it (the same sweep as CALIBRATED_TURNING's):
+R^2 0.907, residuals rms 0.33 /m, at most 0.66 /m. It rises with PyBullet's up to a ratio of
+1.5 (3.1 /m against 3.0 /m) and then stays near 3 /m: 4.05 /m at ratio 3, where PyBullet's
+tripods phase-lock and reach 10.3 /m. Its softer contacts let the slow side slip sooner (a
+contact time constant of 20 ms turned at 5.4-6.9 /m but walked 12 % less far). So the same
+drivable plan (arcs down to 0.13 m radius, PyBullet's headroom) asks more of this robot than
+it can turn: the driver asks the engine's own curve and saturates at max_ratio."""
+
+MUJOCO_SPINS = (
+    SpinTurn(omega=5.0, yaw_rate=0.7289, drift=0.00035, wander=0.0126, energy_per_radian=0.00955),
+    SpinTurn(omega=10.0, yaw_rate=1.366, drift=0.00033, wander=0.0156, energy_per_radian=0.01075),
+    SpinTurn(omega=20.0, yaw_rate=2.541, drift=0.00017, wander=0.0233, energy_per_radian=0.01677),
+    SpinTurn(omega=30.0, yaw_rate=2.870, drift=0.00018, wander=0.0319, energy_per_radian=0.03576),
+)
+"""Turning on the spot under MuJoCo, measured as CALIBRATED_SPINS (`calibrate-turning --engine
+mujoco`): within 5-12 % of PyBullet's yaw rates, a third less wander."""
+
+ENGINE_TURNING = {"pybullet": CALIBRATED_TURNING, "mujoco": MUJOCO_TURNING}
+"""Each engine's calibrated turning curve: what the driver asks it for an arc with."""
+ENGINE_SPINS = {"pybullet": CALIBRATED_SPINS, "mujoco": MUJOCO_SPINS}
+"""Each engine's calibrated spins."""

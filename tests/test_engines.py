@@ -1,0 +1,63 @@
+"""The physics seam (issue 31): one engine setting that reaches every simulation, from a scene
+file, the command line and the API, each engine as it was calibrated; PyBullet the default."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import roachplan
+from conftest import roachplan as cli
+from roachplan.scenes import SceneError, build_world, load_scene, with_engine
+from roachplan.sim import (
+    CALIBRATED_TIMESTEP,
+    CALIBRATED_TURNING,
+    MUJOCO_TURNING,
+    MujocoSimulation,
+    PyBulletSimulation,
+    SimConfig,
+)
+
+FLAT = (
+    "terrain: []\nground: 0.0\nrobot: {start: [0.0, 0.0, 0]}\ngoal: [0.6, 0.0, 0]\n"
+    "bounds: [[-0.4, -0.4], [1.0, 0.4]]\nplanner: {name: rrtconnect}\n"
+)
+
+
+def test_pybullet_is_the_default_and_a_scene_file_names_the_other_as_calibrated(tmp_path):
+    assert SimConfig().engine == "pybullet" and load_scene("double_bridge").sim.engine == "pybullet"
+    (tmp_path / "mj.yaml").write_text(FLAT + "sim: {engine: mujoco}\n")
+    scene = load_scene(str(tmp_path / "mj.yaml"))
+    assert scene.sim.engine == "mujoco"
+    assert scene.sim.timestep == CALIBRATED_TIMESTEP["mujoco"] != SimConfig().timestep
+    assert scene.driver.turning == MUJOCO_TURNING != CALIBRATED_TURNING
+    # What the file sets itself stays.
+    (tmp_path / "mj1.yaml").write_text(FLAT + "sim: {engine: mujoco, timestep: 0.001}\n")
+    assert load_scene(str(tmp_path / "mj1.yaml")).sim.timestep == 0.001
+    (tmp_path / "bad.yaml").write_text(FLAT + "sim: {engine: bullet3}\n")
+    with pytest.raises(SceneError, match=r"sim\.engine.*one of pybullet, mujoco"):
+        load_scene(str(tmp_path / "bad.yaml"))
+
+
+def test_the_world_builds_the_engine_its_scene_names_and_both_drive_a_plan(tmp_path):
+    (tmp_path / "flat.yaml").write_text(FLAT)
+    base = load_scene(str(tmp_path / "flat.yaml"))
+    outcomes = {}
+    for engine, cls in (("pybullet", PyBulletSimulation), ("mujoco", MujocoSimulation)):
+        world = build_world(with_engine(base, engine))
+        with world.simulation() as sim:
+            assert isinstance(sim, cls) and sim.cfg.timestep == CALIBRATED_TIMESTEP[engine]
+        trial = roachplan.trial(world, seed=1)
+        outcomes[engine] = (trial.outcome, trial.energy)
+    assert all(o == "success" for o, _ in outcomes.values()), outcomes
+    assert outcomes["pybullet"][1] != outcomes["mujoco"][1]  # (two engines, not one twice)
+
+
+def test_engine_on_the_command_line_and_a_refused_one_names_the_choices():
+    ran = cli("trial", "--scene", "double_bridge", "--engine", "mujoco", "--seed", "3", "--json")
+    assert ran.returncode == 0, ran.stderr
+    assert json.loads(ran.stdout)["outcome"] in ("success", "fell", "flipped", "stuck", "missed")
+    refused = cli("trial", "--scene", "double_bridge", "--engine", "ode")
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    assert "--engine" in refused.stderr and "mujoco" in refused.stderr
