@@ -90,7 +90,17 @@ def choose(
     spins = {c.index: c.spins for c in candidates}
 
     def run_rollouts(calls: list[tuple]) -> list[dict]:
-        return list(pool.run(("rollout", (*c, uncertainty), {"spins": spins[c[0]]}) for c in calls))
+        if scene.sim.engine != "mujoco":
+            return list(
+                pool.run(("rollout", (*c, uncertainty), {"spins": spins[c[0]]}) for c in calls)
+            )
+        # MuJoCo steps a worker's share of the round in lockstep (sim/_lockstep.py): one
+        # batch per worker, the calls dealt round-robin (each batch a mix of candidates).
+        dealt = [calls[k :: pool.workers] for k in range(pool.workers)]
+        batches = [
+            ("rollouts", ([(*c, spins[c[0]]) for c in part], uncertainty)) for part in dealt if part
+        ]
+        return [rec for records in pool.run(batches) for rec in records]
 
     try:
         left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)

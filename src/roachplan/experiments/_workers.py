@@ -13,6 +13,7 @@ Both backends take calls (method name, arguments) and yield each result as soon 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import time
@@ -23,6 +24,7 @@ import numpy as np
 from roachplan.planning import PlanResult
 from roachplan.processes import Pool
 from roachplan.scenes import build_world
+from roachplan.sim import drive_path
 
 from ._spec import ExperimentSpec
 from ._store import REDRIVE, TRIAL
@@ -90,11 +92,43 @@ class TrialWorker:
         spot, `spins`) in the world drawn from `uncertainty` with `seed`
         (experiments/_uncertainty.py); a rollout record."""
         t0 = time.perf_counter()
+        with self._rollout_world(seed, uncertainty) as (sim, start, w, sigma):
+            driven = drive_path(sim, np.asarray(path), self.world.scene.driver, spins=spins)
+        return self._rollout_record(candidate, seed, (start, w, sigma), driven, t0)
+
+    def rollouts(self, calls: list[tuple], uncertainty) -> list[dict]:
+        """Several of `choose`'s rollouts, each call (candidate, path, seed, spins) as
+        rollout's: with the MuJoCo engine stepped together in lockstep (sim/_lockstep.py:
+        the same records, bit for bit, as one at a time), else one after the other."""
+        if self.world.scene.sim.engine != "mujoco" or len(calls) < 2:
+            return [self.rollout(c, p, seed, uncertainty, spins) for c, p, seed, spins in calls]
+        from roachplan.sim import drive_lockstep
+
+        t0 = time.perf_counter()
+        with contextlib.ExitStack() as stack:
+            made = [stack.enter_context(self._rollout_world(c[2], uncertainty)) for c in calls]
+            driven = drive_lockstep(
+                [sim for sim, *_ in made],
+                [np.asarray(c[1]) for c in calls],
+                self.world.scene.driver,
+                [c[3] for c in calls],
+            )
+        now = time.perf_counter()
+        share = now - (now - t0) / len(calls)  # (each its share of the wall time)
+        return [
+            self._rollout_record(c[0], c[2], tuple(drawn), d, share)
+            for c, (_, *drawn), d in zip(calls, made, driven, strict=True)
+        ]
+
+    @contextlib.contextmanager
+    def _rollout_world(self, seed: int, uncertainty):
+        """The world of rollout `seed`: (a fresh simulation, reset at the drawn start and
+        perturbed by the drawn friction, mass and motors; the start (x, y, yaw); the draw;
+        the terrain's height error [m]), the simulation closed on leaving."""
         scene = self.world.scene
         w = draw(uncertainty, seed)
         x, y, yaw = (float(a + b) for a, b in zip(self.world.start, w.start_offset, strict=True))
-        start = (x, y, yaw)
-        # A fresh PyBullet world per rollout: after changed masses and friction a reused one
+        # A fresh world per rollout: after changed masses and friction a reused PyBullet one
         # drove the same seed differently depending on what it had driven before (measured:
         # 8 of 28 rollouts), and a rollout must re-run exactly from its seed alone.
         captured = any(obj.kind == "capture" for obj in scene.terrain)
@@ -111,7 +145,13 @@ class TrialWorker:
                 mass_scale=w.mass_scale,
                 motor_gain=w.motor_gain,
             )
-            driven = drive(self.world, np.asarray(path), start=start, sim=sim, spins=spins)
+            sim.reset(x, y, yaw, surface=float(self.world.heightfield.sample(np.array([x, y]))))
+            yield sim, (x, y, yaw), w, sigma
+
+    def _rollout_record(self, candidate: int, seed: int, drawn: tuple, driven, t0: float) -> dict:
+        """A rollout record of the drive `driven` in the world drawn ((start, draw, terrain
+        height error), as _rollout_world gives them), begun at t0 (time.perf_counter() [s])."""
+        start, w, sigma = drawn
         return {
             "candidate": candidate,
             "seed": seed,

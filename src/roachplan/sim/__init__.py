@@ -46,6 +46,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "ENGINES": "._config",
         "Simulation": "._engine",
         "make_simulation": "._engine",
+        "drive_lockstep": "._lockstep",
         "engine_settings": "._engine",
         "engine_driver": "._engine",
         "ENGINE_TURNING": "._turning",
@@ -100,6 +101,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._engine import make_simulation as make_simulation
     from ._engine import open_floor as open_floor
     from ._errors import SimError as SimError
+    from ._lockstep import drive_lockstep as drive_lockstep
     from ._mujoco import MujocoSimulation as MujocoSimulation
     from ._robot import LEG_NAMES as LEG_NAMES
     from ._robot import RobotConfig as RobotConfig

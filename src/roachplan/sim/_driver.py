@@ -166,67 +166,97 @@ def drive_path(
 
     Every control_period the controller reads the body pose, checks the outcome, lets the
     follower (cfg.kind) advance along the path and set the motor speeds; in between, the
-    simulation steps with nothing of ours but the leg targets and the energy meter.
+    simulation steps with nothing of ours but the leg targets and the energy meter. (A
+    worker's rollouts in lockstep, sim/_lockstep.py, run the same Drive per rollout.)
     """
-    path = np.asarray(path_xyz, dtype=float)
-    follower = make_follower(path, cfg, spins)
-    path = follower.path
+    drive = Drive(path_xyz, cfg, spins, robot=sim.robot)
     steps_per_control = max(1, round(cfg.control_period / sim.cfg.timestep))
-    omega_max = omega_limit(sim.robot.max_motor_speed, cfg)
-    standing = sim.robot.standing_height
-    trajectory: list[tuple[float, float, float, float]] = []
-    next_frame = 0.0
-    # Progress: the follower advanced (reference: to its next waypoint), or its gap to go got
-    # stuck_distance smaller, since last_progress [s].
-    last_progress, best_gap = 0.0, math.inf
-    outcome: Outcome = "timeout"
-    reason = f"did not reach the goal within {cfg.time_limit:g} s"
     while True:
         pos, quat = sim.pose()
-        t = sim.time
-        if t >= next_frame:
-            trajectory.append((t, *pos))
-            if on_frame is not None:
-                on_frame(
-                    Frame(
-                        t=t,
-                        p_world_body=pos,
-                        quat_world_body=quat,
-                        leg_angles=tuple(sim.joint_angles().tolist()),
-                    )
+        if on_frame is not None and sim.time >= drive.next_frame:
+            on_frame(
+                Frame(
+                    t=sim.time,
+                    p_world_body=pos,
+                    quat_world_body=quat,
+                    leg_angles=tuple(sim.joint_angles().tolist()),
                 )
-            next_frame += cfg.frame_period
-        failure = _failure(pos, quat, path, standing, cfg.fall_drop)
+            )
+        speeds = drive.control(sim.time, pos, quat)
+        if speeds is None:
+            return drive.result(sim.time, pos, sim.energy_per_leg)
+        sim.set_leg_speeds(*speeds)
+        sim.advance(steps_per_control)
+
+
+class Drive:
+    """One drive's controller and bookkeeping, apart from the engine that moves the robot:
+    each control period `control` takes the body pose and says the motor speeds, or None once
+    the outcome is decided; `result` then gives it. The same for one simulation (drive_path)
+    and for rollouts stepped together (sim/_lockstep.py)."""
+
+    def __init__(self, path_xyz, cfg: DriverConfig, spins, *, robot) -> None:
+        """path_xyz: (N, 3) world frame [m]; spins: (waypoint index, heading [rad]) each;
+        robot: the RobotConfig driven (its standing height and motor limit)."""
+        self.follower = make_follower(np.asarray(path_xyz, dtype=float), cfg, spins)
+        self.path = self.follower.path
+        self.cfg = cfg
+        self.omega_max = omega_limit(robot.max_motor_speed, cfg)
+        self.standing = robot.standing_height
+        self.trajectory: list[tuple[float, float, float, float]] = []
+        """Body positions (t [s], x, y, z [m]), one per frame period."""
+        self.next_frame = 0.0
+        """When the next trajectory sample is due [s]."""
+        # Progress: the follower advanced (reference: to its next waypoint), or its gap to go
+        # got stuck_distance smaller, since last_progress [s].
+        self.last_progress, self.best_gap = 0.0, math.inf
+        self.outcome: Outcome = "timeout"
+        self.reason = f"did not reach the goal within {cfg.time_limit:g} s"
+
+    def control(self, t: float, pos, quat) -> tuple[float, float] | None:
+        """At time t [s] with the body at pos (x, y, z) [m], orientation quat (xyzw): the
+        (left, right) motor speeds [rad/s] until the next control period, or None when the
+        drive has ended (self.outcome, self.reason say how)."""
+        cfg = self.cfg
+        if t >= self.next_frame:
+            self.trajectory.append((t, *pos))
+            self.next_frame += cfg.frame_period
+        failure = _failure(pos, quat, self.path, self.standing, cfg.fall_drop)
         if failure is not None:
-            outcome, reason = failure
-            break
+            self.outcome, self.reason = failure
+            return None
+        follower = self.follower
         ended = follower.update(pos, quat)
         if ended is not None:
-            outcome, reason = ended
-            break
+            self.outcome, self.reason = ended
+            return None
         gap = follower.gap
-        if follower.advanced or gap < best_gap - cfg.stuck_distance:
-            last_progress, best_gap = t, gap
-        elif t - last_progress >= cfg.stuck_time:
-            outcome = "stuck"
-            reason = f"no progress for {cfg.stuck_time:g} s at ({pos[0]:.2f}, {pos[1]:.2f}), " + (
-                follower.where()
+        if follower.advanced or gap < self.best_gap - cfg.stuck_distance:
+            self.last_progress, self.best_gap = t, gap
+        elif t - self.last_progress >= cfg.stuck_time:
+            self.outcome = "stuck"
+            self.reason = (
+                f"no progress for {cfg.stuck_time:g} s at ({pos[0]:.2f}, {pos[1]:.2f}), "
+                + follower.where()
             )
-            break
+            return None
         if t >= cfg.time_limit:
-            break
-        sim.set_leg_speeds(*follower.speeds(pos, quat, omega_max))
-        sim.advance(steps_per_control)
-    if trajectory[-1][0] != sim.time:
-        trajectory.append((sim.time, *pos))
-    return DriveResult(
-        outcome=outcome,
-        reason=reason,
-        drive_time=sim.time,
-        energy=sim.energy,
-        energy_per_leg=tuple(sim.energy_per_leg.tolist()),
-        trajectory=tuple(trajectory),
-    )
+            return None
+        return follower.speeds(pos, quat, self.omega_max)
+
+    def result(self, t: float, pos, energy_per_leg: np.ndarray) -> DriveResult:
+        """The drive's result, ended at time t [s] with the body at pos [m], the motors having
+        spent energy_per_leg ((6,) [J])."""
+        if self.trajectory[-1][0] != t:
+            self.trajectory.append((t, *pos))
+        return DriveResult(
+            outcome=self.outcome,
+            reason=self.reason,
+            drive_time=t,
+            energy=float(np.sum(energy_per_leg)),
+            energy_per_leg=tuple(np.asarray(energy_per_leg).tolist()),
+            trajectory=tuple(self.trajectory),
+        )
 
 
 class Follower(Protocol):

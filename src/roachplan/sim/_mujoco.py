@@ -404,7 +404,8 @@ class MujocoSimulation:
         self._rollout: rollout.Rollout | None = rollout.Rollout(nthread=0)
         self._state = np.empty((1, mujoco.mj_stateSize(m, _STATE)))
         self._warmstart = np.empty((1, m.nv))  # the solver's warm start, for the rollout
-        self._buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # advance()'s, by n
+        self._buffers: dict[int, np.ndarray] = {}  # advance()'s sensor readings, by n
+        self._ahead: dict[int, np.ndarray] = {}  # servo_inputs' times ahead [s], by n
         self._sides = robot.leg_sides
         self._offsets = robot.leg_phase_offsets
         self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
@@ -566,22 +567,16 @@ class MujocoSimulation:
 
         The hot loop of every drive: the legs' servo inputs for all n steps are computed at
         once and MuJoCo steps them in one call (mujoco.rollout, from the data's own state and
-        solver warm start: the same steps as mj_step n times, bit for bit).
+        solver warm start: the same steps as mj_step n times, bit for bit). A worker's rollouts
+        stepped together (sim/_lockstep.py) use the same servo_inputs and advanced.
         """
         if n <= 0:
             return
-        r, m, d, dt = self.robot, self.model, self.data, self.cfg.timestep
-        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
-        leg_phase = self._phase[self._sides] + self._offsets
-        buffers = self._buffers.get(n)
-        if buffers is None:  # (time ahead of the phase [s], sensor readings): kept per n
-            ahead = np.arange(1, n + 1)[:, None] * dt
-            buffers = self._buffers[n] = (ahead, np.empty((1, n, m.nsensordata)))
-        ahead, sensors = buffers
-        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
-        # Each leg is a PD servo on its share of its side's motor phase: the legs of a side
-        # stay in phase like the real linkage. ctrl carries the targets' part of the force.
-        ctrl = (r.motor_kp * q + r.motor_kd * (dq_dphase * omega))[None]
+        m, d = self.model, self.data
+        ctrl = self.servo_inputs(n)[None]
+        sensors = self._buffers.get(n)
+        if sensors is None:
+            sensors = self._buffers[n] = np.empty((1, n, m.nsensordata))
         mujoco.mj_getState(m, d, self._state[0], _STATE)
         self._warmstart[0] = d.qacc_warmstart
         unstable = self._resets()
@@ -597,14 +592,33 @@ class MujocoSimulation:
             state=None,
             sensordata=sensors,
         )
-        if self._resets() != unstable:
-            # MuJoCo resets a diverged world to its model's pose and goes on; what diverged
-            # is reported as PyBullet's would be, a body at no finite place.
-            self._diverged = True
+        self.advanced(n, sensors[0], diverged=self._resets() != unstable)
+
+    def servo_inputs(self, n: int) -> np.ndarray:
+        """(n, 6) each leg servo's input for the next n steps at the current leg speeds: the
+        targets' part of its force, kp q_target + kd dq_target [N m] (the actuator adds
+        -kp q - kd dq). Each leg is a PD servo on its share of its side's motor phase: the
+        legs of a side stay in phase like the real linkage."""
+        r, dt = self.robot, self.cfg.timestep
+        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
+        leg_phase = self._phase[self._sides] + self._offsets
+        ahead = self._ahead.get(n)
+        if ahead is None:
+            ahead = self._ahead[n] = np.arange(1, n + 1)[:, None] * dt
+        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
+        return r.motor_kp * q + r.motor_kd * (dq_dphase * omega)
+
+    def advanced(self, n: int, sensors: np.ndarray, *, diverged: bool) -> None:
+        """After n steps with servo_inputs(n): meter them from their sensor readings ((n,
+        nsensordata), each step's forward pass) and move the motors' phase and the clock on.
+        diverged: MuJoCo found the state not finite and reset it meanwhile (it then goes on
+        from its model's pose; the drive reads a body at no finite place, as PyBullet's)."""
+        self._diverged = self._diverged or diverged
         # The meter: E += |tau dq/dt| dt per leg (Tong 2018, 3.4), tau the servo's force as
         # applied (after the torque limit), dq/dt the hip's speed as the step began (both are
         # the sensors of the step's forward pass, as PyBullet's meter reads them).
-        tau, dq = sensors[0, :, :6], sensors[0, :, 6:12]
+        dt = self.cfg.timestep
+        tau, dq = sensors[:, :6], sensors[:, 6:12]
         self.energy_per_leg += np.abs(tau * dq).sum(axis=0) * dt
         self._phase += self._omega * (n * dt)
         self.time += n * dt
