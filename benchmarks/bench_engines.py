@@ -9,7 +9,10 @@ Open floor: a 10 s walk at 20 rad/s on both sides, and a turn with the right sid
 the left (as the turning calibration walks them: the path summed every 20 ms), under PyBullet
 at 1 ms and MuJoCo at 1 ms and 2 ms: distance, mean speed, curvature, energy per metre and wall
 time per simulated second. Then one path the planner gives on the double bridge, driven by the
-tracking driver under each: outcome, time and energy. --quick: 3 s walks, one repeat.
+tracking driver under each: outcome, time and energy. Last, choose's rollouts per second on 2
+workers (double_bridge, double_bridge_rough, kinect_bridge: its seed-0 plan in worlds drawn from
+its uncertainty): PyBullet, MuJoCo one at a time and MuJoCo in lockstep (sim/_lockstep.py).
+--quick: 3 s walks, one repeat, 4 rollouts of double_bridge.
 """
 
 from __future__ import annotations
@@ -149,6 +152,70 @@ def bridge(seed: int, repeat: int) -> None:
         )
 
 
+ROLLOUT_SCENES = ("double_bridge", "double_bridge_rough", "kinect_bridge")
+
+
+def rollouts_per_second(scene: str, n: int, workers: int) -> None:
+    """Choose's rollouts of one scene on `workers` cores: n rollouts of its seed-0 plan, each
+    in its own world drawn from the scene's uncertainty, under PyBullet one at a time, MuJoCo
+    one at a time, and MuJoCo in lockstep (the rounds choose deals: one batch per worker).
+    Rollouts per second of wall time, the same calls in each, side by side."""
+    from roachplan.experiments import ExperimentSpec, plan
+    from roachplan.experiments._runner import _make_pool
+    from roachplan.scenes import build_world, load_scene, with_engine
+
+    base = load_scene(scene)
+    world = build_world(base)
+    planned = plan(world, seed=0)
+    path = planned.path_xyz.tolist()
+    calls = [(0, path, seed, planned.spins) for seed in range(1000, 1000 + n)]
+    rows = {}
+    for label, engine, lockstep in (
+        ("pybullet", "pybullet", False),
+        ("mujoco", "mujoco", False),
+        ("mujoco lockstep", "mujoco", True),
+    ):
+        scene_e = with_engine(base, engine)
+        spec = ExperimentSpec(
+            name="bench",
+            path=scene_e.path,
+            scene=scene_e.path,
+            planner=scene_e.planner,
+            sim=scene_e.sim,
+            driver=scene_e.driver,
+            uncertainty=scene_e.uncertainty,
+        )
+        pool = _make_pool(spec, workers, "local", None)
+        try:
+            list(pool.run([("plan_route", (0,))] * workers))  # (the workers up, worlds built)
+            t = time.perf_counter()
+            if lockstep:
+                dealt = [calls[k::workers] for k in range(workers)]
+                batches = [("rollouts", (part, scene_e.uncertainty)) for part in dealt]
+                recs = [r for records in pool.run(batches) for r in records]
+            else:
+                recs = list(
+                    pool.run(
+                        ("rollout", (c, p, sd, scene_e.uncertainty), {"spins": sp})
+                        for c, p, sd, sp in calls
+                    )
+                )
+            wall = time.perf_counter() - t
+        finally:
+            pool.close()
+        ok = sum(r["outcome"] == "success" for r in recs)
+        simulated = sum(r["drive_time"] for r in recs)
+        rows[label] = (n / wall, simulated / wall, ok)
+    ref, ref_sim = rows["pybullet"][:2]
+    for label, (rate, sim_rate, ok) in rows.items():
+        # (a failed rollout ends early: simulated seconds per second compare the engines'
+        # speed where their outcomes differ)
+        print(
+            f"{scene:20s} {label:16s} {rate:7.2f} rollouts/s  {rate / ref:5.2f}x  "
+            f"{sim_rate:6.1f} simulated s/s  {sim_rate / ref_sim:5.2f}x  successes {ok}/{n}"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="3 s walks, one repeat")
@@ -159,6 +226,10 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; best of {repeat}")
     walks(seconds, repeat)
     bridge(args.seed, repeat)
+    n = 4 if args.quick else 16
+    print(f"\nchoose's rollouts, {n} per scene on 2 workers (rollouts/s; ratio to PyBullet's)")
+    for scene in ROLLOUT_SCENES[:1] if args.quick else ROLLOUT_SCENES:
+        rollouts_per_second(scene, n, workers=2)
 
 
 if __name__ == "__main__":
