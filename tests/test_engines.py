@@ -88,3 +88,23 @@ def test_rollouts_in_lockstep_are_the_rollouts_driven_one_at_a_time(tmp_path):
     strip = [{k: v for k, v in r.items() if k != "wall_time"} for r in (*together, *alone)]
     assert strip[:3] == strip[3:]
     assert len({r["energy"] for r in together}) == 3  # (three worlds, not one thrice)
+
+
+def test_a_choice_is_cross_checked_under_the_other_engine(tmp_path):
+    """choose --cross-check: every rollout driven again under the other engine, the same paths
+    in the same drawn worlds; per path both tallies, and a sentence on whether they agree."""
+    (tmp_path / "flat.yaml").write_text(FLAT)
+    world = roachplan.load(str(tmp_path / "flat.yaml"), engine="mujoco")
+    choice = roachplan.choose(
+        world, candidates=2, rollouts=8, budget_s=None, workers=2, seed=2, cross_check=True
+    )
+    x = choice.cross_check
+    assert x is not None and (x["engine"], x["other"]) == ("mujoco", "pybullet")
+    driven = {
+        c.index: len(c.rollouts) + len(choice.fresh.get(c.index, [])) for c in choice.candidates
+    }
+    for row in x["candidates"]:
+        assert row["mujoco"]["rollouts"] == row["pybullet"]["rollouts"] == driven[row["candidate"]]
+        assert row["mujoco"]["successes"] <= row["mujoco"]["rollouts"]
+    # On a flat floor both engines walk every path: they agree, and the sentence says so.
+    assert x["agree"] and x["sentence"].startswith("mujoco and pybullet agree")

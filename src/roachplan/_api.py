@@ -121,6 +121,7 @@ def choose(
     seed: int = 0,
     workers: int = 1,
     quick: bool = False,
+    cross_check: bool = False,
 ) -> Choice:
     """Which path should the robot take: K candidate paths screened by simulation under the
     scene's uncertainty model, the chosen one certified on fresh rollouts (`roachplan
@@ -129,7 +130,9 @@ def choose(
     succeeded), `choice.guarantee` (what the choice is shown to be, at `confidence`:
     `.sentence(choice.chosen)` says it in words), `choice.stopped` (why it ended). quick: the
     quick mode (succeeds at least 90 % of the time, within 10 % of the lowest energy; the
-    default 95 % and 5 %)."""
+    default 95 % and 5 %). cross_check: every rollout driven again under the other physics
+    engine (`choice.cross_check`: per path, success and energy under each, and whether they
+    agree)."""
     from roachplan.experiments import DEFAULT_MODE, QUICK_MODE, ChooseConfig
     from roachplan.experiments import choose as race_candidates
 
@@ -142,7 +145,7 @@ def choose(
         seed=seed,
         indifference=QUICK_MODE if quick else DEFAULT_MODE,
     )
-    choice, _ = race_candidates(world, cfg, workers=workers)
+    choice, _ = race_candidates(world, cfg, workers=workers, cross_check=cross_check)
     return choice
 
 

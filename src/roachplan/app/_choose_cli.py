@@ -107,6 +107,13 @@ def add_choose_parser(sub, terrain_help: str) -> None:
         "predicted with observed success (Brier score, reliability table)",
     )
     p.add_argument(
+        "--cross-check",
+        action="store_true",
+        help="then drive every rollout again under the other physics engine (the same paths "
+        "in the same drawn worlds): per path, success and energy under each, and whether "
+        "the engines agree on the choice",
+    )
+    p.add_argument(
         "--out",
         default=None,
         metavar="DIR",
@@ -236,6 +243,20 @@ def _jsonable(obj):
     return obj
 
 
+def cross_check_lines(x: dict) -> str:
+    """choose --cross-check's report: its sentence, then per candidate the successes of its
+    rollouts and their mean relative energy under each engine."""
+    lines = [f"\ncross-check: {x['sentence']}"]
+    for row in x["candidates"]:
+        a, b = row[x["engine"]], row[x["other"]]
+        lines.append(
+            f"  candidate {row['candidate']}: {x['engine']} {a['successes']}/{a['rollouts']} "
+            f"(relative energy {a['relative_energy']:.2f}), {x['other']} {b['successes']}/"
+            f"{b['rollouts']} ({b['relative_energy']:.2f}){'' if row['agree'] else '  differ'}"
+        )
+    return "\n".join(lines)
+
+
 def cmd_choose(args: argparse.Namespace) -> int:
     import dataclasses
     import os
@@ -283,6 +304,7 @@ def cmd_choose(args: argparse.Namespace) -> int:
         backend=args.backend,
         address=args.address,
         validate_repeats=args.validate,
+        cross_check=args.cross_check,
         on_event=progress,
     )
     shown.close()
@@ -306,6 +328,8 @@ def cmd_choose(args: argparse.Namespace) -> int:
             "uncertainty": dataclasses.asdict(scene.uncertainty),
             "ranking": choice.ranking,
             "validation": checked,
+            "engine": scene.sim.engine,
+            "cross_check": choice.cross_check,
             "chosen_path": (
                 choice.candidates[choice.chosen].path_xyz.tolist()
                 if choice.chosen is not None
@@ -355,6 +379,8 @@ def cmd_choose(args: argparse.Namespace) -> int:
                     f"  predicted {row['bin']}: mean {row['mean_predicted']:.2f}, observed "
                     f"{row['observed']:.2f} over {row['rollouts']} rollouts"
                 )
+        if choice.cross_check is not None:
+            print(cross_check_lines(choice.cross_check))
         if out is not None:
             print(f"\nwrote {out}/choice.json, ranking.csv, rollouts.jsonl")
     return 0 if choice.chosen is not None else 1

@@ -41,6 +41,8 @@ from ._choose_config import ChooseConfig
 from ._choose_events import CandidatesPlanned, ChooseEvent
 from ._choose_planning import plan_candidates
 from ._choose_race import Choice, race
+from ._cross_check import OTHER_ENGINE
+from ._cross_check import cross_check as check_engines
 from ._errors import ChooseError
 from ._uncertainty import rollout_seed
 
@@ -56,6 +58,7 @@ def choose(
     backend: Backend = "local",
     address: str | None = None,
     validate_repeats: int = 0,
+    cross_check: bool = False,
     on_event: Callable[[ChooseEvent], None] | None = None,
     cancelled: Callable[[], bool] = lambda: False,
 ) -> tuple[Choice, dict | None]:
@@ -63,7 +66,10 @@ def choose(
     rollout workers rebuild it from the scene's file), race them on a pool of `workers` (local
     processes, or Ray), and with validate_repeats > 0 validate the prediction. on_event
     receives the race's events (experiments/_choose_events.py) in the calling thread as they
-    happen. Returns (choice, validation or None)."""
+    happen. cross_check: drive every rollout again under the other physics engine
+    (experiments/_cross_check.py; choice.cross_check). Returns (choice, validation or None)."""
+    from roachplan.scenes import with_engine
+
     from ._runner import _make_pool
     from ._spec import ExperimentSpec
 
@@ -76,31 +82,40 @@ def choose(
         raise ChooseError(f"{scene.name}: the planner found no path to choose from")
     if on_event is not None:
         on_event(CandidatesPlanned(candidates=tuple(c.plan for c in candidates)))
-    spec = ExperimentSpec(
-        name=f"choose-{scene.name}",
-        path=scene.path,
-        scene=scene.path,
-        planner=scene.planner,
-        sim=scene.sim,
-        driver=scene.driver,
-        uncertainty=uncertainty,
-    )
-    pool = _make_pool(spec, workers, backend, address)
 
+    def spec_of(physics) -> ExperimentSpec:  # (physics: the scene, or it under another engine)
+        return ExperimentSpec(
+            name=f"choose-{scene.name}",
+            path=scene.path,
+            scene=scene.path,
+            planner=scene.planner,
+            sim=physics.sim,
+            driver=physics.driver,
+            uncertainty=uncertainty,
+        )
+
+    pool = _make_pool(spec_of(scene), workers, backend, address)
     spins = {c.index: c.spins for c in candidates}
 
-    def run_rollouts(calls: list[tuple]) -> list[dict]:
-        if scene.sim.engine != "mujoco":
-            return list(
-                pool.run(("rollout", (*c, uncertainty), {"spins": spins[c[0]]}) for c in calls)
-            )
-        # MuJoCo steps a worker's share of the round in lockstep (sim/_lockstep.py): one
-        # batch per worker, the calls dealt round-robin (each batch a mix of candidates).
-        dealt = [calls[k :: pool.workers] for k in range(pool.workers)]
-        batches = [
-            ("rollouts", ([(*c, spins[c[0]]) for c in part], uncertainty)) for part in dealt if part
-        ]
-        return [rec for records in pool.run(batches) for rec in records]
+    def runner(on, engine: str) -> Callable[[list[tuple]], list[dict]]:
+        def run_rollouts(calls: list[tuple]) -> list[dict]:
+            if engine != "mujoco":
+                return list(
+                    on.run(("rollout", (*c, uncertainty), {"spins": spins[c[0]]}) for c in calls)
+                )
+            # MuJoCo steps a worker's share of the round in lockstep (sim/_lockstep.py): one
+            # batch per worker, the calls dealt round-robin (each batch a mix of candidates).
+            dealt = [calls[k :: on.workers] for k in range(on.workers)]
+            batches = [
+                ("rollouts", ([(*c, spins[c[0]]) for c in part], uncertainty))
+                for part in dealt
+                if part
+            ]
+            return [rec for records in on.run(batches) for rec in records]
+
+        return run_rollouts
+
+    run_rollouts = runner(pool, scene.sim.engine)
 
     try:
         left = None if cfg.budget_s is None else max(cfg.budget_s - (time.monotonic() - t0), 0.0)
@@ -119,6 +134,14 @@ def choose(
         )
     finally:
         pool.close()
+    if cross_check and choice.stop != "cancelled":
+        other = with_engine(scene, OTHER_ENGINE[scene.sim.engine])
+        pool = _make_pool(spec_of(other), workers, backend, address)
+        try:
+            checked_by = check_engines(choice, scene.sim.engine, runner(pool, other.sim.engine))
+        finally:
+            pool.close()
+        choice = dataclass_replace(choice, cross_check=checked_by)
     return dataclass_replace(choice, wall_time=time.monotonic() - t0), checked
 
 

@@ -132,7 +132,7 @@ class Guarantee:
         if not self.fresh_rollouts:  # (no bound to state: the budget ended first)
             return (
                 f"{name} (not certified): it succeeded in {self.successes} of its "
-                f"{self.rollouts} rollouts; the budget ended before the fresh rollouts that "
+                f"{self.rollouts} rollouts; the race stopped before the fresh rollouts that "
                 f"would show, {conf}, that it succeeds at least {self.p_level:.0%} of the time"
             )
         words = [f"{name} (not certified): {conf} it succeeds at least "]

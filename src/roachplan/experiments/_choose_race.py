@@ -56,6 +56,9 @@ class Choice:
     """What the choice is shown to be (screen then certify); None for the race (procedure "race")."""
     fresh: dict[int, list[dict]] = field(default_factory=dict)
     """The certifying rollouts' records by candidate (screen then certify)."""
+    cross_check: dict | None = None
+    """The same rollouts under the other physics engine, per path, and whether the engines
+    agree (experiments/_cross_check.py; choose(cross_check=True)), else None."""
 
     @property
     def ranking(self) -> list[dict]:
