@@ -108,3 +108,17 @@ def test_a_choice_is_cross_checked_under_the_other_engine(tmp_path):
         assert row["mujoco"]["successes"] <= row["mujoco"]["rollouts"]
     # On a flat floor both engines walk every path: they agree, and the sentence says so.
     assert x["agree"] and x["sentence"].startswith("mujoco and pybullet agree")
+
+
+def test_the_page_says_a_cross_check_with_its_path_numbers():
+    """The page numbers paths from 1 (candidate k is path k + 1), in the cross-check too."""
+    from roachplan.app._choose_panel import RaceView, _pathed, follow_race
+    from roachplan.experiments import CrossChecked
+
+    said = _pathed(
+        "model uncertainty: mujoco chose candidate 0, pybullet favours candidate 2; the "
+        "engines' success rates differ beyond their 95% intervals on candidates 1, 3"
+    )
+    assert "chose path 1, pybullet favours path 3" in said and said.endswith("on paths 2, 4")
+    view = follow_race(RaceView(message=""), CrossChecked(result={"sentence": "x"}))
+    assert view.checked == {"sentence": "x"}

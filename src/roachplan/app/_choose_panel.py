@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import re
 import time
 from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
@@ -30,6 +31,7 @@ from roachplan.experiments import (
     CandidatesPlanned,
     ChooseConfig,
     ChooseError,
+    CrossChecked,
     Decided,
     Knockout,
     LabelledPlan,
@@ -143,6 +145,8 @@ class RaceView:
     decided: Decided | None = None
     failed: str | None = None
     """Why the race failed."""
+    checked: dict | None = None
+    """The cross-check's result, once made (experiments/_cross_check.py)."""
 
 
 def follow_race(view: RaceView, event) -> RaceView:
@@ -154,6 +158,8 @@ def follow_race(view: RaceView, event) -> RaceView:
             return dataclass_replace(view, message=event.message, standings=event.standings)
         case Decided():
             return dataclass_replace(view, standings=event.standings, decided=event)
+        case CrossChecked():
+            return dataclass_replace(view, checked=event.result)
         case Failed():
             return dataclass_replace(view, failed=event.error)
     return view  # (a KnockedOut: the RoundDone that follows it has its standing)
@@ -191,6 +197,13 @@ class ChoosePanel:
                 "about a quarter of the rollouts. Either is certified on fresh rollouts at the "
                 "confidence above",
             )
+            self.cross_check = gui.add_checkbox(
+                "Cross-check engines",
+                False,
+                hint="After the race, drive its rollouts again under the other physics engine "
+                "(the same paths in the same drawn worlds) and say whether the two agree; "
+                "takes about as long again, after the budget",
+            )
             self.button = gui.add_button(
                 "Choose path",
                 hint="Drive each candidate many times in worlds drawn from the uncertainty "
@@ -219,7 +232,7 @@ class ChoosePanel:
         self.summary.content = self.table.content = ""
 
 
-def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
+def _choose_job(conn, world, cfg: ChooseConfig, workers: int, cross_check: bool) -> None:
     """choose() on the page's world, each of its events sent as it happens; a Failed
     instead of the rest when it fails."""
     limit_memory()
@@ -228,7 +241,7 @@ def _choose_job(conn, world, cfg: ChooseConfig, workers: int) -> None:
     # Cancel kills them with it (kill_tree), so none is left behind either way.
     multiprocessing.current_process().daemon = False
     try:
-        choose(world, cfg, workers=workers, on_event=conn.send)
+        choose(world, cfg, workers=workers, cross_check=cross_check, on_event=conn.send)
     except Exception as exc:  # reported to the user as a notification, in the page's words
         if not is_for_the_user(exc):
             log_internal(exc, where="the Choose path process")
@@ -274,7 +287,8 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
     panel.lines, panel.table.content = {}, ""
     view = RaceView(message=f"planning {cfg.candidates} candidate paths (seed {cfg.seed})")
     took = 0.0  # wall time from the job's start to the decision [s]
-    job = Job(_choose_job, app.world, cfg, workers)
+    cross_check = bool(panel.cross_check.value)
+    job = Job(_choose_job, app.world, cfg, workers, cross_check)
 
     def step(events) -> bool:
         nonlocal view, took
@@ -300,7 +314,13 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
 
     panel.progress.value, panel.progress.visible, panel.cancel.visible = 0.0, True, True
     try:
-        end = app.loop.follow(job, "Choose path", step, hard_stop=time.monotonic() + budget + GRACE)
+        # (a cross-check drives the race's rollouts again: as long again, after the budget)
+        end = app.loop.follow(
+            job,
+            "Choose path",
+            step,
+            hard_stop=time.monotonic() + budget * (1 + cross_check) + GRACE,
+        )
     finally:
         panel.progress.visible = panel.cancel.visible = False
     if view.failed is not None:
@@ -316,7 +336,7 @@ def do_choose(app: App, cmd: ChooseCmd) -> None:
         )
         app.page.set_status(panel.summary.content)
         return
-    _show_choice(app, panel, cfg, view.decided, view.paths, took=took)
+    _show_choice(app, panel, cfg, view.decided, view.paths, took=took, checked=view.checked)
 
 
 def _draw_candidates(app, panel: ChoosePanel, paths: tuple[CandidatePlan, ...]) -> None:
@@ -354,15 +374,18 @@ def _show_choice(
     paths: tuple[CandidatePlan, ...],
     *,
     took: float,
+    checked: dict | None = None,
 ) -> None:
     """The ranking; the candidates become the plan's paths, the chosen one marked for Drive.
-    took: the wall time to the decision [s]."""
+    took: the wall time to the decision [s]; checked: the cross-check's result, if one was
+    made (experiments/_cross_check.py)."""
     ranking, chosen, scene = decided.standings, decided.chosen, app.world.scene
     panel.table.content = ranking_markdown(ranking, chosen, cfg)
     again = (
         f"`roachplan choose --scene {scene.name} --candidates {cfg.candidates} "
         f"--budget-s {cfg.budget_s:g} --confidence {cfg.confidence:g} --seed {cfg.seed}"
-        f"{' --quick' if cfg.indifference == QUICK_MODE else ''}`"
+        f"{' --quick' if cfg.indifference == QUICK_MODE else ''} --engine {scene.sim.engine}"
+        f"{' --cross-check' if checked is not None else ''}`"
     )
     ran = f"{decided.rollouts} rollouts in {took:.1f} s ({decided.stopped})"
     # The candidates become the plan's paths (labelled 1..K, as in the table), the chosen one
@@ -399,8 +422,22 @@ def _show_choice(
             f"probability (flat priors, not a confidence) that it meets the claim: "
             f"{g.posterior:.2f}."
         )
+    if checked is not None:
+        text += f"  \n**Cross-check**: {_pathed(checked['sentence'])}."
     app.page.set_status(text + " **Drive** drives it (*Drive path* picks another).")
     panel.summary.content = f"{text}  \nSame race from the command line: {again}"
+
+
+def _pathed(sentence: str) -> str:
+    """A cross-check's sentence in the page's words: candidate k is path k + 1."""
+    return re.sub(r"candidates? ([\d, ]+)", lambda m: _plus_one(m.group(0)), sentence)
+
+
+def _plus_one(words: str) -> str:
+    """'candidate 0' -> 'path 1'; 'candidates 1, 2' -> 'paths 2, 3'."""
+    noun = "paths" if words.startswith("candidates") else "path"
+    rest = words.split(" ", 1)[1]
+    return f"{noun} " + re.sub(r"\d+", lambda m: str(int(m.group(0)) + 1), rest)
 
 
 def _labelled(scene, c: CandidatePlan) -> LabelledPlan:

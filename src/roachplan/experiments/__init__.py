@@ -26,6 +26,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "CandidatesPlanned": "._choose_events",
         "ChooseEvent": "._choose_events",
         "Decided": "._choose_events",
+        "CrossChecked": "._choose_events",
         "KnockedOut": "._choose_events",
         "RoundDone": "._choose_events",
         "StopReason": "._choose_events",
@@ -94,6 +95,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._choose_config import ChooseConfig as ChooseConfig
     from ._choose_events import CandidatesPlanned as CandidatesPlanned
     from ._choose_events import ChooseEvent as ChooseEvent
+    from ._choose_events import CrossChecked as CrossChecked
     from ._choose_events import Decided as Decided
     from ._choose_events import KnockedOut as KnockedOut
     from ._choose_events import RoundDone as RoundDone

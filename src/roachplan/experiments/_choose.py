@@ -38,7 +38,7 @@ import numpy as np
 
 from ._choose_certify import certify_race
 from ._choose_config import ChooseConfig
-from ._choose_events import CandidatesPlanned, ChooseEvent
+from ._choose_events import CandidatesPlanned, ChooseEvent, CrossChecked
 from ._choose_planning import plan_candidates
 from ._choose_race import Choice, race
 from ._cross_check import OTHER_ENGINE
@@ -142,6 +142,8 @@ def choose(
         finally:
             pool.close()
         choice = dataclass_replace(choice, cross_check=checked_by)
+        if on_event is not None:
+            on_event(CrossChecked(result=checked_by))
     return dataclass_replace(choice, wall_time=time.monotonic() - t0), checked
 
 

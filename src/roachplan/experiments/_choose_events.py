@@ -139,5 +139,14 @@ class Decided:
         return self.stop in CUT_SHORT
 
 
-ChooseEvent = CandidatesPlanned | KnockedOut | RoundDone | Decided
+@dataclass(frozen=True, kw_only=True)
+class CrossChecked:
+    """After the race, its rollouts driven again under the other engine (choose's
+    cross_check; experiments/_cross_check.py)."""
+
+    result: dict
+    """cross_check()'s: per path both engines' tallies, whether they agree, and the sentence."""
+
+
+ChooseEvent = CandidatesPlanned | KnockedOut | RoundDone | Decided | CrossChecked
 """What on_event receives."""

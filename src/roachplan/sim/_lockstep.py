@@ -26,6 +26,7 @@ from mujoco.batch import Batch
 
 from ._config import DriverConfig
 from ._driver import Drive, DriveResult
+from ._engine import Simulation
 from ._errors import SimError
 from ._mujoco import MujocoSimulation
 
@@ -38,17 +39,20 @@ _DIVERGED = (
 
 
 def drive_lockstep(
-    sims: Sequence[MujocoSimulation],
+    engines: Sequence[Simulation],
     paths: Sequence[np.ndarray],
     cfg: DriverConfig,
     spins: Sequence = (),
     *,
     threads: int = 1,
 ) -> list[DriveResult]:
-    """Drive sims[i] (already reset, and perturbed) along paths[i] ((N, 3) world frame [m])
+    """Drive engines[i] (MujocoSimulations, already reset and perturbed) along paths[i] ((N, 3) world frame [m])
     with its turns on the spot spins[i] (default none), all in lockstep; one DriveResult each,
     as drive_path gives it. threads: MuJoCo's threads for the batch (1: a worker of a pool
     already uses its core)."""
+    sims = [s for s in engines if isinstance(s, MujocoSimulation)]
+    if len(sims) != len(engines):
+        raise SimError("rollouts in lockstep are MuJoCo's: give MujocoSimulations")
     if not sims:
         return []
     timestep = sims[0].cfg.timestep
