@@ -10,7 +10,8 @@ height field, start and goal picked), sim terrain (what PyBullet is given), plan
 drive (the tracking driver). A row ends in one of: driven (and its outcome), "no pick" (no
 start and goal the planner joins: the message says why), "no path", or "ERROR" (an exception
 that is not an input error: the goal is none). Then the time from a 1920x1080 and a 640x480
-capture to the first path, side by side. --quick: one viewpoint and two presets.
+capture to the first path, side by side. --quick: one viewpoint and two presets;
+--first-path: that comparison alone.
 """
 
 from __future__ import annotations
@@ -164,9 +165,13 @@ def first_path() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="one view, two cameras")
+    parser.add_argument(
+        "--first-path", action="store_true", help="only the capture-to-first-path timing"
+    )
     args = parser.parse_args()
-    sweep(args.quick)
-    print()
+    if not args.first_path:
+        sweep(args.quick)
+        print()
     first_path()
 
 
