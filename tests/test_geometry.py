@@ -12,6 +12,7 @@ from roachplan.planning import (
     FOOT,
     OFF_MAP,
     VALID,
+    HeightField,
     ValidityConfig,
     check_states,
     describe_state,
@@ -82,3 +83,32 @@ def test_validity_conditions_on_the_double_bridge(world):
     # Facing +x at the bridge's inner edge, the rear legs hang over the gap.
     assert describe_state(hf, fp, cfg, np.array([0.53, 0.0, 0.0])).endswith("(leg L3)")
     assert describe_state(hf, fp, cfg, np.array([0.0, -0.5, up])).startswith("a foot has no ground")
+
+
+def test_many_states_are_checked_in_chunks_as_at_once(world, monkeypatch):
+    """A batch larger than a chunk (a standable map's 300,000 states) gives what one call on
+    all of them gives, state for state; height and noise sampled together are what they are
+    sampled alone."""
+    import roachplan.planning._validity as validity
+
+    hf, fp, cfg = world.heightfield, world.footprint, ValidityConfig()
+    rng = np.random.default_rng(0)
+    n = 3 * validity.CHUNK + 17
+    states = np.column_stack(
+        [rng.uniform(-1.2, 1.2, n), rng.uniform(-2.0, 2.0, n), rng.uniform(-np.pi, np.pi, n)]
+    )
+    chunked = check_states(hf, fp, cfg, states)
+    monkeypatch.setattr(validity, "CHUNK", n)
+    whole = check_states(hf, fp, cfg, states)
+    assert whole.valid.any() and not whole.valid.all()
+    for field in ("code", "worst_foot", "z_surface"):
+        assert np.array_equal(getattr(chunked, field), getattr(whole, field))
+    heights = rng.normal(0.0, 0.01, (40, 60))
+    heights[10:14, 20:30] = np.nan
+    noisy = HeightField(x0=-0.3, y0=-0.2, resolution=0.01, heights=heights,
+                        noise=rng.uniform(0.0, 0.002, (40, 60)))  # fmt: skip
+    xy = rng.uniform(-0.35, 0.35, (5000, 2))
+    h, noise = noisy.sample_with_noise(xy)
+    assert np.isnan(h).any() and np.isfinite(h).any()
+    assert np.array_equal(h, noisy.sample(xy), equal_nan=True)
+    assert np.array_equal(noise, noisy.sample_noise(xy))

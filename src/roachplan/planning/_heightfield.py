@@ -55,18 +55,25 @@ class HeightField:
 
     def sample(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear surface height at xy ((..., 2) [m]); NaN off the grid or next to a NaN cell."""
-        return self._bilinear(self.heights, xy)
+        return self._bilinear(xy, self.heights)[0]
 
     def sample_noise(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear height noise at xy ((..., 2) [m]) [m]; 0 where there is none (a model, or
         off the surface)."""
         if self.noise is None:
             return np.zeros(np.shape(xy)[:-1])
-        return np.nan_to_num(self._bilinear(self.noise, xy))
+        return np.nan_to_num(self._bilinear(xy, self.noise)[0])
 
-    def _bilinear(self, h: np.ndarray, xy: np.ndarray) -> np.ndarray:
-        """Bilinear interpolation of a (ny, nx) grid on this one's points at xy ((..., 2) [m]);
-        NaN off the grid or next to a NaN cell."""
+    def sample_with_noise(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(sample(xy), sample_noise(xy)) at once: the cells and weights found once."""
+        if self.noise is None:
+            return self.sample(xy), np.zeros(np.shape(xy)[:-1])
+        h, noise = self._bilinear(xy, self.heights, self.noise)
+        return h, np.nan_to_num(noise)
+
+    def _bilinear(self, xy: np.ndarray, *grids: np.ndarray) -> list[np.ndarray]:
+        """Bilinear interpolation of (ny, nx) grids on this one's points at xy ((..., 2) [m]),
+        one array per grid; NaN off the grid or next to a NaN cell."""
         xy = np.asarray(xy, dtype=np.float64)
         ny, nx = self.heights.shape
         u = (xy[..., 0] - self.x0) / self.resolution
@@ -76,13 +83,21 @@ class HeightField:
         j = np.clip(np.floor(v).astype(np.int64), 0, ny - 2)
         fu = np.clip(u - i, 0.0, 1.0)
         fv = np.clip(v - j, 0.0, 1.0)
-        z = (
-            h[j, i] * (1 - fu) * (1 - fv)
-            + h[j, i + 1] * fu * (1 - fv)
-            + h[j + 1, i] * (1 - fu) * fv
-            + h[j + 1, i + 1] * fu * fv
-        )
-        return np.where(inside, z, np.nan)
+        gu, gv = 1 - fu, 1 - fv
+        # One flat index for the four corners (np.take on it is several times faster than
+        # indexing by (j, i) pairs: the standable map samples millions of points).
+        k = j * nx + i
+        out = []
+        for h in grids:
+            flat = h.ravel()
+            z = (
+                flat.take(k) * gu * gv
+                + flat.take(k + 1) * fu * gv
+                + flat.take(k + nx) * gu * fv
+                + flat.take(k + nx + 1) * fu * fv
+            )
+            out.append(np.where(inside, z, np.nan))
+        return out
 
 
 def heightfield_from_mesh(
@@ -167,20 +182,20 @@ def _grid_hits(
     hi = np.minimum(
         np.floor((tri[:, :, :2].max(1) - xy0) / resolution + 1e-9), (nx - 1, ny - 1)
     ).astype(np.int64)
-    span = np.max(hi - lo + 1, axis=1)  # cells per side of each triangle's bounding square
     on_grid = np.all(hi >= lo, axis=1)
-    # Vectorised over triangles of similar size: each bucket tests a side x side block of grid
-    # points per triangle, side the next power of two of its triangles' bounding boxes.
-    side = 1 << np.ceil(np.log2(np.maximum(span, 1))).astype(np.int64)
+    # Vectorised over triangles of similar size: each bucket tests a bx x by block of grid
+    # points per triangle, bx and by the next powers of two of its triangles' bounding boxes'
+    # sides (not a square of the longer: a far floor's triangles are long and thin).
+    side = 1 << np.ceil(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.int64)  # (F, 2)
     ats, zs, sigmas = [np.zeros(0, dtype=np.int64)], [np.zeros(0)], [np.zeros(0)]
-    for b in np.unique(side[on_grid]):
-        idx = np.flatnonzero(on_grid & (side == b))
-        off = np.stack(np.meshgrid(np.arange(b), np.arange(b)), axis=-1).reshape(-1, 2)  # (b*b, 2)
-        chunk = max(1, 2_000_000 // (b * b))  # bound the temporaries to ~2M grid points
+    for bx, by in np.unique(side[on_grid], axis=0):
+        idx = np.flatnonzero(on_grid & (side[:, 0] == bx) & (side[:, 1] == by))
+        off = np.stack(np.meshgrid(np.arange(bx), np.arange(by)), axis=-1).reshape(-1, 2)
+        chunk = max(1, 2_000_000 // (bx * by))  # bound the temporaries to ~2M grid points
         for k in range(0, len(idx), chunk):
             sel = idx[k : k + chunk]
             t, d = tri[sel], det[sel]
-            cell = lo[sel, None, :] + off[None]  # (n, b*b, 2) grid indices (i, j)
+            cell = lo[sel, None, :] + off[None]  # (n, bx*by, 2) grid indices (i, j)
             o = t[:, None, 0]  # (n, 1, 3) first corner; e1, e2 the edges from it
             e1, e2 = (t[:, None, 1] - o), (t[:, None, 2] - o)
             px = xy0[0] + cell[..., 0] * resolution - o[..., 0]

@@ -97,6 +97,10 @@ def _footprint_terms(
     return local, np.linalg.pinv(design), design, body_design, leg_design
 
 
+CHUNK = 2048
+"""States checked at once [-] (check_states)."""
+
+
 def check_states(
     hf: HeightField, fp: Footprint, cfg: ValidityConfig, states: np.ndarray
 ) -> StateCheck:
@@ -104,13 +108,29 @@ def check_states(
     states = np.atleast_2d(np.asarray(states, dtype=np.float64))
     if states.shape[-1] != 3:
         raise ValueError(f"states must be (N, 3) x, y, yaw; got {states.shape}")
+    if len(states) <= CHUNK:
+        return _check_chunk(hf, fp, cfg, states)
+    # States are checked each on its own, so in chunks whose temporaries stay in the caches
+    # (a standable map checks 300,000 states at 35 points each: at once, about twice as slow).
+    parts = [_check_chunk(hf, fp, cfg, states[k : k + CHUNK]) for k in range(0, len(states), CHUNK)]
+    return StateCheck(
+        code=np.concatenate([p.code for p in parts]),
+        worst_foot=np.concatenate([p.worst_foot for p in parts]),
+        z_surface=np.concatenate([p.z_surface for p in parts]),
+    )
+
+
+def _check_chunk(
+    hf: HeightField, fp: Footprint, cfg: ValidityConfig, states: np.ndarray
+) -> StateCheck:
+    """check_states of states ((N, 3), float64)."""
     local, fit, design, body_design, leg_design = _footprint_terms(fp)
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
     wx = states[:, None, 0] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
     wy = states[:, None, 1] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
     xy = np.stack([wx, wy], axis=-1)
-    h = hf.sample(xy)  # (N, P), NaN where there is no surface
-    slack = np.minimum(cfg.noise_sigmas * hf.sample_noise(xy), cfg.max_noise_slack)  # (N, P) [m]
+    h, noise = hf.sample_with_noise(xy)  # (N, P), h NaN where there is no surface
+    slack = np.minimum(cfg.noise_sigmas * noise, cfg.max_noise_slack)  # (N, P) [m]
     x0, x1, y0, y1 = hf.extent
     off_map = ((wx < x0) | (wx > x1) | (wy < y0) | (wy > y1)).any(axis=1)
     n_feet, n_body = len(fp.feet_xy), len(body_design)
