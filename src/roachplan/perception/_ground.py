@@ -792,20 +792,28 @@ def _refit_level(
         on = points[np.abs(points @ normal + offset) <= threshold]
         offsets.append(float(-n @ on.mean(axis=0)) if len(on) else offset)
     band = threshold
-    for _ in range(10):  # the inliers move with the planes and the band until it settles
+    for _ in range(SETTLE_ROUNDS):  # the inliers move with the planes and the band
         groups = [points[np.abs(points @ n + dk) <= band] for dk in offsets]
         if len(groups[0]) < 3:
             break
         stacked = np.concatenate([g - g.mean(axis=0) for g in groups if len(g) >= 3])
         m = np.linalg.svd(stacked, full_matrices=False)[2][2]
-        n = m if m @ n >= 0 else -m
-        offsets = [
-            float(-n @ g.mean(axis=0)) if len(g) >= 3 else dk
+        m = m if m @ n >= 0 else -m
+        new = [
+            float(-m @ g.mean(axis=0)) if len(g) >= 3 else dk
             for g, dk in zip(groups, offsets, strict=True)
         ]
+        # Settled when the band and the planes are: a band that stays put while the planes
+        # still move (a noisy floor's 1.5 cm band from a RANSAC plane 2 deg off) left the
+        # plane where that band cut it, 1.2 cm from where it settles.
+        moved = (
+            _angle(m, n) >= 0.01
+            or max(abs(a - b) for a, b in zip(new, offsets, strict=True)) >= 5e-4
+        )
+        n, offsets = m, new
         rms = float(np.sqrt(np.mean((groups[0] @ n + offsets[0]) ** 2)))
         wider = min(max(threshold, 2.5 * rms), MAX_BAND)
-        if abs(wider - band) < 1e-3:
+        if abs(wider - band) < 1e-3 and not moved:
             break
         band = wider
     return n, offsets[0]
