@@ -225,6 +225,47 @@ def test_the_noise_model_is_fitted_to_the_captures_own_spread(tmp_path):
             assert sigma3 < 1e-3, sigma3
 
 
+def test_a_high_resolution_capture_is_meshed_at_the_voxel_with_the_sensors_noise(tmp_path):
+    """A 1920 x 1080 capture of a floor 2.6-6.4 m away from 1.8 m up (pixels 2.4-6 mm apart,
+    3.4 mm at the median range) is averaged in blocks a voxel (1 cm) across before the ground
+    and the mesh, a 640 x 480 one of the same view (8.6 mm) is not; the block size comes from
+    the pinhole, not from neighbouring samples (whose depth noise exceeds their spacing
+    there). The blocks are quieter than the pixels, but the noise each vertex carries is the
+    sensor's, not the blocks': smoothed vertices a twelfth of its variance, the others all."""
+    from roachplan.perception._surface import block_image, range_noise_model
+
+    floor = trimesh.creation.box((12.0, 12.0, 0.02))
+    floor.apply_translation((0, 0, -0.01))
+    pose = look_at((0.0, 0.0, 1.8), (0.0, 4.5, 0.0))
+    strides = {}
+    for preset in ("kinect2-hd", "realsense-d435-640x480"):
+        intr = PRESETS[preset]
+        depth = render_depth(floor, intr, pose, NoiseModel(), np.random.default_rng(3))
+        save_depth(tmp_path / f"{preset}.png", depth, intr)
+        cap = load_capture(tmp_path / f"{preset}.png")
+        assert cap.shape is not None
+        grid = cap.points.reshape(*cap.shape, 3)
+        blocks = block_image(grid, cap.valid.reshape(cap.shape), 0.01)
+        strides[preset] = blocks.stride
+        assert blocks.pitch == pytest.approx(blocks.stride / intr.fx, rel=0.01)
+        if preset == "kinect2-hd":
+            raw = range_noise_model(cap.finite_points(), camera=True)
+            quiet = range_noise_model(blocks.points[blocks.ok], camera=True)
+            rec = mesh_capture(tmp_path / f"{preset}.png")
+    assert strides == {"kinect2-hd": 3, "realsense-d435-640x480": 1}
+    assert any("blocks of 3 x 3 pixels" in n for n in rec.notes)
+    assert rec.counts["triangles"] <= 2 * (1920 // 3 + 1) * (1080 // 3 + 1)
+    sigma = lambda m, r: m[0] + m[1] * r**2  # noqa: E731
+    assert sigma(quiet, 3.0) < 0.6 * sigma(raw, 3.0)  # the blocks average the pixels' noise
+    # Each vertex: the sensor's noise at its range times its ray's vertical part, over the
+    # square root of the samples it was smoothed with (12) or not (1).
+    v = rec.to_capture_frame(rec.mesh.vertices)
+    r = np.linalg.norm(v, axis=1)
+    vertical = np.abs(v @ rec.world_from_camera[2, :3]) / r
+    ratio = rec.mesh.vertex_attributes["height_noise"] / (sigma(raw, r) * vertical)
+    assert np.all(np.isclose(ratio, 1.0) | np.isclose(ratio, 1 / math.sqrt(12)))
+
+
 # -- models on a ground plane are crossed ---------------------------------------------------------
 
 

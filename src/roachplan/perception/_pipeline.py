@@ -1,6 +1,7 @@
 """From a capture to a simulation-ready terrain mesh (Tong 2018, sections 3.1-3.2).
 
-crop (depth range) -> voxel grid (dx, dy, dz; centroid per voxel) -> statistical outliers ->
+crop (depth range) -> (the sensor method, an organized capture: pixels averaged in blocks
+about a voxel across) -> voxel grid (dx, dy, dz; centroid per voxel) -> statistical outliers ->
 ground (perception/_ground.py: the lowest well-supported plane facing up under a gravity prior)
 and the capture-to-world transform (ground at z = 0, z up) or the user's camera pose -> crop
 (world box) -> mesh -> every facet's normal toward the camera.
@@ -25,7 +26,15 @@ from ._capture import Capture, depth_scale_advice, is_georeferenced
 from ._errors import CaptureError
 from ._ground import CAMERA_UP, Z_UP, GroundChoice, GroundConfig, choose_ground
 from ._settings import CaptureSettings, MeshingConfig
-from ._surface import Surface, organized_surface, projected_surface, scattered_surface
+from ._surface import (
+    Blocks,
+    Surface,
+    block_image,
+    organized_surface,
+    projected_surface,
+    range_noise_model,
+    scattered_surface,
+)
 
 CAMERA_DEPTH_RANGE = (0.3, 8.0)
 """Default depth range of a camera-frame capture [m] (Kinect v2: 0.5-4.5 m rated)."""
@@ -287,6 +296,11 @@ def reconstruct(
     inside = _in_depth_range(capture, raw - origin, frame, cfg, warnings)
     pts = pts[inside]
     log.done("depth range", len(pts))
+    kept = np.zeros(len(capture.points), dtype=bool)  # the file's points the stages keep
+    kept[np.flatnonzero(capture.valid)[inside]] = True
+    blocks = _blocks(capture, kept, frame, cfg, notes)
+    if blocks is not None:  # the ground is found on a pixel of each block
+        pts = blocks.samples[blocks.ok]
     pts = voxel_downsample(pts, cfg.voxel)
     log.done("voxel", len(pts))
     pts = remove_outliers(pts, cfg.outlier_neighbours, cfg.outlier_std)
@@ -300,10 +314,8 @@ def reconstruct(
     world = world[in_crop]
     log.done("ground", len(world))
     if cfg.method == "sensor":
-        kept = np.zeros(len(capture.points), dtype=bool)  # the file's points the stages kept
-        kept[np.flatnonzero(capture.valid)[inside]] = True
         surface = _sensor_surface(
-            capture, kept, pts=pts[in_crop], world=world, placed=placed, cfg=cfg
+            capture, kept, blocks, pts=pts[in_crop], world=world, placed=placed, cfg=cfg
         )
         mesh = surface_to_mesh(surface)
         total = surface.observed_area + surface.filled_area
@@ -338,6 +350,28 @@ def reconstruct(
         warnings=tuple(warnings),
         notes=tuple(notes),
     )
+
+
+def _blocks(
+    capture: Capture, kept: np.ndarray, frame: str, cfg: MeshingConfig, notes: list[str]
+) -> Blocks | None:
+    """An organized capture's pixels (kept (N,) bool: those the stages keep) in blocks about
+    a voxel across (block_image), for the sensor method, which meshes the blocks and finds the
+    ground on a pixel of each rather than on every pixel of a high-resolution image; None for
+    another method or an unorganized cloud."""
+    shape = capture.shape
+    camera = frame == "camera" or cfg.camera_pose is not None
+    if cfg.method != "sensor" or shape is None or not camera:
+        return None
+    origin = np.asarray(capture.sensor_origin, dtype=np.float64)
+    grid = np.where(kept[:, None], capture.points - origin, np.nan)
+    blocks = block_image(grid.reshape(*shape, 3), kept.reshape(shape), cfg.voxel[0])
+    if blocks.stride > 1:
+        notes.append(
+            f"depth image averaged in blocks of {blocks.stride} x {blocks.stride} pixels "
+            f"(about {cfg.voxel[0]:g} m across at the median range)"
+        )
+    return blocks
 
 
 def _in_depth_range(
@@ -419,29 +453,32 @@ def _place(
 def _sensor_surface(
     capture: Capture,
     kept: np.ndarray,
+    blocks: Blocks | None,
     *,
     pts: np.ndarray,
     world: np.ndarray,
     placed: _Placement,
     cfg: MeshingConfig,
 ) -> Surface:
-    """The sensor method's surface (perception/_surface.py): an organized capture pixel to
-    pixel (the file's points the stages kept: kept (N,) bool, within the crop box); an
-    unorganized camera cloud by its directions (pts: the kept, cropped points relative to the
-    sensor); a world-frame cloud by x, y (world: the same points in the world [m])."""
-    if placed.frame == "camera" and capture.shape is not None:
+    """The sensor method's surface (perception/_surface.py): an organized capture block to
+    block (blocks: its pixels averaged, block_image; kept (N,) bool: the file's points the
+    stages kept, whose spread gives the sensor's noise), within the crop box; an unorganized
+    camera cloud by its directions (pts: the kept, cropped points relative to the sensor); a
+    world-frame cloud by x, y (world: the same points in the world [m])."""
+    if blocks is not None:
         origin = np.asarray(capture.sensor_origin, dtype=np.float64)
-        grid = np.where(kept[:, None], capture.points - origin, np.nan)
         to_world = placed.world_from_centred
-        kept = kept.copy()
-        kept[kept] = _crop_mask(grid[kept] @ to_world[:3, :3].T + to_world[:3, 3], cfg.crop)
-        return organized_surface(
-            grid.reshape(*capture.shape, 3),
-            kept.reshape(capture.shape),
-            to_world,
-            cfg.voxel[0],
-            cfg.max_fill,
-        )
+        pick = np.flatnonzero(kept)
+        if cfg.crop is not None:
+            near = capture.points[pick] - origin
+            pick = pick[_crop_mask(near @ to_world[:3, :3].T + to_world[:3, 3], cfg.crop)]
+        # The noise model takes 20,000 of the pixels (range_noise_model), not the million of
+        # a high-resolution image.
+        raw = capture.points[pick[:: max(1, len(pick) // 20000)]] - origin
+        ok = blocks.ok.copy()
+        ok[ok] = _crop_mask(blocks.points[ok] @ to_world[:3, :3].T + to_world[:3, 3], cfg.crop)
+        model = range_noise_model(raw, camera=True)
+        return organized_surface(blocks, ok, to_world, cfg.max_fill, model)
     if placed.frame == "camera":
         return projected_surface(pts, placed.world_from_centred, cfg.max_fill)
     return scattered_surface(world, cfg.max_fill)

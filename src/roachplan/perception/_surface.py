@@ -7,9 +7,11 @@ stays open: unknown, and so not walkable.
 
 - An organized capture (a depth image, an organized cloud): neighbouring pixels are joined, as
   PCL's organized meshing (OrganizedFastMesh) does, after averaging blocks of pixels about a
-  voxel across. A floor seen from a low camera is sampled more sparsely than any fixed grid
-  far away (7 cm between rows at 4 m from 0.4 m up); its triangles span that, where a 1 cm
-  height grid was mostly holes.
+  voxel across at the median range (block_image: a 1920 x 1080 view 2-4 m away in blocks of
+  3 x 3, a 640 x 480 one not at all; the pipeline finds the ground on a pixel of each). A
+  floor seen from a low camera is sampled more sparsely than any fixed grid far away (7 cm
+  between rows at 4 m from 0.4 m up); its triangles span that, where a 1 cm height grid was
+  mostly holes.
 - An unorganized cloud in a camera frame: the Delaunay triangulation of the samples'
   directions from the sensor (x/z, y/z), the image the sensor would have made.
 - A cloud in a world frame (a lidar's, a map's): the Delaunay triangulation in x, y with edges
@@ -24,7 +26,8 @@ has; every other edge is kept.
 
 Each vertex carries its height noise [m]: the sensor's noise along its ray at that range,
 fitted to the local spread of the capture's own samples (sigma(d) = a + b d^2, the form of
-structured-light, stereo and time-of-flight depth noise alike), times the ray's vertical part.
+structured-light, stereo and time-of-flight depth noise alike; an organized capture's pixels,
+not its blocks' means), times the ray's vertical part.
 The planner's checks take it into account (planning/_validity.py), so a floor that is flat
 within the noise is flat, and a step higher than the noise is still a step.
 
@@ -82,38 +85,107 @@ class Surface:
 # -- organized captures -----------------------------------------------------------------------
 
 
-def organized_surface(
-    points: np.ndarray,
-    valid: np.ndarray,
-    world_from_camera: np.ndarray,
-    voxel: float,
-    max_fill: float,
-) -> Surface:
-    """The surface of an organized capture: points ((H, W, 3) camera frame [m], the sensor at
-    the origin), valid ((H, W) bool: measured and kept), world_from_camera ((4, 4)). Pixels are
-    averaged in blocks about voxel [m] across at the median range; holes of at most max_fill
-    [m] with a flat rim are filled from it."""
+@dataclass(frozen=True, eq=False)
+class Blocks:
+    """An organized capture averaged in blocks of stride x stride pixels (block_image)."""
+
+    points: np.ndarray
+    """(h, w, 3) each block's mean, camera frame [m], the sensor at the origin; NaN where a
+    block has too few pixels: what is meshed."""
+    samples: np.ndarray
+    """(h, w, 3) each block's pixel of median range, as points: what the ground is found on.
+    A sample the sensor took keeps its scatter and quantisation; a block's mean blends a far
+    floor's disparity steps, and the normals of its nearest neighbours then turned away from
+    the floor (on a Kinect v1's strip of far floor, 1.7 % of the pixels, the ground's surface
+    held a seventh of the points it holds on the pixels, and was 2.4 cm off)."""
+    count: np.ndarray
+    """(h, w) int: pixels each block averages (0: none)."""
+    stride: int
+    """Pixels per block side [-]."""
+    pitch: float
+    """Angle between neighbouring blocks [rad]."""
+    rays: np.ndarray | None
+    """(h, w, 3) directions (x/z, y/z, 1) of the block centres, from a pinhole fitted to the
+    pixels; None with too few pixels."""
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(h, w) bool: the blocks that have a point."""
+        return self.count > 0
+
+
+def block_image(points: np.ndarray, valid: np.ndarray, voxel: float) -> Blocks:
+    """An organized capture (points (H, W, 3) camera frame [m], the sensor at the origin;
+    valid (H, W) bool: measured and kept) averaged in blocks of pixels about voxel [m] across
+    at the median range: every stage after it (ground, mesh) works at that resolution, which
+    is all the voxel grid and the planner's height field keep. A 1920 x 1080 view of a floor
+    2-4 m away has pixels 2-4 mm apart; a 640 x 480 view 3 m away, 8 mm: the first is
+    averaged in blocks of 3 x 3, the second not at all. The pixels' spacing is taken from the
+    pinhole fitted to their directions, not from neighbouring points (on a far floor a
+    high-resolution sensor's depth noise exceeds the spacing, which then read twice what it
+    is)."""
     points = np.where(valid[..., None], points, np.nan)
-    pitch = _angular_pitch(points, valid)
+    pinhole = _fit_pinhole(points, valid)
+    # The pinhole's x/z per column; for directions that are no pinhole's (off its fit by more
+    # than half a column), what neighbouring points measure.
+    if pinhole is not None and pinhole[2] <= 0.5 * abs(pinhole[0][0]):
+        pitch = abs(float(pinhole[0][0]))
+    else:
+        pitch = _angular_pitch(points, valid)
     ranges = np.linalg.norm(points[valid], axis=1)
     median_range = float(np.median(ranges)) if len(ranges) else 1.0
-    stride = int(np.clip(round(voxel / max(pitch * median_range, 1e-9)), 1, 16))
-    grid, count = _block_average(points, stride)
-    ok = count > 0
+    stride = _nearest_stride(voxel / max(pitch * median_range, 1e-9))
+    grid, count, samples = _block_average(points, stride)
+    rays = None
+    if pinhole is not None:
+        au, av, _ = pinhole
+        centre = (stride - 1) / 2
+        cu = np.polyval(au, np.arange(count.shape[1]) * stride + centre)
+        cv = np.polyval(av, np.arange(count.shape[0]) * stride + centre)
+        rays = np.stack(np.broadcast_arrays(cu[None, :], cv[:, None], np.ones(count.shape)), -1)
+    return Blocks(
+        points=grid, samples=samples, count=count, stride=stride, pitch=pitch * stride, rays=rays
+    )
+
+
+def _nearest_stride(pixels: float) -> int:
+    """The whole number of pixels (1 to 16) nearest, by ratio, to a block pixels across (the
+    voxel over a pixel's footprint): a block too fine and one too coarse by the same factor
+    are as far off (between 1 and 2 pixels the choice turns at 1.41, not 1.5)."""
+    low = int(np.clip(math.floor(pixels), 1, 16))
+    high = min(low + 1, 16)
+    return high if pixels * pixels > low * high else low
+
+
+def organized_surface(
+    blocks: Blocks,
+    valid: np.ndarray,
+    world_from_camera: np.ndarray,
+    max_fill: float,
+    noise_model: tuple[float, float],
+) -> Surface:
+    """The surface of an organized capture averaged in blocks (block_image): valid ((h, w)
+    bool: the blocks kept), world_from_camera ((4, 4)). Neighbouring blocks are joined;
+    holes of at most max_fill [m] with a flat rim are filled from it. noise_model: the
+    sensor's (range_noise_model of its own pixels, not of the blocks: a block's mean is no
+    better known than the sensor's noise where that noise is correlated between neighbouring
+    pixels, as structured light's and stereo's is)."""
+    grid = np.where(valid[..., None], blocks.points, np.nan)
+    ok = valid.copy()
     filled = np.zeros_like(ok)
-    rays = _pixel_rays(points, valid, stride, ok.shape)
-    if rays is not None:
-        grid, ok, filled = _fill_grid_holes(grid, ok, rays, world_from_camera, max_fill)
-    faces = _grid_faces(grid, ok, world_from_camera, pitch * stride)
+    if blocks.rays is not None:
+        grid, ok, filled = _fill_grid_holes(grid, ok, blocks.rays, world_from_camera, max_fill)
+    faces = _grid_faces(grid, ok, world_from_camera, blocks.pitch)
     index = np.full(ok.shape, -1, dtype=np.int64)
     index[ok] = np.arange(int(ok.sum()))
     faces = index.ravel()[faces]
-    return _finish(grid[ok], faces, filled[ok], world_from_camera)
+    return _finish(grid[ok], faces, filled[ok], world_from_camera, noise_model=noise_model)
 
 
 def _angular_pitch(points: np.ndarray, valid: np.ndarray) -> float:
-    """The angle between neighbouring pixels [rad]: the median of |p(i, j+1) - p(i, j)| / range
-    over side-by-side valid pixels at nearly the same range (a surface facing the sensor)."""
+    """The angle between neighbouring pixels [rad] of an organized cloud that is no pinhole's:
+    the median of |p(i, j+1) - p(i, j)| / range over side-by-side valid pixels at nearly the
+    same range (a surface facing the sensor)."""
     rows = slice(None, None, max(1, points.shape[0] // 120))  # 120 rows are plenty
     a, b = points[rows, :-1], points[rows, 1:]
     both = valid[rows, :-1] & valid[rows, 1:]
@@ -125,37 +197,52 @@ def _angular_pitch(points: np.ndarray, valid: np.ndarray) -> float:
     return float(np.median(step))
 
 
-def _block_average(points: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray]:
-    """((h, w, 3) block means [m], (h, w) pixels averaged) of points ((H, W, 3), NaN = none)
-    in blocks of stride x stride pixels. Only the pixels within 3 % (+1 cm) of a block's median
-    range are averaged, so a block on an object's edge does not mix it with the floor behind;
-    a block with fewer than a quarter of its pixels is empty."""
+def _block_average(points: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((h, w, 3) block means [m], (h, w) pixels averaged, (h, w, 3) each block's pixel of
+    median range [m]) of points ((H, W, 3), NaN = none) in blocks of stride x stride pixels.
+    Only the pixels within 3 % (+1 cm) of a block's median range are averaged, so a block on
+    an object's edge does not mix it with the floor behind; a block with fewer than a quarter
+    of its pixels is empty (NaN in both)."""
     if stride == 1:
         ok = np.all(np.isfinite(points), axis=-1)
-        return points.copy(), ok.astype(np.int64)
-    h, w = -(-points.shape[0] // stride), -(-points.shape[1] // stride)
-    pad = np.full((h * stride, w * stride, 3), np.nan)
-    pad[: points.shape[0], : points.shape[1]] = points
-    blocks = pad.reshape(h, stride, w, stride, 3).transpose(0, 2, 1, 3, 4).reshape(h, w, -1, 3)
-    r = np.linalg.norm(blocks, axis=-1)
-    # The median of each block's valid ranges (NaN last when sorted; a lower median when even).
-    ranked = np.sort(r, axis=-1)
-    valid = np.isfinite(ranked).sum(axis=-1)
-    median = np.take_along_axis(ranked, np.maximum(valid - 1, 0)[..., None] // 2, axis=-1)[..., 0]
+        return points.copy(), ok.astype(np.int64), points.copy()
+    height, width = points.shape[:2]
+    h, w = -(-height // stride), -(-width // stride)
+
+    def blocks(image: np.ndarray, fill: float) -> np.ndarray:
+        """(h, w, stride * stride) the pixels of each block of an (H, W) image."""
+        pad = np.full((h * stride, w * stride), fill)
+        pad[:height, :width] = image
+        return pad.reshape(h, stride, w, stride).transpose(0, 2, 1, 3).reshape(h, w, -1)
+
+    # One coordinate at a time: an image's (H, W) planes, not its (H, W, 3) rows of three.
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    r = blocks(np.sqrt(x * x + y * y + z * z), np.nan)
+    # The pixel of median range of each block (NaN last when sorted; the lower one when even).
+    order = np.argsort(r, axis=-1)
+    valid = np.isfinite(r).sum(axis=-1)
+    middle = np.take_along_axis(order, np.maximum(valid - 1, 0)[..., None] // 2, axis=-1)
+    median = np.take_along_axis(r, middle, axis=-1)[..., 0]
     keep = np.abs(r - median[..., None]) <= 0.03 * median[..., None] + 0.01
     count = keep.sum(axis=-1)
-    total = np.where(keep[..., None], blocks, 0.0).sum(axis=-2)
-    mean = total / np.maximum(count, 1)[..., None]
+    mean, sample = np.empty((h, w, 3)), np.empty((h, w, 3))
+    for c, image in enumerate((x, y, z)):
+        mean[..., c] = np.where(keep, blocks(image, 0.0), 0.0).sum(axis=-1)
+        sample[..., c] = np.take_along_axis(blocks(image, np.nan), middle, axis=-1)[..., 0]
+    mean /= np.maximum(count, 1)[..., None]
     enough = count >= max(1, stride * stride // 4)
     mean[~enough] = np.nan
-    return mean, np.where(enough, count, 0)
+    sample[~enough] = np.nan
+    return mean, np.where(enough, count, 0), sample
 
 
-def _pixel_rays(
-    points: np.ndarray, valid: np.ndarray, stride: int, shape: tuple[int, int]
-) -> np.ndarray | None:
-    """(h, w, 3) directions (x/z, y/z, 1) of the block centres, from a pinhole fitted to the
-    valid pixels (x/z is affine in the column, y/z in the row); None with too few pixels."""
+def _fit_pinhole(
+    points: np.ndarray, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(x/z as a line in the column (2,), y/z as a line in the row (2,), the fit's larger rms
+    residual) of a pinhole fitted to the valid pixels of points ((H, W, 3)); None with too few
+    pixels. A residual of more than half a column's step: no pinhole's directions (an organized
+    lidar's scan)."""
     rows, cols = np.nonzero(valid)
     if len(rows) < 100:
         return None
@@ -163,12 +250,12 @@ def _pixel_rays(
     rows, cols = rows[pick], cols[pick]
     p = points[rows, cols]
     u, v = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
-    au = np.polyfit(cols, u, 1)
-    av = np.polyfit(rows, v, 1)
-    centre = (stride - 1) / 2
-    cu = np.polyval(au, np.arange(shape[1]) * stride + centre)
-    cv = np.polyval(av, np.arange(shape[0]) * stride + centre)
-    return np.stack(np.broadcast_arrays(cu[None, :], cv[:, None], np.ones(shape)), axis=-1)
+    au, av = np.polyfit(cols, u, 1), np.polyfit(rows, v, 1)
+    off = max(
+        float(np.sqrt(np.mean((u - np.polyval(au, cols)) ** 2))),
+        float(np.sqrt(np.mean((v - np.polyval(av, rows)) ** 2))),
+    )
+    return au, av, off
 
 
 def _fill_grid_holes(
@@ -297,7 +384,7 @@ def projected_surface(
 
     pts = points[points[:, 2] > 1e-6]
     uv = pts[:, :2] / pts[:, 2:3]
-    pitch = KDTree(uv).query(uv, k=2)[0][:, 1] if len(pts) >= 3 else np.zeros(len(pts))
+    pitch = KDTree(uv).query(uv, k=2, workers=-1)[0][:, 1] if len(pts) >= 3 else np.zeros(len(pts))
 
     def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return _kept_edges(pts[a], pts[b], world_from_camera, np.maximum(pitch[a], pitch[b]))
@@ -317,7 +404,9 @@ def scattered_surface(points: np.ndarray, max_fill: float, mu: float = 2.5) -> S
     from scipy.spatial import KDTree
 
     xy = points[:, :2]
-    spacing = KDTree(xy).query(xy, k=4)[0][:, 3] if len(points) >= 4 else np.zeros(len(xy))
+    spacing = (
+        KDTree(xy).query(xy, k=4, workers=-1)[0][:, 3] if len(points) >= 4 else np.zeros(len(xy))
+    )
 
     def kept(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         length = np.linalg.norm(points[a] - points[b], axis=1)
@@ -414,13 +503,16 @@ def _finish(
     filled: np.ndarray,
     world_from_camera: np.ndarray | None,
     filled_faces: np.ndarray | None = None,
+    *,
+    noise_model: tuple[float, float] | None = None,
 ) -> Surface:
     """The Surface of vertices points ((V, 3), camera frame when world_from_camera ((4, 4)) is
     given, else world) and faces ((F, 3) into them): specks and unused vertices dropped, each
     facet turned to face the sensor (a world-frame cloud's: up), noise and areas computed.
     filled: (V,) bool vertices filled in from a rim; filled_faces: (F,) bool triangles put back
     into a hole (default: those with a filled vertex). A vertex is filled when it was filled in
-    or only filled triangles use it."""
+    or only filled triangles use it. noise_model: the sensor's (a, b) (range_noise_model);
+    None: fitted to points."""
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if filled_faces is None:
         filled_faces = np.asarray(filled[faces].any(axis=1))
@@ -432,7 +524,7 @@ def _finish(
     faces = remap[faces]
     points, filled = points[used], filled[used]
     camera = world_from_camera is not None
-    model = range_noise_model(points, camera=camera)
+    model = range_noise_model(points, camera=camera) if noise_model is None else noise_model
     points, averaged = denoise(points, model, camera)
     if camera:
         world = points @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
@@ -507,7 +599,7 @@ def denoise(
     k = min(SMOOTH_NEIGHBOURS, n)
     if k < 4:
         return points, averaged
-    idx = np.asarray(KDTree(points).query(points, k=k)[1])
+    idx = np.asarray(KDTree(points).query(points, k=k, workers=-1)[1])
     nbr = points[idx]  # (N, k, 3), the point itself first
     centre = nbr.mean(axis=1)
     cov = np.einsum("nki,nkj->nij", nbr - centre[:, None], nbr - centre[:, None])
