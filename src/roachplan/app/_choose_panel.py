@@ -423,7 +423,7 @@ def _show_choice(
             f"{g.posterior:.2f}."
         )
     if checked is not None:
-        text += f"  \n**Cross-check**: {_pathed(checked['sentence'])}."
+        text += f"  \n**Cross-check engines**: {_pathed(checked['sentence'])}."
     app.page.set_status(text + " **Drive** drives it (*Drive path* picks another).")
     panel.summary.content = f"{text}  \nSame race from the command line: {again}"
 
