@@ -416,6 +416,7 @@ CASES = [
             ),
         ),
         ("lie.ply", "could not be read", "Read PLY failed", "1000 face"),
+        fork=False,
     ),
     Case("ply_holding_a_pcd", mesh("cloud.ply", pcd(xyz_f4(4))), ("cloud.ply", "not a PLY file")),
     # depth images: bombs, wrong bit depths, lying netpbm headers

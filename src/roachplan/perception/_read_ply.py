@@ -3,6 +3,7 @@ faces is a mesh to the scene loader (_inputs.input_kind), and its vertices still
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 import sys
@@ -79,6 +80,9 @@ class _captured_output:  # noqa: N801 - used as a context manager, like contextl
         return self
 
     def __exit__(self, *exc) -> None:
+        # What the library left in C's stdio buffers belongs to the capture too (written
+        # later it would reach the user's terminal or a --json stdout).
+        ctypes.CDLL(None).fflush(None)
         for fd, saved in zip((1, 2), self._saved, strict=True):
             os.dup2(saved, fd)
             os.close(saved)
