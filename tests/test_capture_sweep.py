@@ -16,7 +16,8 @@ from roachplan.perception import survey_views
 from roachplan.scenes import build_terrain_mesh, load_scene
 
 SAMPLE = [
-    ("double_bridge", "kinect2-qhd", "high-far"),  # the report's resolution; no pick before
+    # (The report's resolution, kinect2-qhd of the double bridge, where no pick was found
+    # before: tests/test_autopose.py's joined pick; the benchmark drives it.)
     ("plywood_bridge", "realsense-d435-1280x720", "oblique"),
     ("heightmap", "kinect2-sd", "low-near"),
     ("double_bridge_rough", "kinect2-hd", "oblique"),  # 1920x1080
