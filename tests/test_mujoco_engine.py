@@ -13,14 +13,13 @@ import pytest
 import trimesh
 
 from roachplan.planning import heightfield_from_mesh
-from roachplan.sim import LEG_NAMES, RobotConfig, SimConfig
+from roachplan.sim import LEG_NAMES, PyBulletSimulation, RobotConfig, SimConfig
 from roachplan.sim._mujoco import (
     INTEGRATOR,
     OVERHEAD,
     MujocoSimulation,
     leg_inertia_about_hip,
 )
-from roachplan.sim._simulation import PyBulletSimulation
 
 
 def _box(size, centre) -> trimesh.Trimesh:

@@ -55,7 +55,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "MUJOCO_SPINS": "._turning",
         "CALIBRATED_TIMESTEP": "._engine",
         "open_floor": "._engine",
-        "PyBulletSimulation": "._simulation",
+        "PyBulletSimulation": "._pybullet",
         "MujocoSimulation": "._mujoco",
         "UNCERTAINTY_RANGES": "._uncertainty",
         "UncertaintyConfig": "._uncertainty",
@@ -103,9 +103,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._errors import SimError as SimError
     from ._lockstep import drive_lockstep as drive_lockstep
     from ._mujoco import MujocoSimulation as MujocoSimulation
+    from ._pybullet import PyBulletSimulation as PyBulletSimulation
     from ._robot import LEG_NAMES as LEG_NAMES
     from ._robot import RobotConfig as RobotConfig
-    from ._simulation import PyBulletSimulation as PyBulletSimulation
     from ._turning import CALIBRATED_SPIN as CALIBRATED_SPIN
     from ._turning import CALIBRATED_SPINS as CALIBRATED_SPINS
     from ._turning import CALIBRATED_TURNING as CALIBRATED_TURNING

@@ -1,7 +1,7 @@
 """The physics seam: what the rest of roachplan asks of a simulated world, and the one factory
 that builds one for the engine a SimConfig names (issue 31).
 
-Two engines stand behind it: PyBullet (`sim/_simulation.py`, the default and the reference:
+Two engines stand behind it: PyBullet (`sim/_pybullet.py`, the default and the reference:
 every table the project reproduces was measured with it) and MuJoCo (`sim/_mujoco.py`). Both
 hold one static terrain, an optional ground plane and one roach generated from the same
 RobotConfig, and advance exactly `cfg.timestep` per step without reading the clock.
@@ -145,7 +145,7 @@ class Simulation(Protocol):
 def _engine_class(engine: str) -> Callable[..., Simulation]:
     """The class of the engine named (imported on first use: MuJoCo loads only if asked)."""
     if engine == "pybullet":
-        from ._simulation import PyBulletSimulation
+        from ._pybullet import PyBulletSimulation
 
         return PyBulletSimulation
     if engine == "mujoco":

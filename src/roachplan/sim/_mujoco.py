@@ -1,5 +1,5 @@
 """The MuJoCo engine behind the physics seam (sim/_engine.py): the same terrain, ground and roach
-as the PyBullet engine (sim/_simulation.py), its MJCF model generated from RobotConfig.
+as the PyBullet engine (sim/_pybullet.py), its MJCF model generated from RobotConfig.
 
 The model (`build_spec`):
   - world: the terrain as a height field (`hfield` geom, below) and, when the world has one,

@@ -1,5 +1,5 @@
 """Where a reset stands the robot: pure geometry over an engine's ray cast down, shared by
-every engine (sim/_simulation.py, sim/_mujoco.py), so that both put the robot on the same
+every engine (sim/_pybullet.py, sim/_mujoco.py), so that both put the robot on the same
 ground and the same support plane.
 
 An engine gives `surface_height(x, y, below)`: the height of the highest surface at (x, y)
