@@ -22,7 +22,7 @@ import pybullet as p
 
 from roachplan.experiments import plan
 from roachplan.scenes import build_world, load_scene
-from roachplan.sim import drive_path
+from roachplan.sim import PyBulletSimulation, drive_path
 
 
 def record_torques(world, path_xyz) -> list[list[float]]:
@@ -75,6 +75,8 @@ def main() -> None:
         best = []
         for _ in range(args.repeat):
             with world.simulation() as sim:
+                # (PyBullet's own stepping, the engine this benchmark measures the loop against)
+                assert isinstance(sim, PyBulletSimulation), "bench_trial measures PyBullet"
                 sim.reset(*start)
                 cid, rid, joints = sim._bc._client, sim.robot_id, list(range(6))
                 t0 = time.perf_counter()

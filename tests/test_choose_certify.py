@@ -187,6 +187,7 @@ def test_a_budget_spent_before_any_fresh_rollout_says_what_the_rollouts_showed()
     capped = _certify(truths, seed=1, rollouts=8)
     g = capped.guarantee
     assert g is not None and not g.certified and g.fresh_rollouts == 0
+    assert capped.chosen is not None
     words = g.sentence(capped.chosen)
     assert f"it succeeded in {g.successes} of its {g.rollouts} rollouts" in words
     assert g.successes == g.rollouts > 0 and "at least 0%" not in words
