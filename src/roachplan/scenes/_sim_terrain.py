@@ -142,8 +142,8 @@ def simplified_heightfield_mesh(
     every grid point inside within the tolerance of the two triangles (a quadtree, blocks of
     1 to 2^MAX_BLOCK_LEVEL cells a side). Where the robot may stand or put a foot (ground:
     (ny, nx) bool on the field's grid, level_ground; None: everywhere) a grid point's tolerance is
-    NOISE_TOLERANCE times its height noise (the sensor's), clipped to [min_tolerance,
-    max_tolerance] [m]; elsewhere (walls, steep ground) OFF_GROUND_TOLERANCE. All tolerances
+    NOISE_TOLERANCE times its height noise (the sensor's), clipped to min_tolerance to
+    max_tolerance [m]; elsewhere (walls, steep ground) OFF_GROUND_TOLERANCE. All tolerances
     are raised together while the triangles are more than max_triangles. Cells with a corner
     off the surface (NaN) are left out. The error returned is the largest over the ground's
     grid points: each is within it of the triangles above it.
