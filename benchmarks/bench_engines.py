@@ -176,15 +176,7 @@ def rollouts_per_second(scene: str, n: int, workers: int) -> None:
         ("mujoco lockstep", "mujoco", True),
     ):
         scene_e = with_engine(base, engine)
-        spec = ExperimentSpec(
-            name="bench",
-            path=scene_e.path,
-            scene=scene_e.path,
-            planner=scene_e.planner,
-            sim=scene_e.sim,
-            driver=scene_e.driver,
-            uncertainty=scene_e.uncertainty,
-        )
+        spec = ExperimentSpec.of_scene(scene_e, name="bench")
         pool = _make_pool(spec, workers, "local", None)
         try:
             list(pool.run([("plan_route", (0,))] * workers))  # (the workers up, worlds built)

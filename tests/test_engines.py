@@ -71,16 +71,7 @@ def test_rollouts_in_lockstep_are_the_rollouts_driven_one_at_a_time(tmp_path):
 
     (tmp_path / "flat.yaml").write_text(FLAT + "sim: {engine: mujoco}\n")
     scene = load_scene(str(tmp_path / "flat.yaml"))
-    spec = ExperimentSpec(
-        name="lockstep",
-        path=scene.path,
-        scene=scene.path,
-        planner=scene.planner,
-        sim=scene.sim,
-        driver=scene.driver,
-        uncertainty=scene.uncertainty,
-    )
-    worker = TrialWorker(spec)
+    worker = TrialWorker(ExperimentSpec.of_scene(scene, name="lockstep"))
     path = [[0.0, 0.0, 0.0], [0.3, 0.05, 0.0], [0.6, 0.0, 0.0]]
     calls = [(k % 2, path, seed, ()) for k, seed in enumerate((11, 12, 13))]
     together = worker.rollouts(calls, scene.uncertainty)

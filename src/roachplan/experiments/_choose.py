@@ -84,14 +84,8 @@ def choose(
         on_event(CandidatesPlanned(candidates=tuple(c.plan for c in candidates)))
 
     def spec_of(physics) -> ExperimentSpec:  # (physics: the scene, or it under another engine)
-        return ExperimentSpec(
-            name=f"choose-{scene.name}",
-            path=scene.path,
-            scene=scene.path,
-            planner=scene.planner,
-            sim=physics.sim,
-            driver=physics.driver,
-            uncertainty=uncertainty,
+        return ExperimentSpec.of_scene(
+            physics, name=f"choose-{scene.name}", uncertainty=uncertainty
         )
 
     pool = _make_pool(spec_of(scene), workers, backend, address)

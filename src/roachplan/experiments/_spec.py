@@ -81,6 +81,22 @@ class ExperimentSpec:
     def __post_init__(self) -> None:
         check_settings(self)
 
+    @classmethod
+    def of_scene(
+        cls, scene: Scene, *, name: str, uncertainty: UncertaintyConfig | None = None
+    ) -> ExperimentSpec:
+        """A spec of scene's own settings (its file, planner, sim, driver; its uncertainty unless
+        another is given), for work that rebuilds the scene in workers (choose's rollouts)."""
+        return cls(
+            name=name,
+            path=scene.path,
+            scene=scene.path,
+            planner=scene.planner,
+            sim=scene.sim,
+            driver=scene.driver,
+            uncertainty=scene.uncertainty if uncertainty is None else uncertainty,
+        )
+
     @property
     def default_trials(self) -> int:
         """Total trials the spec asks for (trials_per_route over each route)."""

@@ -48,8 +48,13 @@ import numpy as np
 from mujoco import rollout
 
 from ._config import SimConfig
-from ._errors import SimError
-from ._placement import DROP_CLEARANCE, ground_height, start_height, support_plane_pose
+from ._placement import (
+    DROP_CLEARANCE,
+    ground_height,
+    start_height,
+    support_plane_pose,
+    terrain_arrays,
+)
 from ._robot import LEG_NAMES, RobotConfig
 
 if TYPE_CHECKING:
@@ -380,14 +385,9 @@ class MujocoSimulation:
         cfg: SimConfig,
     ) -> None:
         """terrain_vertices: (V, 3) float world frame [m]; terrain_faces: (F, 3) int."""
-        terrain_vertices = np.asarray(terrain_vertices, dtype=np.float64)
-        terrain_faces = np.asarray(terrain_faces, dtype=np.int64)
-        if terrain_vertices.ndim != 2 or terrain_vertices.shape[1] != 3:
-            raise SimError(f"terrain vertices must be (V, 3), got {terrain_vertices.shape}")
-        if terrain_faces.ndim != 2 or terrain_faces.shape[1] != 3:
-            raise SimError(f"terrain faces must be (F, 3), got {terrain_faces.shape}")
-        if len(terrain_faces) == 0 and ground_height is None:
-            raise SimError("a world needs terrain triangles or a ground plane; it has neither")
+        terrain_vertices, terrain_faces = terrain_arrays(
+            terrain_vertices, terrain_faces, ground_height
+        )
         self.robot = robot
         self.cfg = cfg
         field = _cached_field(terrain_vertices, terrain_faces, ground_height)

@@ -85,3 +85,19 @@ def support_plane_pose(
     px, py, pz = centre.tolist()
     qx, qy, qz, qw = Rotation.from_matrix(rot).as_quat().tolist()
     return (px, py, pz), (qx, qy, qz, qw)
+
+
+def terrain_arrays(
+    vertices: np.ndarray, faces: np.ndarray, ground_height: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """An engine's terrain as float64 vertices (V, 3) [m] and int64 faces (F, 3); SimError
+    for another shape, or for a world with neither triangles nor a ground plane."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise SimError(f"terrain vertices must be (V, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise SimError(f"terrain faces must be (F, 3), got {faces.shape}")
+    if len(faces) == 0 and ground_height is None:
+        raise SimError("a world needs terrain triangles or a ground plane; it has neither")
+    return vertices, faces
