@@ -5,7 +5,8 @@ importing (numpy, Open3D, trimesh, OMPL: 2-5 s a case on a busy 2-core machine).
 The server (`python tests/cli_forks.py`, one per test process) imports the command line and
 the packages its commands load, then for each request forks a child: its own process with its
 standard output and error (the file descriptors, so a C library's printout is caught too) sent
-to files, its working directory the repository's, `roachplan.app.cli.main(argv)` its whole work
+to files, its working directory the repository's, its environment the test's (as a subprocess
+inherits it), `roachplan.app.cli.main(argv)` its whole work
 and its exit status main's. The server is single-threaded and has run nothing: what a child
 inherits is imported modules, as a fresh `python -m roachplan` would have after its imports.
 """
@@ -37,7 +38,8 @@ PRELOAD = (
 
 
 def _serve() -> None:
-    """Read one JSON request per line ({"argv": [...], "timeout": s}); answer one JSON line
+    """Read one JSON request per line ({"argv": [...], "timeout": s, "env": the caller's
+    environment}); answer one JSON line
     ({"status": int, "stdout": str, "stderr": str})."""
     import importlib
 
@@ -65,6 +67,8 @@ def _serve() -> None:
                     sys.stderr = open(2, "w", closefd=False)  # noqa: SIM115
                     sys.stdin = open(os.devnull)  # noqa: SIM115
                     os.chdir(ROOT)
+                    os.environ.clear()  # (the test's environment: a case's settings, its cache)
+                    os.environ.update(request["env"])
                     status = main(request["argv"])
                 except SystemExit as exc:  # (argparse's usage errors exit)
                     status = exc.code if isinstance(exc.code, int) else 2
@@ -107,7 +111,8 @@ class ForkedCli:
 
     def run(self, argv: list[str], timeout: float) -> subprocess.CompletedProcess:
         assert self.proc.stdin is not None and self.proc.stdout is not None
-        self.proc.stdin.write(json.dumps({"argv": argv, "timeout": timeout}) + "\n")
+        request = {"argv": argv, "timeout": timeout, "env": dict(os.environ)}
+        self.proc.stdin.write(json.dumps(request) + "\n")
         self.proc.stdin.flush()
         answer = json.loads(self.proc.stdout.readline())
         if answer["status"] == -9:
