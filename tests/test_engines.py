@@ -113,3 +113,17 @@ def test_the_page_says_a_cross_check_with_its_path_numbers():
     assert "chose path 1, pybullet favours path 3" in said and said.endswith("on paths 2, 4")
     view = follow_race(RaceView(message=""), CrossChecked(result={"sentence": "x"}))
     assert view.checked == {"sentence": "x"}
+
+
+def test_an_experiment_spec_names_the_engine_as_calibrated(tmp_path):
+    """An experiment spec's `sim: {engine: mujoco}` over a PyBullet scene: MuJoCo's timestep
+    and turning curve, as a scene file's gives them; the spec's own keys read over those."""
+    from roachplan.experiments import load_experiment
+
+    (tmp_path / "flat.yaml").write_text(FLAT)
+    (tmp_path / "spec.yaml").write_text("scene: flat.yaml\nsim: {engine: mujoco}\n")
+    spec = load_experiment(str(tmp_path / "spec.yaml"))
+    assert spec.sim.engine == "mujoco" and spec.sim.timestep == CALIBRATED_TIMESTEP["mujoco"]
+    assert spec.driver.turning == MUJOCO_TURNING
+    (tmp_path / "own.yaml").write_text("scene: flat.yaml\nsim: {engine: mujoco, timestep: 0.001}\n")
+    assert load_experiment(str(tmp_path / "own.yaml")).sim.timestep == 0.001

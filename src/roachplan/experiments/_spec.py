@@ -26,8 +26,9 @@ from roachplan.scenes import (
     load_scene,
     read_yaml,
     resolve_in_library,
+    with_engine,
 )
-from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig
+from roachplan.sim import ENGINES, DriverConfig, SimConfig, UncertaintyConfig
 
 from ._errors import ExperimentError
 from ._library import LIBRARY
@@ -188,7 +189,8 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
     if not isinstance(description, str):
         raise f.fail("description", f"expected a string, got {short_repr(description)}")
     planner = _override(f, scene.planner, data.get("planner"), "planner")
-    driver = _override(f, scene.driver, data.get("driver"), "driver")
+    physics = _engine_of(scene, data.get("sim"))
+    driver = _override(f, physics.driver, data.get("driver"), "driver")
     reference = data.get("reference", False)
     if not isinstance(reference, bool):
         raise f.fail("reference", f"expected true or false, got {short_repr(reference)}")
@@ -201,7 +203,7 @@ def load_experiment(name_or_path: str | Path) -> ExperimentSpec:
             description=description,
             scene=scene.path,
             planner=planner,
-            sim=_override(f, scene.sim, data.get("sim"), "sim"),
+            sim=_override(f, physics.sim, data.get("sim"), "sim"),
             driver=driver,
             uncertainty=f.uncertainty(
                 {} if data.get("uncertainty") is None else data["uncertainty"],
@@ -228,6 +230,17 @@ def reference_settings(planner: PlannerConfig, driver: DriverConfig):
         dataclasses.replace(planner, turning_radius=None),
         dataclasses.replace(driver, kind="reference"),
     )
+
+
+def _engine_of(scene: Scene, sim: Any) -> Scene:
+    """The scene simulated by the engine a spec's `sim:` names, as that engine was calibrated
+    (scenes.with_engine: its timestep, its turning curve for the driver), so that the spec's
+    own sim and driver keys are read over it; the scene itself when it names none (or the
+    scene's, or one the validator then refuses)."""
+    engine = sim.get("engine") if isinstance(sim, dict) else None
+    if not isinstance(engine, str) or engine not in ENGINES or engine == scene.sim.engine:
+        return scene
+    return with_engine(scene, engine)
 
 
 def _override(f: YamlFields, base: Any, changes: Any, key: str) -> Any:
