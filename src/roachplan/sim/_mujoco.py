@@ -48,6 +48,7 @@ import numpy as np
 from mujoco import rollout
 
 from ._config import SimConfig
+from ._motors import SideMotors
 from ._placement import (
     DROP_CLEARANCE,
     ground_height,
@@ -405,12 +406,7 @@ class MujocoSimulation:
         self._state = np.empty((1, mujoco.mj_stateSize(m, _STATE)))
         self._warmstart = np.empty((1, m.nv))  # the solver's warm start, for the rollout
         self._buffers: dict[int, np.ndarray] = {}  # advance()'s sensor readings, by n
-        self._ahead: dict[int, np.ndarray] = {}  # servo_inputs' times ahead [s], by n
-        self._sides = robot.leg_sides
-        self._offsets = robot.leg_phase_offsets
-        self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
-        self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
-        self._motor_gain = robot.motor_gain  # each side's speed / its command [-]
+        self._motors = SideMotors(robot)
         self._diverged = False
         self._hit = np.zeros(1, dtype=np.int32)
         self.time = 0.0
@@ -493,10 +489,7 @@ class MujocoSimulation:
         tilted = support_plane_pose(ground, r, x, y, yaw)
         if tilted is not None:
             position, quat = tilted
-        self._phase[:] = phase
-        self._omega[:] = 0.0
-        q0, _ = r.leg_angle(self._phase[self._sides] + self._offsets)
-        d.qpos[self._legs_q] = q0
+        d.qpos[self._legs_q] = self._motors.reset(phase)
         self.place(position, quat)
         self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
         self.time = 0.0
@@ -530,9 +523,7 @@ class MujocoSimulation:
         """Command the left and right motors [rad/s], clipped to the motor's speed limit. With
         perturb()'s motor gains, each side then runs at gain x the command (a real motor's
         speed differs from what it is told)."""
-        lim = self.robot.max_motor_speed
-        self._omega[0] = min(max(left * self._motor_gain[0], -lim), lim)
-        self._omega[1] = min(max(right * self._motor_gain[1], -lim), lim)
+        self._motors.command(left, right)
 
     def perturb(
         self, *, friction: float, mass_scale: float, motor_gain: tuple[float, float]
@@ -555,8 +546,7 @@ class MujocoSimulation:
         mujoco.mj_setConst(m, d)
         mujoco.mj_setState(m, d, state, mujoco.mjtState.mjSTATE_INTEGRATION.value)
         mujoco.mj_forward(m, d)
-        own = self.robot.motor_gain
-        self._motor_gain = (float(motor_gain[0]) * own[0], float(motor_gain[1]) * own[1])
+        self._motors.set_gain(motor_gain)
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
@@ -599,14 +589,9 @@ class MujocoSimulation:
         targets' part of its force, kp q_target + kd dq_target [N m] (the actuator adds
         -kp q - kd dq). Each leg is a PD servo on its share of its side's motor phase: the
         legs of a side stay in phase like the real linkage."""
-        r, dt = self.robot, self.cfg.timestep
-        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
-        leg_phase = self._phase[self._sides] + self._offsets
-        ahead = self._ahead.get(n)
-        if ahead is None:
-            ahead = self._ahead[n] = np.arange(1, n + 1)[:, None] * dt
-        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
-        return r.motor_kp * q + r.motor_kd * (dq_dphase * omega)
+        r = self.robot
+        q, dq = self._motors.targets(n, self.cfg.timestep)  # (n, 6) each
+        return r.motor_kp * q + r.motor_kd * dq
 
     def advanced(self, n: int, sensors: np.ndarray, *, diverged: bool) -> None:
         """After n steps with servo_inputs(n): meter them from their sensor readings ((n,
@@ -620,7 +605,7 @@ class MujocoSimulation:
         dt = self.cfg.timestep
         tau, dq = sensors[:, :6], sensors[:, 6:12]
         self.energy_per_leg += np.abs(tau * dq).sum(axis=0) * dt
-        self._phase += self._omega * (n * dt)
+        self._motors.advance(n, dt)
         self.time += n * dt
 
     def _resets(self) -> int:

@@ -13,6 +13,7 @@ import numpy as np
 
 from ._config import SimConfig
 from ._errors import SimError
+from ._motors import SideMotors
 from ._placement import (
     DROP_CLEARANCE,
     ground_height,
@@ -99,11 +100,7 @@ class PyBulletSimulation:
         self.robot_id = self._create_robot()
         self._cid = bc._client  # the hot loop calls pybullet directly, skipping the wrapper
         self._joints = list(range(6))
-        self._sides = robot.leg_sides
-        self._offsets = robot.leg_phase_offsets
-        self._phase = np.zeros(2)  # motor phase of the left and right side [rad]
-        self._omega = np.zeros(2)  # commanded speed of the left and right side [rad/s]
-        self._motor_gain = robot.motor_gain  # each side's speed / its command [-]
+        self._motors = SideMotors(robot)
         self._base_inertia: tuple[float, float, float] | None = None  # nominal, for perturb
         self.time = 0.0
         self.energy_per_leg = np.zeros(6)
@@ -248,9 +245,7 @@ class PyBulletSimulation:
             position, quat = tilted
         bc.resetBasePositionAndOrientation(self.robot_id, position, quat)
         bc.resetBaseVelocity(self.robot_id, (0, 0, 0), (0, 0, 0))
-        self._phase[:] = phase
-        self._omega[:] = 0.0
-        q0, _ = r.leg_angle(self._phase[self._sides] + self._offsets)
+        q0 = self._motors.reset(phase)
         for j in self._joints:
             bc.resetJointState(self.robot_id, j, float(q0[j]), 0.0)
         self.advance(round(self.cfg.settle_time / self.cfg.timestep))  # legs held, speed 0
@@ -277,9 +272,7 @@ class PyBulletSimulation:
         """Command the left and right motors [rad/s], clipped to the motor's speed limit. With
         perturb()'s motor gains, each side then runs at gain x the command (a real motor's
         speed differs from what it is told)."""
-        lim = self.robot.max_motor_speed
-        self._omega[0] = min(max(left * self._motor_gain[0], -lim), lim)
-        self._omega[1] = min(max(right * self._motor_gain[1], -lim), lim)
+        self._motors.command(left, right)
 
     def perturb(
         self, *, friction: float, mass_scale: float, motor_gain: tuple[float, float]
@@ -306,8 +299,7 @@ class PyBulletSimulation:
             -1,
             localInertiaDiagonal=tuple(v * mass_scale for v in self._base_inertia),
         )
-        own = self.robot.motor_gain
-        self._motor_gain = (float(motor_gain[0]) * own[0], float(motor_gain[1]) * own[1])
+        self._motors.set_gain(motor_gain)
 
     def step(self) -> None:
         """Advance one timestep and meter the energy the leg motors spend (Tong 2018, 3.4)."""
@@ -322,11 +314,8 @@ class PyBulletSimulation:
         dt, cid, rid, joints = self.cfg.timestep, self._cid, self.robot_id, self._joints
         r = self.robot
         kp, kd, limit = r.motor_kp, r.motor_kd, r.max_motor_torque
-        omega = self._omega[self._sides]  # (6,) motor speed of each leg's side [rad/s]
-        leg_phase = self._phase[self._sides] + self._offsets
-        ahead = np.arange(1, n + 1)[:, None] * dt
-        q, dq_dphase = r.leg_angle(leg_phase[None] + ahead * omega[None])  # (n, 6)
-        targets, speeds = q.tolist(), (dq_dphase * omega).tolist()
+        q, dq = self._motors.targets(n, dt)  # (n, 6) each
+        targets, speeds = q.tolist(), dq.tolist()
         energy = self.energy_per_leg.tolist()
         for k in range(n):
             # Each leg is a PD servo on its share of its side's motor phase: the legs of a
@@ -347,7 +336,7 @@ class PyBulletSimulation:
             )
             p.stepSimulation(physicsClientId=cid)
         self.energy_per_leg[:] = energy
-        self._phase += self._omega * (n * dt)
+        self._motors.advance(n, dt)
         self.time += n * dt
 
     def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
