@@ -522,6 +522,7 @@ class _Certifier:
             mine, theirs = self.fresh.pairs(chosen, j, self.since)
             reached = excess_reached(mine, theirs, self.errors.energy)
             compared.append((j, min(self.settled.get(j, math.inf), reached)))
+        all_of_chosen = _tally(self.candidates[chosen], self.fresh)  # (screening and fresh)
         return Guarantee(
             certified=stop == "certified",
             confidence=self.cfg.confidence,
@@ -531,8 +532,8 @@ class _Certifier:
             energy_reached=max((e for _, e in compared), default=0.0),
             fresh_rollouts=s + f,
             fresh_successes=s,
-            rollouts=sum(_tally(self.candidates[chosen], self.fresh)),
-            successes=_tally(self.candidates[chosen], self.fresh)[0],
+            rollouts=sum(all_of_chosen),
+            successes=all_of_chosen[0],
             unsafe=tuple(sorted(self.unsafe - {chosen})),
             compared=tuple(compared),
             unsettled=tuple(j for j, e in compared if e > self.eps_e),

@@ -60,8 +60,8 @@ def tally(records: list[dict]) -> EngineTally:
     return EngineTally(
         rollouts=len(records),
         successes=s,
-        p_low=p_lower(s, f, ALPHA) if records else 0.0,
-        p_high=p_upper(s, f, ALPHA) if records else 1.0,
+        p_low=p_lower(s, f, ALPHA),  # (no rollouts: 0 and 1)
+        p_high=p_upper(s, f, ALPHA),
         relative_energy=float(np.mean(energies)) if energies else math.nan,
     )
 

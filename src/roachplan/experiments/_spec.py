@@ -28,7 +28,7 @@ from roachplan.scenes import (
     resolve_in_library,
     with_engine,
 )
-from roachplan.sim import ENGINES, DriverConfig, SimConfig, UncertaintyConfig
+from roachplan.sim import DriverConfig, SimConfig, UncertaintyConfig, engine_named
 
 from ._errors import ExperimentError
 from ._library import LIBRARY
@@ -237,8 +237,8 @@ def _engine_of(scene: Scene, sim: Any) -> Scene:
     (scenes.with_engine: its timestep, its turning curve for the driver), so that the spec's
     own sim and driver keys are read over it; the scene itself when it names none (or the
     scene's, or one the validator then refuses)."""
-    engine = sim.get("engine") if isinstance(sim, dict) else None
-    if not isinstance(engine, str) or engine not in ENGINES or engine == scene.sim.engine:
+    engine = engine_named(sim)
+    if engine is None or engine == scene.sim.engine:
         return scene
     return with_engine(scene, engine)
 

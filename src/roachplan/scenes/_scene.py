@@ -37,12 +37,12 @@ from roachplan.perception import (
 )
 from roachplan.planning import PlannerConfig
 from roachplan.sim import (
-    ENGINES,
     DriverConfig,
     RobotConfig,
     SimConfig,
     UncertaintyConfig,
     engine_driver,
+    engine_named,
     engine_settings,
 )
 
@@ -362,25 +362,17 @@ class YamlFields:
         return self.config(UncertaintyConfig, value, key, base=base)
 
 
-def _engine_named(data: dict) -> str | None:
-    """The engine a scene file's `sim.engine` names, when it names one (its validator refuses
-    anything else)."""
-    sim = data.get("sim")
-    engine = sim.get("engine") if isinstance(sim, dict) else None
-    return engine if isinstance(engine, str) and engine in ENGINES else None
-
-
 def _engine_sim(data: dict) -> SimConfig | None:
     """The physics settings a scene file's `sim:` is read over: the engine it names as that
     engine was calibrated (its timestep), so `sim: {engine: mujoco}` alone is MuJoCo at 2 ms."""
-    engine = _engine_named(data)
+    engine = engine_named(data.get("sim"))
     return None if engine is None else engine_settings(SimConfig(), engine)
 
 
 def _engine_driver(data: dict) -> DriverConfig | None:
     """The driver settings a scene file's `driver:` is read over: asking the engine `sim:`
     names for arcs by that engine's turning curve."""
-    engine = _engine_named(data)
+    engine = engine_named(data.get("sim"))
     return None if engine is None else engine_driver(DriverConfig(), engine)
 
 

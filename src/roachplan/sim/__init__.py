@@ -48,6 +48,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "make_simulation": "._engine",
         "drive_lockstep": "._lockstep",
         "engine_settings": "._engine",
+        "engine_named": "._engine",
         "engine_driver": "._engine",
         "ENGINE_TURNING": "._turning",
         "ENGINE_SPINS": "._turning",
@@ -97,6 +98,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._engine import CALIBRATED_TIMESTEP as CALIBRATED_TIMESTEP
     from ._engine import Simulation as Simulation
     from ._engine import engine_driver as engine_driver
+    from ._engine import engine_named as engine_named
     from ._engine import engine_settings as engine_settings
     from ._engine import make_simulation as make_simulation
     from ._engine import open_floor as open_floor

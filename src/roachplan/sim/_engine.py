@@ -30,6 +30,13 @@ every table was measured at 1 ms). MuJoCo: 2 ms, where semi-implicit Euler keeps
 stable and a 10 s walk within 5 % in distance and 2 % in energy of 0.25 ms (sim/_mujoco.py)."""
 
 
+def engine_named(sim: object) -> str | None:
+    """The engine a `sim:` mapping (a scene file's, an experiment spec's) names, when it names
+    one of ENGINES (anything else is left to its validator to refuse)."""
+    engine = sim.get("engine") if isinstance(sim, dict) else None
+    return engine if isinstance(engine, str) and engine in ENGINES else None
+
+
 def engine_settings(cfg: SimConfig, engine: str) -> SimConfig:
     """cfg with engine as calibrated: its name and its timestep (CALIBRATED_TIMESTEP)."""
     return dataclasses.replace(cfg, engine=engine, timestep=CALIBRATED_TIMESTEP[engine])
