@@ -127,3 +127,36 @@ def test_an_experiment_spec_names_the_engine_as_calibrated(tmp_path):
     assert spec.driver.turning == MUJOCO_TURNING
     (tmp_path / "own.yaml").write_text("scene: flat.yaml\nsim: {engine: mujoco, timestep: 0.001}\n")
     assert load_experiment(str(tmp_path / "own.yaml")).sim.timestep == 0.001
+
+
+def test_an_experiment_is_cross_checked_per_route_under_the_other_engine(tmp_path):
+    """experiment --cross-check: every trial's stored path driven again under the other
+    engine from its start; per route both tallies, in cross_check.json and the table. Driving
+    a trial's path again under its own engine is the trial, bit for bit (what makes the other
+    engine's drive the same trial)."""
+    from roachplan.experiments import ExperimentSpec, load_experiment
+    from roachplan.experiments._workers import TrialWorker
+
+    (tmp_path / "flat.yaml").write_text(FLAT)
+    (tmp_path / "spec.yaml").write_text("scene: flat.yaml\n")
+    out = tmp_path / "out"
+    report = roachplan.experiment(
+        tmp_path / "spec.yaml", trials=3, out=out, workers=2, cross_check=True
+    )
+    x = report.cross_check
+    assert x is not None and (x["engine"], x["other"]) == ("pybullet", "mujoco")
+    trials = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    trials = [t for t in trials if t["kind"] == "trial" and t["path_found"]]
+    assert x["trials"] == len(trials) == sum(r["pybullet"]["rollouts"] for r in x["routes"])
+    assert sum(r["mujoco"]["rollouts"] for r in x["routes"]) == len(trials)
+    assert json.loads((out / "cross_check.json").read_text()) == json.loads(json.dumps(x))
+    assert report.table.splitlines()[-len(x["routes"]) - 1].startswith("cross-check: ")
+    # A flat floor: both engines walk every path, at energies of their own.
+    assert x["agree"] and x["same_outcome"] == len(trials), x["sentence"]
+    for row in x["routes"]:
+        assert row["pybullet"]["relative_energy"] != row["mujoco"]["relative_energy"]
+    spec = load_experiment(str(tmp_path / "spec.yaml"))
+    assert isinstance(spec, ExperimentSpec)
+    t = trials[0]
+    again = TrialWorker(spec).redrive(0, t["index"], t["path"], t["start"], t.get("spins", []))
+    assert (again["outcome"], again["energy"]) == (t["outcome"], t["energy"])

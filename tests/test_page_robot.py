@@ -68,8 +68,17 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
         finally:
             app.stop()
     assert sum(abs(a - b) for a, b in zip(start, moved, strict=True)) > 0.05  # the live pose
+    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
+    assert len(logs) == 1
+    run = read_run(logs[0])
+    assert run.complete and run.result is not None and run.result["reason"] == "stop"
+    # The loop stops at once once it hears Stop (its first stop frame, then no moving one
+    # after a frame in flight); the click's way through the browser and the websocket to the
+    # loop is a page latency (benchmarks/bench_robot.py), bounded loosely on a loaded machine.
+    heard = run.result["t_stop"]
     moving = [c for c in commands if not c[4]]
-    assert moving and moving[-1][0] < t_stop + 1.0
+    assert moving and moving[-1][0] < heard + 0.5  # (received: a loaded twin reads late)
+    assert t_stop < heard < t_stop + 5.0
     after = [c for c in commands if c[0] > moving[-1][0]]
     assert len(after) >= 10 and all(c[2] == c[3] == 0.0 for c in after)
     assert state["speeds"] == [0.0, 0.0]
@@ -78,8 +87,4 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
     late, periods = map(int, said.groups())
     print(f"page open: {late} of {periods} control periods late ({100 * late / periods:.1f} %)")
     assert periods > 100 and late < 0.5 * periods  # (the 10 % goal: benchmarks/bench_robot.py)
-    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
-    assert len(logs) == 1
-    run = read_run(logs[0])
-    assert run.complete and run.result is not None and run.result["reason"] == "stop"
     assert run.prediction is not None and len(run.poses["t_receive"]) > 100

@@ -158,11 +158,13 @@ def experiment(
     resume: bool = False,
     progress: bool = False,
     engine: str | None = None,
+    cross_check: bool = False,
 ) -> ExperimentReport:
     """A batch of trials in parallel with its tables and figures (`roachplan experiment`):
     a library spec's name ("bridge_rough") or a spec .yaml; results in `out` (new, empty, or
     an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`.
-    engine: `--engine` (default: the spec's `sim.engine`)."""
+    engine: `--engine` (default: the spec's `sim.engine`). cross_check: every trial's path
+    driven again under the other engine (`report.cross_check`, per route)."""
     from roachplan.experiments import load_experiment, run_experiment
     from roachplan.scenes import with_engine
 
@@ -174,6 +176,7 @@ def experiment(
         workers=workers,
         resume=resume,
         progress=progress,
+        cross_check=cross_check,
     )
 
 

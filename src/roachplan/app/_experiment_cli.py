@@ -67,6 +67,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
             backend=args.backend,
             address=args.address,
             progress=not args.quiet,
+            cross_check=args.cross_check,
         )
     except (KeyboardInterrupt, BrokenProcessPool) as exc:
         why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"a worker died ({exc})"
@@ -82,7 +83,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     print(report.table)
     print()
     print(describe_best(report.best))
-    print(f"\nwrote {out}/summary.csv, summary.md, paths.png, energy.png, best_path.json")
+    wrote = "summary.csv, summary.md, paths.png, energy.png, best_path.json"
+    print(f"\nwrote {out}/{wrote}{', cross_check.json' if report.cross_check else ''}")
     return 0
 
 

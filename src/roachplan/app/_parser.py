@@ -155,6 +155,13 @@ def _add_experiment_parser(sub) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     engine_flag(p)
+    p.add_argument(
+        "--cross-check",
+        action="store_true",
+        help="then drive every trial's path again under the other physics engine, from the "
+        "same start: per route, success and energy under each, and whether the engines agree "
+        "(cross_check.json)",
+    )
     _runs(p, "_experiment_cli:cmd_experiment")
 
 

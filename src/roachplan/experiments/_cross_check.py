@@ -1,6 +1,7 @@
 """Two engines as a cross-check (issue 31, item 4): a choice's rollouts driven again under the
 other physics engine, the same paths in the same drawn worlds (each rollout's seed), and per
-path its success and energy under each engine and whether they agree.
+path its success and energy under each engine and whether they agree; an experiment's trials
+likewise, per route (each trial's path driven again from its start).
 
 Where both engines' success rates are within each other's 95 % intervals and the other engine
 favours the same path, the choice is one both engines agree on; a disagreement is model
@@ -11,8 +12,9 @@ turning), and the choice rests on the one that was used.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -66,16 +68,39 @@ def tally(records: list[dict]) -> EngineTally:
     )
 
 
-def favourite(tallies: dict[int, EngineTally]) -> int:
-    """The path one engine's rollouts favour: the highest success rate, then the lowest mean
-    energy, then the lower index."""
+def favourite(tallies: dict) -> Any:
+    """The group (a path's index, a route's name) one engine's rollouts favour: the highest
+    success rate, then the lowest mean energy, then the first key in order."""
 
-    def key(i: int):
+    def key(i):
         t = tallies[i]
         energy = t.relative_energy if math.isfinite(t.relative_energy) else math.inf
         return (-t.p_success, energy, i)
 
     return min(tallies, key=key)
+
+
+def compare(
+    mine: dict, theirs: dict, engine: str, other: str, *, key: str
+) -> tuple[list[dict], Any]:
+    """Per group (a candidate path, a route: the dicts' keys, records each), the two engines'
+    tallies under `engine` and `other` and whether their 95 % intervals overlap (rows named by
+    `key`, in key order); and the group the other engine's records favour (None without any)."""
+    ours = {g: tally(recs) for g, recs in mine.items()}
+    others = {g: tally(theirs.get(g, [])) for g in mine}
+    rows = []
+    for g in sorted(mine):
+        a, b = ours[g], others[g]
+        rows.append(
+            {
+                key: g,
+                engine: a.to_json(),
+                other: b.to_json(),
+                "agree": bool(a.p_low <= b.p_high and b.p_low <= a.p_high),
+            }
+        )
+    driven = {g: t for g, t in others.items() if t.rollouts}
+    return rows, (favourite(driven) if driven else None)
 
 
 def cross_check(
@@ -95,20 +120,7 @@ def cross_check(
     theirs: dict[int, list[dict]] = {i: [] for i in mine}
     for rec in run_other(calls):
         theirs[rec["candidate"]].append(rec)
-    ours = {i: tally(recs) for i, recs in mine.items()}
-    others = {i: tally(recs) for i, recs in theirs.items()}
-    rows = []
-    for i in sorted(mine):
-        a, b = ours[i], others[i]
-        rows.append(
-            {
-                "candidate": i,
-                engine: a.to_json(),
-                other: b.to_json(),
-                "agree": bool(a.p_low <= b.p_high and b.p_low <= a.p_high),
-            }
-        )
-    favoured = favourite(others) if others else None
+    rows, favoured = compare(mine, theirs, engine, other, key="candidate")
     chosen = choice.chosen
     agree = chosen is not None and favoured == chosen and all(r["agree"] for r in rows)
     return {
@@ -118,6 +130,62 @@ def cross_check(
         "other_favours": favoured,
         "agree": agree,
         "sentence": _sentence(engine, other, rows, chosen, favoured, agree=agree),
+    }
+
+
+def cross_check_routes(
+    trials: list[dict], engine: str, drive_other: Callable[[list[dict]], Iterable[dict]]
+) -> dict:
+    """An experiment's trials (store records, made under `engine`) driven again under the other
+    engine: drive_other(trials) drives each trial's stored path and turns on the spot from its
+    start and yields {"index", "outcome", "relative_energy"} per trial, in any order. Per route
+    (route_key), the two engines' tallies and whether their intervals overlap; whether both
+    favour the same route (the highest success rate, then the lowest mean energy). Trials
+    without a path are left out: there is nothing to drive."""
+    from ._summary import route_key
+
+    other = OTHER_ENGINE[engine]
+    driven = [t for t in trials if t.get("path_found")]
+    route_of = {t["index"]: route_key(t) for t in driven}
+    mine: dict[str, list[dict]] = {}
+    for t in driven:
+        mine.setdefault(route_of[t["index"]], []).append(t)
+    theirs: dict[str, list[dict]] = {r: [] for r in mine}
+    agreeing = 0
+    outcome = {t["index"]: t["outcome"] for t in driven}
+    for rec in drive_other(driven):
+        theirs[route_of[rec["index"]]].append(rec)
+        agreeing += (rec["outcome"] == "success") == (outcome[rec["index"]] == "success")
+    rows, favoured = compare(mine, theirs, engine, other, key="route")
+    ours = favourite({r: tally(recs) for r, recs in mine.items()}) if mine else None
+    agree = ours is not None and favoured == ours and all(r["agree"] for r in rows)
+    if ours is None:
+        sentence = f"no trial had a path for {other} to drive"
+    elif agree:
+        sentence = (
+            f"{engine} and {other} agree: both favour {ours}, and every route's success rates "
+            f"under the two are within each other's 95% intervals"
+        )
+    else:
+        differ = [r["route"] for r in rows if not r["agree"]]
+        sentence = f"model uncertainty: {engine} favours {ours}"
+        if favoured != ours:
+            sentence += f", {other} favours {favoured}"
+        if differ:
+            sentence += (
+                f"; the engines' success rates differ beyond their 95% intervals on "
+                f"{', '.join(differ)}"
+            )
+    return {
+        "engine": engine,
+        "other": other,
+        "routes": rows,
+        "favours": ours,
+        "other_favours": favoured,
+        "trials": len(driven),
+        "same_outcome": agreeing,
+        "agree": agree,
+        "sentence": sentence,
     }
 
 

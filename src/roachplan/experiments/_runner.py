@@ -24,6 +24,7 @@ import numpy as np
 
 from roachplan.scenes import build_world, with_scad_backend
 
+from ._cross_check import OTHER_ENGINE, cross_check_routes
 from ._errors import ExperimentError, OutputError
 from ._manifest import (
     MANIFEST,
@@ -48,6 +49,7 @@ from ._summary import (
 )
 
 STORE = "trials.jsonl"
+CROSS_CHECK = "cross_check.json"
 RESULTS_FOLDER = (
     "--out takes a new or empty folder, or one holding a roachplan experiment (to --resume it)"
 )
@@ -67,6 +69,9 @@ class ExperimentReport:
     trials_stored: int
     trials_run: int
     """Trials run by this invocation (the rest were in the store already)."""
+    cross_check: dict | None = None
+    """The trials driven again under the other engine, as cross_check.json holds it
+    (experiments/_cross_check.py cross_check_routes); None: not asked for."""
 
 
 def run_experiment(
@@ -79,7 +84,12 @@ def run_experiment(
     backend: Backend = "local",
     address: str | None = None,
     progress: bool = True,
+    cross_check: bool = False,
 ) -> ExperimentReport:
+    """Run (or resume) the experiment of `spec` into `out` (module docstring). cross_check:
+    then drive every trial's path again under the other physics engine, from the same start
+    (per route, success and energy under each and whether they agree: cross_check.json, and
+    the table's last lines). It is recomputed on every invocation, never stored as trials."""
     out = Path(out)
     if trials < 1:
         raise ExperimentError(f"--trials {trials}: must be 1 or more")
@@ -126,6 +136,11 @@ def run_experiment(
     table = format_table(summaries)
     if len(spec.routes) == 2:
         table += "\n\n" + compare_routes(summaries[0], summaries[1], trial_recs)
+    checked = None
+    if cross_check:
+        checked = _cross_check(spec, trial_recs, workers, backend, address, progress)
+        table += "\n\n" + cross_check_lines(checked)
+        atomic_write(out / CROSS_CHECK, json.dumps(checked, indent=1) + "\n")
     _write_outputs(out, spec=spec, world=world, trials=trial_recs, summaries=summaries, best=best)
     return ExperimentReport(
         out=out,
@@ -134,7 +149,50 @@ def run_experiment(
         best=best,
         trials_stored=len(trial_recs),
         trials_run=ran,
+        cross_check=checked,
     )
+
+
+def _cross_check(spec: ExperimentSpec, trials: list[dict], workers, backend, address, progress):
+    """Every trial's path driven again under the other engine, in a pool of that engine's
+    workers (their redrive: the stored path and turns from the trial's start)."""
+    from roachplan.scenes import with_engine
+
+    engine = spec.scene_with_settings().sim.engine
+    pool = _make_pool(with_engine(spec, OTHER_ENGINE[engine]), workers, backend, address)
+
+    def drive_other(driven: list[dict]):
+        calls = [
+            ("redrive", (t["index"], t["index"], t["path"], t["start"], t.get("spins", [])))
+            for t in driven
+        ]
+        bar = _bar(progress, len(calls), 0, "cross-checks")
+        for rec in pool.run(calls):
+            bar.update(1)
+            yield rec
+        bar.close()
+
+    try:
+        return cross_check_routes(trials, engine, drive_other)
+    finally:
+        pool.close()
+
+
+def cross_check_lines(x: dict) -> str:
+    """An experiment's cross-check in words: its sentence, then per route the successes of its
+    trials and their mean relative energy under each engine."""
+    lines = [
+        f"cross-check: {x['sentence']}; {x['same_outcome']} of {x['trials']} trials ended "
+        f"alike (success or not) under both"
+    ]
+    for row in x["routes"]:
+        a, b = row[x["engine"]], row[x["other"]]
+        lines.append(
+            f"  {row['route']}: {x['engine']} {a['successes']}/{a['rollouts']} (relative "
+            f"energy {a['relative_energy']:.2f}), {x['other']} {b['successes']}/{b['rollouts']} "
+            f"({b['relative_energy']:.2f}){'' if row['agree'] else '  differ'}"
+        )
+    return "\n".join(lines)
 
 
 def check_results_folder(out: Path, *, create: bool = True) -> Path:
