@@ -28,9 +28,30 @@ def type_into(page, label: str, value: str) -> None:
     box.press("Enter")
 
 
+def stopped_run(app, commands: list[list], state: dict, t_stop: float):
+    """The run's log, read back, after checking that it was stopped when the loop heard Stop
+    (the twin's commands: [t, seq, left, right, stop])."""
+    from roachplan.robot import read_run
+
+    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
+    assert len(logs) == 1
+    run = read_run(logs[0])
+    assert run.complete and run.result is not None and run.result["reason"] == "stop"
+    # The loop stops as soon as it hears Stop (its first stop frame, then no moving one
+    # after a frame in flight); the click's way through the browser and the websocket to the
+    # loop is a page latency (benchmarks/bench_robot.py), bounded loosely on a loaded machine.
+    heard = run.result["t_stop"]
+    moving = [c for c in commands if not c[4]]
+    assert moving and moving[-1][0] < heard + 0.5  # (received: a loaded twin reads late)
+    assert t_stop < heard < t_stop + 5.0
+    after = [c for c in commands if c[0] > moving[-1][0]]
+    assert len(after) >= 10 and all(c[2] == c[3] == 0.0 for c in after)
+    assert state["speeds"] == [0.0, 0.0]
+    return run
+
+
 def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifacts):
     from roachplan.app._server import RoachApp
-    from roachplan.robot import read_run
     from roachplan.scenes import build_world, load_scene
 
     with twin(*MOCAP) as (ready, control):
@@ -68,20 +89,7 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
         finally:
             app.stop()
     assert sum(abs(a - b) for a, b in zip(start, moved, strict=True)) > 0.05  # the live pose
-    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
-    assert len(logs) == 1
-    run = read_run(logs[0])
-    assert run.complete and run.result is not None and run.result["reason"] == "stop"
-    # The loop stops at once once it hears Stop (its first stop frame, then no moving one
-    # after a frame in flight); the click's way through the browser and the websocket to the
-    # loop is a page latency (benchmarks/bench_robot.py), bounded loosely on a loaded machine.
-    heard = run.result["t_stop"]
-    moving = [c for c in commands if not c[4]]
-    assert moving and moving[-1][0] < heard + 0.5  # (received: a loaded twin reads late)
-    assert t_stop < heard < t_stop + 5.0
-    after = [c for c in commands if c[0] > moving[-1][0]]
-    assert len(after) >= 10 and all(c[2] == c[3] == 0.0 for c in after)
-    assert state["speeds"] == [0.0, 0.0]
+    run = stopped_run(app, commands, state, t_stop)
     said = re.search(r"(\d+) of (\d+) control periods late", report)
     assert said is not None, report
     late, periods = map(int, said.groups())

@@ -138,7 +138,9 @@ def run_experiment(
         table += "\n\n" + compare_routes(summaries[0], summaries[1], trial_recs)
     checked = None
     if cross_check:
-        checked = _cross_check(spec, trial_recs, workers, backend, address, progress)
+        checked = _cross_check(
+            spec, trial_recs, workers=workers, backend=backend, address=address, progress=progress
+        )
         table += "\n\n" + cross_check_lines(checked)
         atomic_write(out / CROSS_CHECK, json.dumps(checked, indent=1) + "\n")
     _write_outputs(out, spec=spec, world=world, trials=trial_recs, summaries=summaries, best=best)
@@ -153,7 +155,7 @@ def run_experiment(
     )
 
 
-def _cross_check(spec: ExperimentSpec, trials: list[dict], workers, backend, address, progress):
+def _cross_check(spec: ExperimentSpec, trials: list[dict], *, workers, backend, address, progress):
     """Every trial's path driven again under the other engine, in a pool of that engine's
     workers (their redrive: the stored path and turns from the trial's start)."""
     from roachplan.scenes import with_engine
