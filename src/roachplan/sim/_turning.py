@@ -73,10 +73,15 @@ class TurningCurve:
         hi = math.log(max_ratio)
         if not k < self.curvature(max_ratio):  # also inf and nan: the tightest turn there is
             return max_ratio
+        # curvature(exp(mid)) written out, the pole's log taken once: the driver asks this
+        # every control period, and the same operations in the same order give the same bits.
+        ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
+        exp, log = math.exp, math.log
         lo = 0.0
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if self.curvature(math.exp(mid)) < k:
+            x = log(exp(mid))
+            if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
                 lo = mid
             else:
                 hi = mid
