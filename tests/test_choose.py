@@ -453,35 +453,44 @@ def _choose(scene, *extra):
 def test_the_safe_route_wins_the_same_seed_gives_the_same_ranking_and_validates(
     two_bridges, tmp_path
 ):
-    first = _choose(two_bridges)
-    routes = {r["route"] for r in first["ranking"]}
-    assert routes == {"wide", "narrow"}, "both routes are candidates"
-    by_index = {r["candidate"]: r for r in first["ranking"]}
-    chosen = by_index[first["chosen"]]
-    assert chosen["route"] == "wide", first["ranking"]
-    # Nothing ranked above a candidate whose interval lies wholly above its own.
-    for i, a in enumerate(first["ranking"]):
-        for b in first["ranking"][i + 1 :]:
-            assert not a["p_high"] < b["p_low"]
-    assert first["rollouts"] <= 32 and first["stopped"]
-    # The same race again, validated after (fresh seeds: the race's own rollouts untouched).
+    from roachplan.experiments import ExperimentSpec
+    from roachplan.experiments._workers import TrialWorker
+    from roachplan.scenes import load_scene
+
     out = tmp_path / "choice"
     result = _choose(two_bridges, "--validate", "8", "--out", str(out))
-
-    def key(result):  # every rollout the same: counts and the energies' means
-        return [
-            (r["candidate"], r["successes"], r["rollouts"], r["relative_energy"])
-            for r in result["ranking"]
-        ]
-
-    assert key(result) == key(first)
+    routes = {r["route"] for r in result["ranking"]}
+    assert routes == {"wide", "narrow"}, "both routes are candidates"
+    by_index = {r["candidate"]: r for r in result["ranking"]}
+    chosen = by_index[result["chosen"]]
+    assert chosen["route"] == "wide", result["ranking"]
+    # Nothing ranked above a candidate whose interval lies wholly above its own.
+    for i, a in enumerate(result["ranking"]):
+        for b in result["ranking"][i + 1 :]:
+            assert not a["p_high"] < b["p_low"]
+    assert result["rollouts"] <= 32 and result["stopped"]
+    # The same seed, the same ranking: each rollout is a function of its seed alone (not of
+    # the worker, the order or what ran before), so the same race deals the same rollouts and
+    # decides the same. The chosen path's first rollouts, driven again here, are the saved ones.
+    saved = [json.loads(line) for line in (out / "rollouts.jsonl").read_text().splitlines()]
+    mine = [r for r in saved if r["candidate"] == result["chosen"] and not r.get("fresh")][:3]
+    scene = load_scene(str(two_bridges))
+    worker = TrialWorker(ExperimentSpec.of_scene(scene, name="again"))
+    for rec in mine:
+        again = worker.rollout(
+            rec["candidate"],
+            result["chosen_path"],
+            rec["seed"],
+            scene.uncertainty,
+            [tuple(s) for s in result["chosen_spins"]],
+        )
+        assert (again["outcome"], again["energy"]) == (rec["outcome"], rec["energy"])
     # Validation: the observed success of fresh rollouts within the predicted intervals.
     checked = result["validation"]
     assert checked["repeats"] == 8 and 0 <= checked["brier"] <= 1
     inside = [r["inside"] for r in checked["candidates"]]
     assert sum(inside) >= len(inside) - 1, checked["candidates"]
-    saved = json.loads((out / "choice.json").read_text())
-    assert saved["chosen"] == result["chosen"]
+    assert json.loads((out / "choice.json").read_text())["chosen"] == result["chosen"]
     assert len((out / "rollouts.jsonl").read_text().splitlines()) == result["rollouts"]
     # A folder holding other files is refused, the files left alone.
     (tmp_path / "mine").mkdir()
