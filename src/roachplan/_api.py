@@ -159,16 +159,22 @@ def experiment(
     progress: bool = False,
     engine: str | None = None,
     cross_check: bool = False,
+    repeats: int | None = None,
 ) -> ExperimentReport:
     """A batch of trials in parallel with its tables and figures (`roachplan experiment`):
     a library spec's name ("bridge_rough") or a spec .yaml; results in `out` (new, empty, or
     an experiment's folder to resume). `report.table`, `report.summaries`, `report.best`.
     engine: `--engine` (default: the spec's `sim.engine`). cross_check: every trial's path
-    driven again under the other engine (`report.cross_check`, per route)."""
+    driven again under the other engine (`report.cross_check`, per route). repeats: re-drives
+    of the best path (`--repeats`; default: the spec's `best_path.repeats`)."""
+    import dataclasses
+
     from roachplan.experiments import load_experiment, run_experiment
     from roachplan.scenes import with_engine
 
     loaded = load_experiment(os.fspath(spec))
+    if repeats is not None:  # (the spec's setting checks it, as the spec file's)
+        loaded = dataclasses.replace(loaded, best_path_repeats=repeats)
     return run_experiment(
         loaded if engine is None else with_engine(loaded, engine),
         trials=trials,
