@@ -59,6 +59,8 @@ bench: setup
 	$(BIN)/python benchmarks/bench_app.py
 	$(BIN)/python benchmarks/bench_drivable.py
 	$(BIN)/python benchmarks/bench_choose.py
+	$(BIN)/python benchmarks/bench_engines.py
+	$(BIN)/python benchmarks/bench_fidelity.py
 	$(BIN)/python benchmarks/load_test.py
 
 # Five browsers clicking and uploading at once for 2 minutes; needs chromium.
