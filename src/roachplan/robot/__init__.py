@@ -73,6 +73,10 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotRun": "._run",
         "drive_robot": "._run",
         "predict": "._run",
+        "LookAhead": "._lookahead",
+        "LookAheadConfig": "._lookahead",
+        "look_ahead": "._lookahead",
+        "remaining_path": "._lookahead",
         "Comparison": "._compare",
         "FitConfig": "._compare",
         "FitResult": "._compare",
@@ -121,6 +125,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._links import UdpLinkSettings as UdpLinkSettings
     from ._links import open_link as open_link
     from ._links import register_link as register_link
+    from ._lookahead import LookAhead as LookAhead
+    from ._lookahead import LookAheadConfig as LookAheadConfig
+    from ._lookahead import look_ahead as look_ahead
+    from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent
     from ._loop import LoopEvent as LoopEvent

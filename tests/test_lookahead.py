@@ -1,0 +1,97 @@
+"""The look-ahead (issue 32, its first part): short rollouts of the rest of the plan from the
+robot's live pose, judged by the loop's own safety checks. Real planner, both engines."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from roachplan.robot import (
+    LookAheadConfig,
+    SafetyConfig,
+    SafetyMap,
+    look_ahead,
+    remaining_path,
+)
+
+
+def test_the_rest_of_a_plan_starts_at_the_point_nearest_the_robot_with_its_spins_reindexed():
+    path = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]])
+    spins = ((1, math.pi / 2), (2, 0.0))
+    rest, kept = remaining_path(path, spins, (0.4, 0.1))
+    assert np.allclose(rest, [[0.4, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]])
+    assert kept == ((1, math.pi / 2), (2, 0.0))
+    rest, kept = remaining_path(path, spins, (1.1, 0.5))  # past the first spin's waypoint
+    assert np.allclose(rest, [[1.0, 0.5, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]])
+    assert kept == ((1, 0.0),)
+
+
+@pytest.fixture(scope="module")
+def bridge():
+    from roachplan.experiments import plan
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene("double_bridge"))
+    planned = plan(world, seed=0)
+    assert planned.found
+    return world, planned
+
+
+def _pose_on_path(planned, share: float) -> tuple[float, float, float]:
+    p = planned.path_xyz
+    k = int(share * (len(p) - 1))
+    dx, dy = p[k + 1, :2] - p[k, :2]
+    return float(p[k, 0]), float(p[k, 1]), math.atan2(dy, dx)
+
+
+def _edge_pose(world, planned, safety_map) -> tuple[float, float, float]:
+    """A pose on the bridge 2 cm inside its edge, facing out across it (the bridge's edge found
+    from the standable map, walking sideways from the path's middle)."""
+    x, y, yaw = _pose_on_path(planned, 0.5)
+    out = yaw - math.pi / 2
+    for side in (out, out + math.pi):
+        for step in np.arange(0.0, 0.5, 0.005):
+            px, py = x + step * math.cos(side), y + step * math.sin(side)
+            if safety_map.off_standable(px, py) > 0.0:
+                back = step - 0.02
+                return x + back * math.cos(side), y + back * math.sin(side), side
+    raise AssertionError("no edge found beside the path")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("engine", ["pybullet", "mujoco"])
+def test_on_its_path_the_robot_holds_and_facing_off_the_bridge_edge_it_does_not(bridge, engine):
+    world, planned = bridge
+    world = world.with_sim(*_engine_settings(world, engine))
+    smap = SafetyMap.from_world(world)
+    cfg = LookAheadConfig(draws=4, horizon=2.0)
+    here = _pose_on_path(planned, 0.3)
+    on = look_ahead(
+        world, planned.path_xyz, planned.spins, here, cfg,
+        safety=SafetyConfig(), safety_map=smap, seed=1,
+    )  # fmt: skip
+    assert (on.rollouts, on.holds, on.failures) == (4, 4, ())
+    edge = _edge_pose(world, planned, smap)
+    off = look_ahead(
+        world, planned.path_xyz, planned.spins, edge, cfg,
+        safety=SafetyConfig(), safety_map=smap, seed=1,
+    )  # fmt: skip
+    assert off.p_hold < 0.5, off
+    assert all(why in ("off_standable", "fell", "flipped", "deviation") for *_, why in off.failures)
+    # Where they failed: beside the edge, not back at the plan's start.
+    for fx, fy, _ in off.failures:
+        assert math.dist((fx, fy), edge[:2]) < 0.3
+    again = look_ahead(
+        world, planned.path_xyz, planned.spins, edge, cfg,
+        safety=SafetyConfig(), safety_map=smap, seed=1,
+    )  # fmt: skip
+    assert again.failures == off.failures  # (one seed, one answer)
+
+
+def _engine_settings(world, engine: str):
+    from roachplan.scenes import with_engine
+
+    scene = with_engine(world.scene, engine)
+    return scene.sim, scene.driver
