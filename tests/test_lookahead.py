@@ -4,6 +4,7 @@ robot's live pose, judged by the loop's own safety checks. Real planner, both en
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -95,3 +96,37 @@ def _engine_settings(world, engine: str):
 
     scene = with_engine(world.scene, engine)
     return scene.sim, scene.driver
+
+
+def test_the_runner_keeps_the_legs_phase_from_the_commands_sent(bridge):
+    """The phase a look-ahead starts its legs at: the commands' integral (a stop frame stands
+    still), as compare's windows take it from a log."""
+    from roachplan.robot import CommandEvent, CommandFrame, LookAheadRunner, PoseEvent, PoseSample
+
+    world, planned = bridge
+    seen = []
+    runner = LookAheadRunner(
+        world, planned.path_xyz, planned.spins, LookAheadConfig(draws=1, horizon=0.5),
+        safety=SafetyConfig(), safety_map=SafetyMap.from_world(world), period=60.0, seed=0,
+        on_result=lambda t, a: seen.append(a),
+    )  # fmt: skip
+    try:
+        for t, left, right, stop in ((10.0, 2.0, 3.0, False), (10.5, 0.0, 0.0, True)):
+            frame = CommandFrame(seq=0, t_us=0, left=left, right=right, stop=stop)
+            runner.listen(CommandEvent(t=t, scheduled=t, frame=frame))
+        with runner._lock:
+            assert runner._phase_at(99.0) == pytest.approx((1.0, 1.5))
+        # A pose heard, the first look-ahead starts at once, from it.
+        x, y, yaw = _pose_on_path(planned, 0.3)
+        sample = PoseSample(
+            t_receive=0.0, t_source=0.0, seq=0, position=(x, y, 0.0), quat=(0.0, 0.0, 0.0, 1.0)
+        )
+        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        runner.listen(PoseEvent(sample=sample, position=(x, y, 0.2), quat=q))
+        runner.start()
+        deadline = time.monotonic() + 60
+        while not seen and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        runner.close()
+    assert len(seen) == 1 and seen[0].start == pytest.approx((x, y, yaw))

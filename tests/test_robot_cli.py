@@ -9,6 +9,7 @@ import contextlib
 import json
 import os
 import queue
+import re
 import signal
 import socket
 import subprocess
@@ -129,6 +130,8 @@ def wait_for(stream, text: str, timeout: float) -> str:
         (["robot", "--baudrate", "10"], "--baudrate 10: expected a line speed [bit/s]"),
         (["robot", "--seed", "-1"], "--seed -1: expected a non-negative integer"),
         (["robot", "-o", "run.txt"], "-o run.txt: the output must end in one of .mcap"),
+        (["robot", "--look-ahead-draws", "0"], "--look-ahead-draws 0: expected an integer from"),
+        (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
         (["compare", "x.mcap", "--latency", "3"], "--latency 3: expected a number from 0 to 1"),
         (["compare", "missing.mcap"], "run log missing.mcap: cannot read it"),
         (["fit", "a.mcap", "-o", "r.yaml", "--parameters", "foo"], "--parameters foo: expected"),
@@ -199,6 +202,9 @@ def test_go_then_sigterm_stops_with_zero_commands_repeated_and_the_log_compares_
             str(ready["command_port"]),
             "-o",
             str(log),
+            "--look-ahead",
+            "--look-ahead-draws",
+            "3",
             stdin=subprocess.PIPE,
         )
         try:
@@ -218,6 +224,7 @@ def test_go_then_sigterm_stops_with_zero_commands_repeated_and_the_log_compares_
     assert proc.returncode == 130, err
     assert out.startswith("signal after "), out
     assert "SIGTERM received" in out and f"wrote {log}" in out
+    assert re.search(r"looked ahead \d+ times", out), out  # (--look-ahead: beside the loop)
     moving = [c for c in commands if not c[4]]
     assert moving, "it drove after Enter"
     after = [c for c in commands if c[0] >= moving[-1][0]][1:]

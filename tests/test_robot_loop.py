@@ -20,9 +20,11 @@ import pytest
 
 import roachplan.scenes
 from roachplan.robot import (
+    LookAheadConfig,
     LoopConfig,
     RobotSettings,
     SafetyConfig,
+    distance_to_path,
     drive_robot,
     predict,
     read_run,
@@ -103,7 +105,13 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     for attempt in range(2):
         with twin(*HIDDEN, *MOCAP) as (ready, control):
             log = tmp_path / f"run{attempt}.mcap"
-            settings = RobotSettings(**natnet(ready), **udp(ready), log=log, loop=TRACK)
+            settings = RobotSettings(
+                **natnet(ready),
+                **udp(ready),
+                log=log,
+                loop=TRACK,
+                look_ahead=LookAheadConfig(draws=4, horizon=2.0),
+            )
             run = drive_robot(world, settings)
             state = control("state")
         if run.result.reason == "goal":
@@ -121,11 +129,22 @@ def test_the_loop_drives_the_double_bridge_to_the_goal_and_records_it(world, tmp
     with open(log, "rb") as f:
         topics = {channel.topic for _, channel, _ in make_reader(f).iter_messages()}
     assert {"/scene", "/settings", "/plan", "/pose", "/command", "/event", "/prediction"} <= topics
+    # The look-ahead ran beside the loop, about once a second (each in its own process), from
+    # poses along the path, and the loop kept its rate meanwhile (loosely: bench_robot.py).
+    assert "/lookahead" in topics
+    assert run.result.periods > 100 and run.result.late < 0.5 * run.result.periods
     assert not Path(str(log) + ".partial").exists()
     back = read_run(log)
     assert back.complete and back.result is not None and back.result["reason"] == "goal"
     assert len(back.poses["t_receive"]) > 100 and len(back.commands["t"]) > 100
     assert back.scene["name"] == "double_bridge" and len(back.scene["sha256"]) == 64
+    ahead = back.lookaheads
+    assert len(ahead) >= 3 and [a["p_hold"] for a in ahead] == [la.p_hold for la in run.lookaheads]
+    assert all(a["rollouts"] == 4 and 0 <= a["holds"] <= 4 for a in ahead)
+    times = [a["t"] for a in ahead]
+    assert times == sorted(times) and min(np.diff(times)) >= 0.9  # (one a period at most)
+    for a in ahead:  # from where the robot was, on its way
+        assert distance_to_path(a["start"][:2], run.path_xyz[:, :2]) < 0.3
     # The prediction is one simulated drive from the robot's measured start, which moves by
     # millimetres with the mocap noise and timing; on the double bridge such a drive fails about
     # 1 time in 16 (measured), so its outcome is not asserted - only that it is the simulation

@@ -138,6 +138,18 @@ FLAGS: dict[str, tuple[str, Callable[[], Check]]] = {
         "--first-pose-timeout",
         _of("roachplan.robot", "RobotSettings", "first_pose_timeout"),
     ),
+    "look_ahead_draws": (
+        "--look-ahead-draws",
+        _of("roachplan.robot", "LookAheadConfig", "draws"),
+    ),
+    "look_ahead_horizon": (
+        "--look-ahead-horizon",
+        _of("roachplan.robot", "LookAheadConfig", "horizon"),
+    ),
+    "look_ahead_period": (
+        "--look-ahead-period",
+        _of("roachplan.robot", "RobotSettings", "look_ahead_period"),
+    ),
     "latency": ("--latency", _of("roachplan.robot", "FitConfig", "latency")),
     "evaluations": ("--evaluations", _of("roachplan.robot", "FitConfig", "max_evaluations")),
     "rounds": ("--rounds", _of("roachplan.robot", "FitConfig", "rounds")),

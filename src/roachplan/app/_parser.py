@@ -770,6 +770,30 @@ def _add_robot_parser(sub) -> None:
         help="do not simulate the plan from the robot's start for the log",
     )
     p.add_argument(
+        "--look-ahead",
+        action="store_true",
+        help="while it drives, about once a second simulate short rollouts of the rest of the "
+        "plan from its live pose, in their own process: the chance it goes on without a stop "
+        "or a fall, recorded in the log (/lookahead)",
+    )
+    p.add_argument(
+        "--look-ahead-draws", type=int, default=None, metavar="N", help="rollouts each (default 8)"
+    )
+    p.add_argument(
+        "--look-ahead-horizon",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated seconds each rollout walks (default 3)",
+    )
+    p.add_argument(
+        "--look-ahead-period",
+        type=float,
+        default=None,
+        metavar="S",
+        help="how often a look-ahead starts [s] (default 1)",
+    )
+    p.add_argument(
         "-o",
         "--output",
         default=None,

@@ -100,7 +100,7 @@ def _run_log_written(head: bytes) -> bool:
 
 def robot_settings(args: argparse.Namespace, log: Path | None):
     """The RobotSettings of `roachplan robot`'s flags."""
-    from roachplan.robot import LoopConfig, RobotSettings, SafetyConfig
+    from roachplan.robot import LookAheadConfig, LoopConfig, RobotSettings, SafetyConfig
 
     if args.source == "natnet":
         from roachplan import setting_problem
@@ -148,6 +148,18 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         if getattr(args, f"robot_{k}") is not None
     }
     loop = LoopConfig(rate=args.robot_rate, safety=SafetyConfig(**safety))
+    ahead = {
+        k: getattr(args, f"look_ahead_{k}")
+        for k in ("draws", "horizon")
+        if getattr(args, f"look_ahead_{k}") is not None
+    }
+    given = [
+        f"--look-ahead-{k}"
+        for k in ("draws", "horizon", "period")
+        if getattr(args, f"look_ahead_{k}") is not None
+    ]
+    if given and not args.look_ahead:
+        raise UsageError(f"{given[0]} is a setting of the look-ahead; add --look-ahead")
     return RobotSettings(
         source=args.source,
         source_settings=source_settings,
@@ -159,6 +171,8 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         log=log,
         predict=not args.no_predict,
         first_pose_timeout=args.robot_first_pose_timeout,
+        look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
+        **({} if args.look_ahead_period is None else {"look_ahead_period": args.look_ahead_period}),
     )
 
 
@@ -229,6 +243,8 @@ def cmd_robot(args: argparse.Namespace) -> int:
         if run.prediction is None
         else {k: run.prediction[k] for k in ("outcome", "reason", "drive_time")},
         "log": None if run.log is None else str(run.log),
+        "lookaheads": len(run.lookaheads),
+        "lowest_p_hold": min((a.p_hold for a in run.lookaheads), default=None),
     }
     if args.json:
         print(json.dumps(summary))
@@ -240,6 +256,13 @@ def cmd_robot(args: argparse.Namespace) -> int:
             p = run.prediction
             print(
                 f"the simulation predicted: {p['outcome']} ({p['reason']}) in {p['drive_time']:.2f} s"
+            )
+        if run.lookaheads:
+            low = min(run.lookaheads, key=lambda a: a.p_hold)
+            print(
+                f"looked ahead {len(run.lookaheads)} times; the lowest chance of going on "
+                f"{low.horizon:g} s without a stop or a fall: {low.p_hold:.2f}, from "
+                f"({low.start[0]:.2f}, {low.start[1]:.2f})"
             )
         print(f"wrote {run.log}")
     if r.success:

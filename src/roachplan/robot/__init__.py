@@ -75,6 +75,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "predict": "._run",
         "LookAhead": "._lookahead",
         "LookAheadConfig": "._lookahead",
+        "LookAheadRunner": "._lookahead",
         "look_ahead": "._lookahead",
         "remaining_path": "._lookahead",
         "Comparison": "._compare",
@@ -127,6 +128,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._links import register_link as register_link
     from ._lookahead import LookAhead as LookAhead
     from ._lookahead import LookAheadConfig as LookAheadConfig
+    from ._lookahead import LookAheadRunner as LookAheadRunner
     from ._lookahead import look_ahead as look_ahead
     from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent

@@ -10,6 +10,7 @@ from typing import Any
 from roachplan._settings import between, check_settings, optional, positive, seed
 from roachplan._settings import setting as s
 
+from ._lookahead import LookAheadConfig
 from ._safety import SafetyConfig
 from ._transform import FrameTransform
 
@@ -52,6 +53,12 @@ class RobotSettings:
     """Record the simulation's prediction of the plan from the robot's actual start."""
     first_pose_timeout: float = s(5.0, positive("s", 600.0))
     """How long to wait for the robot's first pose [s]."""
+    look_ahead: LookAheadConfig | None = None
+    """Look ahead of the robot while it drives (robot/_lookahead.py: short rollouts from its
+    live pose, in their own process, recorded on /lookahead); None: not."""
+    look_ahead_period: float = s(1.0, positive("s", 60.0))
+    """How often to start a look-ahead [s] (the next starts when the last has ended, at the
+    earliest this long after it began)."""
 
     def __post_init__(self) -> None:
         check_settings(self)

@@ -11,18 +11,26 @@ missed) or when, at any frame of its trajectory, the robot loop's own safety che
 the path) would stop the real robot there. Reaching the goal within the horizon, or still
 going at its end, is a rollout that holds.
 
-What it does not model yet: the legs' phase (each rollout starts from the standing pose, its
-legs where a reset puts them) and the pose's latency (the pose is taken as now). The world's
-robot is the scene's, so a scene naming a fitted robot file looks ahead with the fit.
+The legs start at `phase`, the (left, right) motor phase [rad] the commands sent give (their
+integral: LookAheadRunner keeps it from the loop's commands, as compare's windows do from a
+log; reset at phase 0, a window's turn was off by 0.24 rad RMS, at the commands' phase by 0.03).
+What it does not model yet: the pose's latency (the pose is taken as now). The world's robot is
+the scene's, so a scene naming a fitted robot file looks ahead with the fit.
 
-A pure function of its inputs and seed: rollout k draws from np.random.default_rng((seed, k)).
+look_ahead is a pure function of its inputs and seed: rollout k draws from
+np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop about once a
+`period` (RobotSettings.look_ahead), each look-ahead in its own process, recorded on the run's
+/lookahead topic.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -32,9 +40,12 @@ from roachplan._settings import check_settings, integer, non_negative, positive
 from roachplan._settings import setting as s
 
 from ._safety import SafetyConfig, SafetyMap, check_pose
+from ._transform import yaw_of
 
 if TYPE_CHECKING:
     from roachplan.scenes import World
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -120,10 +131,12 @@ def look_ahead(
     safety: SafetyConfig,
     safety_map: SafetyMap,
     seed: int,
+    phase: tuple[float, float] = (0.0, 0.0),
 ) -> LookAhead:
     """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
-    seconds (module docstring), checked by the loop's safety settings on safety_map."""
-    from roachplan.experiments import drive
+    seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
+    safety_map."""
+    from roachplan.sim import drive_path
 
     t0 = time.perf_counter()
     x0, y0, yaw0 = (float(v) for v in pose)
@@ -150,7 +163,10 @@ def look_ahead(
             if stop is not None:
                 stopped.append((float(f.p_world_body[0]), float(f.p_world_body[1]), stop.reason))
 
-        driven = drive(ahead, rest, start=start, on_frame=on_frame, spins=rest_spins)
+        with ahead.simulation() as sim:  # (a fresh one each: a rollout is its seed's alone)
+            surface = float(world.heightfield.sample(np.array(start[:2])))
+            sim.reset(*start, surface=surface, phase=phase)
+            driven = drive_path(sim, rest, ahead.scene.driver, on_frame=on_frame, spins=rest_spins)
         if stopped:
             failures.append(stopped[0])
         elif driven.outcome in ("success", "timeout"):
@@ -166,3 +182,120 @@ def look_ahead(
         failures=tuple(failures),
         wall_time=time.perf_counter() - t0,
     )
+
+
+def _look_in(world: World, path_xyz, spins, pose, cfg, **settings) -> LookAhead:
+    """look_ahead in a fork of the look-ahead's Host (its value: the world)."""
+    return look_ahead(world, path_xyz, spins, pose, cfg, **settings)
+
+
+class LookAheadRunner:
+    """The look-ahead beside the robot loop, never in it: a thread that, every `period`
+    seconds, takes the newest world-frame pose the loop has seen (`listen`, a loop listener)
+    and looks ahead from it in a fork of a process holding the world (processes.Host: the
+    simulation runs in its own process, so the 50 Hz loop keeps its rate and the GIL). Each
+    result goes to on_result(t [s, monotonic], LookAhead). Look-ahead n is seeded
+    (seed, n)."""
+
+    def __init__(
+        self,
+        world: World,
+        path_xyz: np.ndarray,
+        spins,
+        cfg: LookAheadConfig,
+        *,
+        safety: SafetyConfig,
+        safety_map: SafetyMap,
+        period: float,
+        seed: int,
+        on_result: Callable[[float, LookAhead], None],
+    ) -> None:
+        from roachplan.processes import Host
+
+        self._args = (np.asarray(path_xyz, dtype=float), tuple(spins), cfg, safety, safety_map)
+        self.period = period
+        self.seed = seed
+        self.on_result = on_result
+        self.results: list[LookAhead] = []
+        self._pose: tuple[float, float, float] | None = None
+        self._gain = world.robot.motor_gain
+        self._limit = world.robot.max_motor_speed
+        self._phase = (0.0, 0.0)
+        """The motors' phase [rad] at the last command's time (self._speeds since then)."""
+        self._speeds: tuple[float, float, float] | None = None
+        """(t [s, monotonic], left, right [rad/s]) of the last command."""
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._host = Host(world, name="roachplan look-ahead")
+        self._thread = threading.Thread(target=self._run, name="look-ahead", daemon=True)
+
+    def listen(self, event) -> None:
+        """A loop listener: keep the newest pose (x, y, yaw in the world frame) and the motors'
+        phase, the integral of the commands sent (the robot's motor gain applied, clipped to
+        its motors' limit; a stop frame stands still)."""
+        kind = getattr(event, "kind", None)
+        if kind == "pose":
+            x, y, _ = event.position
+            with self._lock:
+                self._pose = (float(x), float(y), yaw_of(event.quat))
+        elif kind == "command":
+            f = event.frame
+            wl, wr = (0.0, 0.0) if f.stop else (f.left * self._gain[0], f.right * self._gain[1])
+            with self._lock:
+                self._phase = self._phase_at(event.t)
+                self._speeds = (
+                    event.t,
+                    min(max(wl, -self._limit), self._limit),
+                    min(max(wr, -self._limit), self._limit),
+                )
+
+    def _phase_at(self, t: float) -> tuple[float, float]:
+        """The motors' phase at t [s, monotonic] (self._lock held)."""
+        if self._speeds is None:
+            return self._phase
+        t0, wl, wr = self._speeds
+        dt = max(t - t0, 0.0)
+        two_pi = 2 * math.pi
+        return ((self._phase[0] + wl * dt) % two_pi, (self._phase[1] + wr * dt) % two_pi)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop looking ahead (a look-ahead under way is cancelled) and end the host."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=10)
+        self._host.close()
+
+    def _run(self) -> None:
+        from roachplan.processes import Child, Returned
+
+        n = 0
+        while not self._stop.wait(self.period if n else 0.0):
+            with self._lock:
+                pose, phase = self._pose, self._phase_at(time.monotonic())
+            if pose is None:
+                continue
+            path, spins, cfg, safety, smap = self._args
+            seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
+            t = time.monotonic()
+            child = Child(
+                _look_in,
+                (path, spins, pose, cfg),
+                {"safety": safety, "safety_map": smap, "seed": seed, "phase": phase},
+                start=self._host,
+                task="look-ahead",
+            )
+            while not child.done:
+                if self._stop.is_set():
+                    child.cancel()
+                    return
+                child.poll(0.05)
+            n += 1
+            outcome = child.outcome
+            if isinstance(outcome, Returned) and isinstance(outcome.value, LookAhead):
+                self.results.append(outcome.value)
+                self.on_result(t, outcome.value)
+            else:  # (the robot drives on: a look-ahead is advice, never the loop's)
+                _log.warning("look-ahead %d from %s did not finish: %s", n, pose, outcome)

@@ -8,7 +8,9 @@ path [[x, y, z]...] [m], spins, planner, seed), /pose (each new pose: t_receive,
 seq, mocap {p, q} and world {p, q}), /command (each frame sent: t, scheduled, seq, t_us,
 left, right [rad/s], stop), /event (go, stop with its reason, finished), /prediction (the
 simulation of the same plan from the robot's actual start: outcome, reason, trajectory
-[[t, x, y, z, yaw]...]) and /result (how the run ended).
+[[t, x, y, z, yaw]...]), /lookahead (each look-ahead while it drove, when asked for: t,
+start, horizon, rollouts, holds, p_hold, failures [[x, y, why]...]) and /result (how the run
+ended).
 
 Crash-safe as the experiment results are: the run is written to a temporary file beside the
 target (TARGET.partial), flushed as it goes (no chunks: each message is on disk once written),
@@ -31,7 +33,17 @@ import numpy as np
 
 from ._errors import RobotError
 
-TOPICS = ("/scene", "/settings", "/plan", "/pose", "/command", "/event", "/prediction", "/result")
+TOPICS = (
+    "/scene",
+    "/settings",
+    "/plan",
+    "/pose",
+    "/command",
+    "/event",
+    "/prediction",
+    "/lookahead",
+    "/result",
+)
 PROFILE = "roachplan.robot-run"
 FORMAT_VERSION = 1
 
@@ -172,6 +184,9 @@ class RunLog:
     prediction: dict | None
     result: dict | None
     extra: dict[str, Any] = field(default_factory=dict)
+    lookaheads: list[dict] = field(default_factory=list)
+    """The look-aheads made while it drove (LookAhead.to_json() each, with "t" [s, monotonic]
+    when it started), in order; none when it was not asked for."""
 
     @property
     def t_go(self) -> float | None:
@@ -223,6 +238,7 @@ def read_run(path: str | os.PathLike) -> RunLog:
     poses: list[dict] = []
     commands: list[dict] = []
     events: list[dict] = []
+    lookaheads: list[dict] = []
     for topic, msg in _messages(path):
         if topic == "/pose":
             poses.append(msg)
@@ -230,6 +246,8 @@ def read_run(path: str | os.PathLike) -> RunLog:
             commands.append(msg)
         elif topic == "/event":
             events.append(msg)
+        elif topic == "/lookahead":
+            lookaheads.append(msg)
         else:
             one[topic] = msg
     if not events or events[0].get("name") != "opened":
@@ -267,6 +285,7 @@ def read_run(path: str | os.PathLike) -> RunLog:
         events=events,
         prediction=one.get("/prediction"),
         result=one.get("/result"),
+        lookaheads=lookaheads,
     )
 
 

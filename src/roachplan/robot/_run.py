@@ -19,6 +19,7 @@ import numpy as np
 from ._config import RobotSettings
 from ._errors import RobotError
 from ._links import CommandLink, open_link
+from ._lookahead import LookAhead, LookAheadRunner
 from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
@@ -40,6 +41,8 @@ class RobotRun:
     spins: tuple[tuple[int, float], ...]
     log: Path | None
     prediction: dict | None
+    lookaheads: tuple[LookAhead, ...] = ()
+    """The look-aheads made while it drove (RobotSettings.look_ahead), in order."""
 
 
 def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
@@ -102,6 +105,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     own_link = link is None
     source = source or open_pose_source(settings.source, **settings.source_settings)
     recorder: RunRecorder | None = None
+    watcher: LookAheadRunner | None = None
     try:
         link = link or open_link(settings.link, **settings.link_settings)
         scene = world.scene
@@ -153,9 +157,14 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             recorder=recorder,
             listeners=listeners,
         )
+        if settings.look_ahead is not None:
+            watcher = _look_ahead_runner(world, settings, path, spins, recorder)
+            loop.listeners.append(watcher.listen)
         restore = _stop_on_signals(loop)
         try:
             loop.start()
+            if watcher is not None:
+                watcher.start()
             if on_loop is not None:
                 on_loop(loop)
             if ready is None or ready(loop):
@@ -166,6 +175,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 pass
         finally:
             restore()
+            if watcher is not None:
+                watcher.close()
         prediction = None
         if settings.predict and result.start is not None:
             prediction = predict(world, path, spins, result.start)
@@ -185,6 +196,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             spins=spins,
             log=log,
             prediction=prediction,
+            lookaheads=tuple(watcher.results) if watcher is not None else (),
         )
     finally:
         if recorder is not None:
@@ -193,6 +205,27 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             link.close()
         if own_source:
             source.close()
+
+
+def _look_ahead_runner(world, settings: RobotSettings, path, spins, recorder) -> LookAheadRunner:
+    """The look-ahead beside this drive's loop, each result recorded on /lookahead."""
+    assert settings.look_ahead is not None
+
+    def record(t: float, ahead: LookAhead) -> None:
+        if recorder is not None:
+            recorder.write("/lookahead", t, {"t": t, **ahead.to_json()})
+
+    return LookAheadRunner(
+        world,
+        path,
+        spins,
+        settings.look_ahead,
+        safety=settings.loop.safety,
+        safety_map=SafetyMap.from_world(world),
+        period=settings.look_ahead_period,
+        seed=world.scene.seed if settings.seed is None else settings.seed,
+        on_result=record,
+    )
 
 
 def _scene_file(scene) -> Path | None:
