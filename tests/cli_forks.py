@@ -1,6 +1,8 @@
 """The `roachplan` command line run in a fork of a process that has already imported it: the
-hostile-input corpus runs it some 220 times, and a fresh interpreter spent most of each run
-importing (numpy, Open3D, trimesh, OMPL: 2-5 s a case on a busy 2-core machine).
+tests run it some 450 times (the hostile-input corpus 220), and a fresh interpreter spent most
+of each run importing (numpy, Open3D, trimesh: 2-5 s a run on a busy 2-core machine).
+conftest.roachplan runs it so; conftest.fresh_roachplan in a new interpreter, for what only a
+new one shows (a command's own start-up, Open3D's log).
 
 The server (`python tests/cli_forks.py`, one per test process) imports the command line and
 the packages its commands load, then for each request forks a child: its own process with its
@@ -13,6 +15,7 @@ inherits is imported modules, as a fresh `python -m roachplan` would have after 
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import signal
@@ -125,6 +128,19 @@ class ForkedCli:
         if self.proc.stdin is not None:
             self.proc.stdin.close()
         self.proc.wait(timeout=30)
+
+
+_SERVERS: list[ForkedCli] = []
+"""This test process's fork server (started on first use; again if it has died)."""
+
+
+def forked_roachplan(argv: list[str], timeout: float) -> subprocess.CompletedProcess:
+    """`roachplan ARGV` as a fork of this test process's server, with its own output, working
+    directory (the repository's), environment (the test's) and exit status."""
+    if not _SERVERS or _SERVERS[-1].proc.poll() is not None:
+        _SERVERS.append(ForkedCli())
+        atexit.register(_SERVERS[-1].close)
+    return _SERVERS[-1].run(argv, timeout)
 
 
 if __name__ == "__main__":

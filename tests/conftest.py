@@ -35,7 +35,18 @@ ROACHPLAN = [sys.executable, "-m", "roachplan"]
 
 
 def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the `roachplan` command line from the repository root; never raises on failure."""
+    """Run the `roachplan` command line from the repository root, as a fork of a process that
+    has imported it (tests/cli_forks.py): its own output, exit status and the test's
+    environment, as a subprocess; never raises on failure (TimeoutExpired at timeout [s])."""
+    from cli_forks import forked_roachplan
+
+    return forked_roachplan(list(args), timeout)
+
+
+def fresh_roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run the `roachplan` command line from the repository root in a new interpreter (what a
+    fork cannot show: a command's own imports and start-up, Open3D's log); never raises on
+    failure."""
     return subprocess.run(
         [*ROACHPLAN, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False
     )

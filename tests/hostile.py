@@ -5,28 +5,13 @@ where a file could be lost, that the user's files are byte-identical afterwards.
 
 from __future__ import annotations
 
-import atexit
 import hashlib
 import subprocess
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cli_forks import ForkedCli
-from conftest import roachplan as fresh_roachplan
-
-_SERVERS: list[ForkedCli] = []
-"""This test process's fork server (started on first use)."""
-
-
-def roachplan(*argv: str, timeout: float) -> subprocess.CompletedProcess:
-    """`roachplan ARGV` as a fork of a process that has imported the command line (cli_forks:
-    the corpus's 220 runs spent most of their time importing), with its own output, working
-    directory and exit status."""
-    if not _SERVERS or _SERVERS[-1].proc.poll() is not None:
-        _SERVERS.append(ForkedCli())
-        atexit.register(_SERVERS[-1].close)
-    return _SERVERS[-1].run(list(argv), timeout)
+from conftest import fresh_roachplan, roachplan
 
 
 @dataclass(frozen=True)
