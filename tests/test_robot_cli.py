@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import queue
 import re
@@ -131,6 +132,8 @@ def wait_for(stream, text: str, timeout: float) -> str:
         (["robot", "--seed", "-1"], "--seed -1: expected a non-negative integer"),
         (["robot", "-o", "run.txt"], "-o run.txt: the output must end in one of .mcap"),
         (["robot", "--look-ahead-draws", "0"], "--look-ahead-draws 0: expected an integer from"),
+        (["robot", "--look-ahead", "--guard", "2"], "--guard 2: expected a number from 0 to 1"),
+        (["robot", "--guard", "0.5"], "--guard holds the robot on what the look-ahead says"),
         (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
         (["compare", "x.mcap", "--latency", "3"], "--latency 3: expected a number from 0 to 1"),
         (["compare", "missing.mcap"], "run log missing.mcap: cannot read it"),
@@ -306,3 +309,37 @@ def test_a_robot_commands_bad_flag_loads_nothing_heavy():
     )
     assert done.returncode == 0 and done.stdout.strip() == "[]", (done.stdout, done.stderr)
     assert len(done.stderr.strip().splitlines()) == 5
+
+
+def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tmp_path):
+    """--guard: a look-ahead whose rollouts start 30 cm off the path (--look-ahead-noise 0.3,
+    beyond the 0.15 m deviation stop: nearly every rollout fails) holds the robot at once; it is
+    re-planned from where it stands and goes on (--go), each leg its own log, until the
+    re-plans run out."""
+    log = tmp_path / "run.mcap"
+    with twin(*MOCAP) as (ready, control):
+        proc = robot(
+            ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
+            "--look-ahead", "--look-ahead-draws", "4", "--look-ahead-horizon", "1",
+            "--look-ahead-noise", "0.3", "--guard", "1", "--replans", "1", "--json",
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=240)
+        state = control("state")
+    assert proc.returncode == 1, err  # (held, and held again after the one re-plan)
+    summary = json.loads(out)
+    assert summary["reason"] == "lookahead" and "guard 1" in summary["detail"]
+    assert len(summary["held"]) == 1 and "re-planning from where the robot stands" in err
+    assert state["speeds"] == [0.0, 0.0]
+    from roachplan.robot import read_run
+
+    first, second = read_run(log), read_run(tmp_path / "run-2.mcap")
+    for leg in (first, second):
+        assert leg.complete and leg.result is not None and leg.result["reason"] == "lookahead"
+        assert leg.lookaheads and leg.lookaheads[0]["p_hold"] < 1.0
+    # The second leg's plan starts where the first left the robot (not at the scene's start).
+    end = first.result["end"]
+    start = second.plan["start"]
+    assert math.dist(start[:2], end[:2]) < 0.05
+    # ... in the frame the first leg measured (not measured again from a robot mid-way).
+    assert second.settings["transform"] == first.settings["transform"]
+    assert first.settings["transform_measured"] and not second.settings["transform_measured"]

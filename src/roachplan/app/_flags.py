@@ -146,6 +146,12 @@ FLAGS: dict[str, tuple[str, Callable[[], Check]]] = {
         "--look-ahead-horizon",
         _of("roachplan.robot", "LookAheadConfig", "horizon"),
     ),
+    "guard": ("--guard", _of("roachplan.robot", "RobotSettings", "guard")),
+    "replans": ("--replans", _whole(0, 100)),
+    "look_ahead_noise": (
+        "--look-ahead-noise",
+        _of("roachplan.robot", "LookAheadConfig", "position_sd"),
+    ),
     "look_ahead_period": (
         "--look-ahead-period",
         _of("roachplan.robot", "RobotSettings", "look_ahead_period"),

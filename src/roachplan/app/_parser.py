@@ -787,6 +787,30 @@ def _add_robot_parser(sub) -> None:
         help="simulated seconds each rollout walks (default 3)",
     )
     p.add_argument(
+        "--guard",
+        type=float,
+        default=None,
+        metavar="P",
+        help="with --look-ahead: hold the robot when a look-ahead's chance of going on without "
+        "a stop or a fall is below P, re-plan from where it stands, and go on at Enter (--go: "
+        "at once)",
+    )
+    p.add_argument(
+        "--replans",
+        type=int,
+        default=2,
+        metavar="N",
+        help="re-plans after the guard held the robot, at most (default 2)",
+    )
+    p.add_argument(
+        "--look-ahead-noise",
+        type=float,
+        default=None,
+        metavar="M",
+        help="the pose's position error each rollout starts with, standard deviation [m] "
+        "(default 0.01)",
+    )
+    p.add_argument(
         "--look-ahead-period",
         type=float,
         default=None,

@@ -8,6 +8,7 @@ in one line naming the flag.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import select
@@ -148,18 +149,21 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         if getattr(args, f"robot_{k}") is not None
     }
     loop = LoopConfig(rate=args.robot_rate, safety=SafetyConfig(**safety))
+    names = {"draws": "draws", "horizon": "horizon", "noise": "position_sd"}
     ahead = {
-        k: getattr(args, f"look_ahead_{k}")
-        for k in ("draws", "horizon")
+        field: getattr(args, f"look_ahead_{k}")
+        for k, field in names.items()
         if getattr(args, f"look_ahead_{k}") is not None
     }
     given = [
         f"--look-ahead-{k}"
-        for k in ("draws", "horizon", "period")
+        for k in (*names, "period")
         if getattr(args, f"look_ahead_{k}") is not None
     ]
     if given and not args.look_ahead:
         raise UsageError(f"{given[0]} is a setting of the look-ahead; add --look-ahead")
+    if args.guard is not None and not args.look_ahead:
+        raise UsageError("--guard holds the robot on what the look-ahead says; add --look-ahead")
     return RobotSettings(
         source=args.source,
         source_settings=source_settings,
@@ -172,6 +176,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         predict=not args.no_predict,
         first_pose_timeout=args.robot_first_pose_timeout,
         look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
+        guard=args.guard,
         **({} if args.look_ahead_period is None else {"look_ahead_period": args.look_ahead_period}),
     )
 
@@ -228,6 +233,27 @@ def cmd_robot(args: argparse.Namespace) -> int:
         return True if args.go else _ask_go(loop)
 
     run = drive_robot(world, settings, ready=ready)
+    held = []  # the legs the guard ended: re-planned from where the robot stood
+    while run.result.reason == "lookahead" and len(held) < args.replans:
+        held.append(run)
+        print(
+            f"roachplan: held by the look-ahead: {run.result.detail}; re-planning from where "
+            f"the robot stands (re-plan {len(held)} of at most {args.replans})",
+            file=sys.stderr,
+            flush=True,
+        )
+        log = settings.log
+        if log is not None:  # (each leg its own log, beside the first: RUN-2.mcap, ...)
+            log = check_output_file(
+                log.with_name(f"{out.stem}-{len(held) + 1}{out.suffix}"),
+                suffixes=(".mcap",),
+                inputs=scene_inputs(scene),
+                replaceable=_run_log_written,
+                kind="a robot run log roachplan wrote",
+                force=args.force,
+            )
+        settings = dataclasses.replace(settings, transform=run.transform, log=log)
+        run = drive_robot(world, settings, ready=ready)
     r = run.result
     summary = {
         "scene": scene.name,
@@ -243,6 +269,9 @@ def cmd_robot(args: argparse.Namespace) -> int:
         if run.prediction is None
         else {k: run.prediction[k] for k in ("outcome", "reason", "drive_time")},
         "log": None if run.log is None else str(run.log),
+        "held": [
+            {"detail": h.result.detail, "log": None if h.log is None else str(h.log)} for h in held
+        ],
         "lookaheads": len(run.lookaheads),
         "lowest_p_hold": min((a.p_hold for a in run.lookaheads), default=None),
     }
@@ -251,6 +280,8 @@ def cmd_robot(args: argparse.Namespace) -> int:
     else:
         drove = "" if summary["drive_time"] is None else f" after {summary['drive_time']:.2f} s"
         late = f"{r.late} of {r.periods} control periods late" if r.periods else "never drove"
+        for h in held:
+            print(f"held by the look-ahead, re-planned: {h.result.detail} (wrote {h.log})")
         print(f"{r.reason}{drove}: {r.detail}\n{late}")
         if run.prediction is not None:
             p = run.prediction

@@ -56,6 +56,10 @@ class RobotSettings:
     look_ahead: LookAheadConfig | None = None
     """Look ahead of the robot while it drives (robot/_lookahead.py: short rollouts from its
     live pose, in their own process, recorded on /lookahead); None: not."""
+    guard: float | None = s(None, optional(between(0.0, 1.0, "-")))
+    """Hold the robot (stop frames; the run ends as "lookahead") when a look-ahead's chance
+    of going on without a stop or a fall is below this [-]; None: never. With it, the run
+    looks ahead (look_ahead, or LookAheadConfig's defaults when that is None)."""
     look_ahead_period: float = s(1.0, positive("s", 60.0))
     """How often to start a look-ahead [s] (the next starts when the last has ended, at the
     earliest this long after it began)."""

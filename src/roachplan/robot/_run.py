@@ -19,7 +19,7 @@ import numpy as np
 from ._config import RobotSettings
 from ._errors import RobotError
 from ._links import CommandLink, open_link
-from ._lookahead import LookAhead, LookAheadRunner
+from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner
 from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
@@ -157,18 +157,18 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             recorder=recorder,
             listeners=listeners,
         )
-        if settings.look_ahead is not None:
-            watcher = _look_ahead_runner(world, settings, path, spins, recorder)
+        if settings.look_ahead is not None or settings.guard is not None:
+            watcher = _look_ahead_runner(world, settings, path, spins, recorder=recorder, loop=loop)
             loop.listeners.append(watcher.listen)
         restore = _stop_on_signals(loop)
         try:
             loop.start()
-            if watcher is not None:
-                watcher.start()
             if on_loop is not None:
                 on_loop(loop)
             if ready is None or ready(loop):
                 loop.go()
+                if watcher is not None:  # (looks ahead of a robot that drives)
+                    watcher.start()
             else:
                 loop.stop("cancel", "not started: Go was not given")
             while (result := loop.wait(0.1)) is None:
@@ -207,19 +207,31 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             source.close()
 
 
-def _look_ahead_runner(world, settings: RobotSettings, path, spins, recorder) -> LookAheadRunner:
-    """The look-ahead beside this drive's loop, each result recorded on /lookahead."""
-    assert settings.look_ahead is not None
+def _look_ahead_runner(
+    world, settings: RobotSettings, path, spins, *, recorder, loop: RobotLoop
+) -> LookAheadRunner:
+    """The look-ahead beside this drive's loop, each result recorded on /lookahead; under
+    settings.guard, the robot held (the loop stopped: "lookahead")."""
 
     def record(t: float, ahead: LookAhead) -> None:
         if recorder is not None:
             recorder.write("/lookahead", t, {"t": t, **ahead.to_json()})
+        guard = settings.guard
+        if guard is not None and ahead.p_hold < guard and not loop.stopping:
+            whys = sorted({why for *_, why in ahead.failures})
+            x, y, _ = ahead.start
+            loop.stop(
+                "lookahead",
+                f"the look-ahead from ({x:.3f}, {y:.3f}) gave a {ahead.p_hold:.2f} chance of "
+                f"going on {ahead.horizon:g} s without a stop or a fall (guard {guard:g}; its "
+                f"rollouts ended: {', '.join(whys)})",
+            )
 
     return LookAheadRunner(
         world,
         path,
         spins,
-        settings.look_ahead,
+        settings.look_ahead or LookAheadConfig(),
         safety=settings.loop.safety,
         safety_map=SafetyMap.from_world(world),
         period=settings.look_ahead_period,

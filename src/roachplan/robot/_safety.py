@@ -26,6 +26,7 @@ StopReason = Literal[
     "outside_area",
     "off_standable",
     "deviation",
+    "lookahead",
     "stop",
     "cancel",
     "signal",
@@ -36,7 +37,8 @@ tracking driver's outcome); stuck: no progress for the driver's stuck_time; time
 within the driver's time_limit; no_pose: no pose at Go; pose_stale: the newest pose older than
 max_pose_age; outside_area: the robot's centre outside the planning area by more than
 area_margin; off_standable: further than standable_margin from any place the robot can stand;
-deviation: further than max_deviation from the path; stop / cancel: the user's Stop or
+deviation: further than max_deviation from the path; lookahead: the look-ahead's chance of
+going on without a stop or a fall fell under RobotSettings.guard; stop / cancel: the user's Stop or
 Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a link down)."""
 
 
