@@ -337,6 +337,7 @@ def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tm
         assert leg.complete and leg.result is not None and leg.result["reason"] == "lookahead"
         assert leg.lookaheads and leg.lookaheads[0]["p_hold"] < 1.0
     # The second leg's plan starts where the first left the robot (not at the scene's start).
+    assert first.result is not None
     end = first.result["end"]
     start = second.plan["start"]
     assert math.dist(start[:2], end[:2]) < 0.05
