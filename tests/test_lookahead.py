@@ -130,3 +130,28 @@ def test_the_runner_keeps_the_legs_phase_from_the_commands_sent(bridge):
     finally:
         runner.close()
     assert len(seen) == 1 and seen[0].start == pytest.approx((x, y, yaw))
+
+
+def test_what_happened_over_each_horizon_scores_the_predictions():
+    """observed_hold and look_ahead_reliability on recorded look-aheads: one that the run
+    outlived holds; one whose horizon a deviation stop fell in did not; one cut short by the
+    user's Stop is not scored. The Brier score is the mean squared miss."""
+    from types import SimpleNamespace
+
+    from roachplan.robot import look_ahead_reliability, observed_hold
+
+    result = {"reason": "deviation", "t_stop": 10.0}
+    early = {"t": 5.0, "horizon": 3.0, "p_hold": 0.9}
+    late = {"t": 8.0, "horizon": 3.0, "p_hold": 0.3}
+    assert observed_hold(early, result) == 1 and observed_hold(late, result) == 0
+    assert observed_hold(late, {"reason": "stop", "t_stop": 10.0}) is None
+    assert observed_hold(late, {"reason": "goal", "t_stop": 10.0}) == 1
+    run = SimpleNamespace(result=result, lookaheads=[early, late])
+    cut = SimpleNamespace(result={"reason": "stop", "t_stop": 10.0}, lookaheads=[late])
+    out = look_ahead_reliability([run, cut])
+    assert out["scored"] == 2
+    assert out["brier"] == pytest.approx(((0.9 - 1) ** 2 + (0.3 - 0) ** 2) / 2)
+    by_bin = {tuple(b["bin"]): b for b in out["bins"]}
+    assert by_bin[(0.0, 0.5)]["scored"] == 1 and by_bin[(0.0, 0.5)]["observed"] == 0.0
+    assert by_bin[(0.8, 0.95)]["scored"] == 1 and by_bin[(0.8, 0.95)]["observed"] == 1.0
+    assert math.isnan(look_ahead_reliability([])["brier"])

@@ -244,8 +244,11 @@ def _compare_fit_replay(log, tmp_path) -> None:
     c = json.loads(r.stdout)
     assert c["robot_outcome"] == "signal" and len(c["windows"]["t"]) >= 2
     assert c["open_loop"]["end_m"] < 1.0 and c["closed_loop"]["end_m"] >= 0
+    # Its look-aheads scored against what happened: those the run outlived held.
+    assert c["look_ahead"] is not None and c["look_ahead"]["scored"] >= 1
     r = roachplan("compare", str(log), "--latency", "0.04")
     assert r.returncode == 0 and "end error: open loop" in r.stdout, r.stderr
+    assert "scored against what happened over their horizon" in r.stdout
     out_file = tmp_path / "roach.yaml"
     r = roachplan(
         "fit", str(log), "-o", str(out_file), "--latency", "0.04", "--evaluations", "4",

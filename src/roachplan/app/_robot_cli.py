@@ -338,14 +338,21 @@ def _fit_config(args: argparse.Namespace):
 def cmd_compare(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from roachplan.robot import compare, log_world, params_of_robot_file, read_run
+    from roachplan.robot import (
+        compare,
+        log_world,
+        look_ahead_reliability,
+        params_of_robot_file,
+        read_run,
+    )
 
     log = read_run(args.log)
     world = log_world(log, args.scene)
     params = params_of_robot_file(args.robot_file) if args.robot_file else None
     c = compare(log, world, params=params, latency=args.latency or 0.0)
+    ahead = look_ahead_reliability([log]) if log.lookaheads else None
     if args.json:
-        print(json.dumps(c.to_json()))
+        print(json.dumps({**c.to_json(), "look_ahead": ahead}))
         return 0
     p = c.params
     print(
@@ -371,6 +378,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
         f"outcome: the robot {c.robot_outcome}, the simulation {c.sim_outcome}: "
         f"{'they agree' if c.outcome_agrees else 'they DISAGREE'}"
     )
+    if ahead is not None:
+        rows = ", ".join(
+            f"{b['bin'][0]:g}-{b['bin'][1]:g}: {b['scored']} predicted {b['predicted']:.2f}, "
+            f"held {b['observed']:.2f}"
+            for b in ahead["bins"]
+            if b["scored"]
+        )
+        print(
+            f"look-ahead: {len(log.lookaheads)} made, {ahead['scored']} scored against what "
+            f"happened over their horizon, Brier score {ahead['brier']:.3f}"
+            + (f" ({rows})" if rows else "")
+        )
     return 0
 
 

@@ -76,6 +76,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "LookAhead": "._lookahead",
         "LookAheadConfig": "._lookahead",
         "LookAheadRunner": "._lookahead",
+        "look_ahead_reliability": "._lookahead",
+        "observed_hold": "._lookahead",
         "look_ahead": "._lookahead",
         "remaining_path": "._lookahead",
         "Comparison": "._compare",
@@ -130,6 +132,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._lookahead import LookAheadConfig as LookAheadConfig
     from ._lookahead import LookAheadRunner as LookAheadRunner
     from ._lookahead import look_ahead as look_ahead
+    from ._lookahead import look_ahead_reliability as look_ahead_reliability
+    from ._lookahead import observed_hold as observed_hold
     from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent

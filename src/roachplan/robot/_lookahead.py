@@ -299,3 +299,50 @@ class LookAheadRunner:
                 self.on_result(t, outcome.value)
             else:  # (the robot drives on: a look-ahead is advice, never the loop's)
                 _log.warning("look-ahead %d from %s did not finish: %s", n, pose, outcome)
+
+
+FAILED_STOPS = frozenset({"outside_area", "off_standable", "deviation", "missed", "stuck"})
+"""How a run ends that a look-ahead predicts: the stops its rollouts fail by (the loop's
+safety checks; the driver's missed and stuck). A fall ends a real run as off_standable."""
+RELIABILITY_BINS = ((0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0))
+"""Bins of predicted chance [-] that `look_ahead_reliability` compares with what happened."""
+
+
+def observed_hold(lookahead: dict, result: dict) -> int | None:
+    """What happened over one recorded look-ahead's horizon (its /lookahead message, with "t"
+    [s, monotonic]), given the run's /result: 1 when the robot went on for the horizon (its
+    first stop frame later than t + horizon) or reached the goal; 0 when a stop it predicts
+    (FAILED_STOPS) ended the run within it; None when something else did (Stop, Cancel, a
+    signal, a stale pose, the guard): nothing to score."""
+    if result["t_stop"] > lookahead["t"] + lookahead["horizon"] or result["reason"] == "goal":
+        return 1
+    return 0 if result["reason"] in FAILED_STOPS else None
+
+
+def look_ahead_reliability(runs) -> dict:
+    """How well the look-aheads recorded in runs (RunLog each, read_run) predicted what
+    happened: per RELIABILITY_BINS bin, how many were scored, their mean predicted chance and
+    the share observed to hold (a bin of fewer than 20 says little); and the Brier score over
+    all (mean squared difference of prediction and outcome, 0 best; nan with none scored)."""
+    pairs = []
+    for run in runs:
+        if run.result is None:
+            continue
+        for ahead in run.lookaheads:
+            seen = observed_hold(ahead, run.result)
+            if seen is not None:
+                pairs.append((float(ahead["p_hold"]), seen))
+    bins = []
+    for k, (lo, hi) in enumerate(RELIABILITY_BINS):
+        last = k == len(RELIABILITY_BINS) - 1
+        inside = [(p, o) for p, o in pairs if lo <= p < hi or (last and p == hi)]
+        bins.append(
+            {
+                "bin": [lo, hi],
+                "scored": len(inside),
+                "predicted": float(np.mean([p for p, _ in inside])) if inside else math.nan,
+                "observed": float(np.mean([o for _, o in inside])) if inside else math.nan,
+            }
+        )
+    brier = float(np.mean([(p - o) ** 2 for p, o in pairs])) if pairs else math.nan
+    return {"scored": len(pairs), "brier": brier, "bins": bins}
