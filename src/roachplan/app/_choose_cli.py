@@ -246,14 +246,10 @@ def _jsonable(obj):
 def cross_check_lines(x: dict) -> str:
     """choose --cross-check's report: its sentence, then per candidate the successes of its
     rollouts and their mean relative energy under each engine."""
+    from roachplan.experiments import tally_lines
+
     lines = [f"\ncross-check: {x['sentence']}"]
-    for row in x["candidates"]:
-        a, b = row[x["engine"]], row[x["other"]]
-        lines.append(
-            f"  candidate {row['candidate']}: {x['engine']} {a['successes']}/{a['rollouts']} "
-            f"(relative energy {a['relative_energy']:.2f}), {x['other']} {b['successes']}/"
-            f"{b['rollouts']} ({b['relative_energy']:.2f}){'' if row['agree'] else '  differ'}"
-        )
+    lines += tally_lines(x, "candidate", lambda i: f"candidate {i}")
     return "\n".join(lines)
 
 

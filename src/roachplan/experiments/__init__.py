@@ -27,6 +27,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "ChooseEvent": "._choose_events",
         "Decided": "._choose_events",
         "CrossChecked": "._choose_events",
+        "tally_lines": "._cross_check",
         "KnockedOut": "._choose_events",
         "RoundDone": "._choose_events",
         "StopReason": "._choose_events",
@@ -101,6 +102,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._choose_events import RoundDone as RoundDone
     from ._choose_events import StopReason as StopReason
     from ._choose_race import Choice as Choice
+    from ._cross_check import tally_lines as tally_lines
     from ._errors import ChooseError as ChooseError
     from ._errors import ExperimentError as ExperimentError
     from ._errors import OutputError as OutputError

@@ -208,3 +208,18 @@ def _sentence(engine: str, other: str, rows: list[dict], chosen, favoured, *, ag
             f"{'s' * (len(differ) > 1)} {', '.join(map(str, differ))}"
         )
     return "".join(words)
+
+
+def tally_lines(x: dict, key: str, name: Callable[[Any], str] = str) -> list[str]:
+    """A cross-check's rows (x[key + "s"]: per candidate or route) in words, one line each:
+    name(group), then its successes and mean relative energy under each engine, "differ" where
+    their 95 % intervals do not overlap."""
+    lines = []
+    for row in x[key + "s"]:
+        a, b = row[x["engine"]], row[x["other"]]
+        lines.append(
+            f"  {name(row[key])}: {x['engine']} {a['successes']}/{a['rollouts']} (relative "
+            f"energy {a['relative_energy']:.2f}), {x['other']} {b['successes']}/{b['rollouts']} "
+            f"({b['relative_energy']:.2f}){'' if row['agree'] else '  differ'}"
+        )
+    return lines

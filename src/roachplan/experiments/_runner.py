@@ -24,7 +24,7 @@ import numpy as np
 
 from roachplan.scenes import build_world, with_scad_backend
 
-from ._cross_check import OTHER_ENGINE, cross_check_routes
+from ._cross_check import OTHER_ENGINE, cross_check_routes, tally_lines
 from ._errors import ExperimentError, OutputError
 from ._manifest import (
     MANIFEST,
@@ -183,18 +183,11 @@ def _cross_check(spec: ExperimentSpec, trials: list[dict], *, workers, backend, 
 def cross_check_lines(x: dict) -> str:
     """An experiment's cross-check in words: its sentence, then per route the successes of its
     trials and their mean relative energy under each engine."""
-    lines = [
+    head = (
         f"cross-check: {x['sentence']}; {x['same_outcome']} of {x['trials']} trials ended "
         f"alike (success or not) under both"
-    ]
-    for row in x["routes"]:
-        a, b = row[x["engine"]], row[x["other"]]
-        lines.append(
-            f"  {row['route']}: {x['engine']} {a['successes']}/{a['rollouts']} (relative "
-            f"energy {a['relative_energy']:.2f}), {x['other']} {b['successes']}/{b['rollouts']} "
-            f"({b['relative_energy']:.2f}){'' if row['agree'] else '  differ'}"
-        )
-    return "\n".join(lines)
+    )
+    return "\n".join([head, *tally_lines(x, "route")])
 
 
 def check_results_folder(out: Path, *, create: bool = True) -> Path:
