@@ -131,6 +131,30 @@ def test_the_turning_curve_inverts_and_clips_to_the_drivers_range():
     assert curve.min_turning_radius(3.0) == pytest.approx(1 / (0.75 * curve.curvature(3.0)))
 
 
+def test_the_inverse_from_its_table_is_the_plain_bisection_bit_for_bit():
+    """ratio_for takes its first halvings from a table made once: a drive's steering must be
+    exactly what the plain 40-step bisection in ln(ratio) gives (a rollout re-runs from its
+    seed to the same bits), for both engines' curves and ranges."""
+    from roachplan.sim import ENGINE_TURNING
+
+    def plain(curve, curvature, max_ratio):  # the bisection as written out in its docstring
+        k, lo, hi = abs(curvature), 0.0, math.log(max_ratio)
+        if not k < curve.curvature(max_ratio):
+            return max_ratio
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if curve.curvature(math.exp(mid)) < k else (lo, mid)
+        return math.exp(0.5 * (lo + hi))
+
+    rng = np.random.default_rng(5)
+    wanted = [*rng.uniform(-12, 12, 3000), *rng.exponential(0.5, 1000), 0.0, math.nan]
+    for curve in ENGINE_TURNING.values():
+        for max_ratio in (3.0, 2.2):
+            for k in wanted:
+                got, want = curve.ratio_for(k, max_ratio), plain(curve, k, max_ratio)
+                assert got == want or (math.isnan(got) and math.isnan(want)), (curve, k)
+
+
 @pytest.mark.parametrize(
     "true",
     [

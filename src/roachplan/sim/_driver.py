@@ -14,6 +14,7 @@ algorithms turn only on arcs) and ignores them."""
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -109,14 +110,21 @@ def next_waypoint(
     return i, arrived
 
 
-def _failure(pos, quat, path: np.ndarray, standing: float, fall_drop: float):
-    """(outcome, reason) if the robot diverged, flipped or dropped off the planned surface."""
+def _failure(
+    pos, quat, path: np.ndarray, standing: float, fall_drop: float, *, top: float = math.inf
+):
+    """(outcome, reason) if the robot diverged, flipped or dropped off the planned surface.
+    top: the path's highest point [m] (its z's maximum), if known."""
     if not all(map(math.isfinite, pos)):
         return "fell", "the simulation diverged (non-finite body position)"
     qx, qy = quat[0], quat[1]
     if 1 - 2 * (qx * qx + qy * qy) < 0.0:  # the body's z axis points down
         return "flipped", f"flipped over at ({pos[0]:.2f}, {pos[1]:.2f})"
-    # Off the surface the path runs on: compare with the path's surface height nearby.
+    # Off the surface the path runs on: compare with the path's surface height nearby. No
+    # waypoint is higher than top, so a body within fall_drop of top's standing height has
+    # not dropped, whichever waypoint is nearest (rounding is monotonic: the same verdict).
+    if top + standing - pos[2] <= fall_drop:
+        return None
     near = int(np.argmin(np.sum((path[:, :2] - pos[:2]) ** 2, axis=1)))
     drop = path[near, 2] + standing - pos[2]
     if drop > fall_drop:
@@ -200,6 +208,8 @@ class Drive:
         robot: the RobotConfig driven (its standing height and motor limit)."""
         self.follower = make_follower(np.asarray(path_xyz, dtype=float), cfg, spins)
         self.path = self.follower.path
+        self.top = float(self.path[:, 2].max())
+        """The path's highest point [m]."""
         self.cfg = cfg
         self.omega_max = omega_limit(robot.max_motor_speed, cfg)
         self.standing = robot.standing_height
@@ -221,7 +231,7 @@ class Drive:
         if t >= self.next_frame:
             self.trajectory.append((t, *pos))
             self.next_frame += cfg.frame_period
-        failure = _failure(pos, quat, self.path, self.standing, cfg.fall_drop)
+        failure = _failure(pos, quat, self.path, self.standing, cfg.fall_drop, top=self.top)
         if failure is not None:
             self.outcome, self.reason = failure
             return None
@@ -350,7 +360,13 @@ class TrackingFollower:
         self.seg_len = np.linalg.norm(seg, axis=1)
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
         self.total = float(self.cum[-1])
+        # The same as plain floats: the projection runs every control period over a window of
+        # a few segments, where numpy's call overhead is most of its cost; scalar math with the
+        # same operations in the same order gives the same bits (tests/test_driver.py).
+        self._xy = [tuple(q) for q in self.xy.tolist()]
+        self._seg_len, self._cum = self.seg_len.tolist(), self.cum.tolist()
         self.end, self.end_dir = self.xy[-1], self._direction_into(len(self.xy) - 1)
+        self._end, self._end_dir = tuple(self.end.tolist()), tuple(self.end_dir.tolist())
         self.cfg = cfg
         self.s = 0.0
         """Progress: arc length of the robot's nearest point on the path, never decreasing [m]."""
@@ -374,30 +390,41 @@ class TrackingFollower:
         j = moving[-1]
         return (self.xy[j + 1] - self.xy[j]) / self.seg_len[j]
 
-    def _project(self, p: np.ndarray, upto: int) -> float:
-        """Arc length of the point of the path nearest p among the segments from the progress
-        to a lookahead and a bit beyond (not the whole path: a path that comes back near
-        itself must not pull the progress forward or back), and not past waypoint `upto`."""
-        last = len(self.seg_len) - 1  # at the path's end the window is its last segment
-        k0 = min(max(0, int(np.searchsorted(self.cum, self.s, side="right")) - 1), last, upto - 1)
-        k1 = int(np.searchsorted(self.cum, self.s + 2 * self.cfg.lookahead + 0.1, side="right"))
-        k1 = min(max(k1, k0 + 1), len(self.seg_len), upto)
-        a, length = self.xy[k0:k1], self.seg_len[k0:k1]
-        d = self.xy[k0 + 1 : k1 + 1] - a
-        u = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(length**2, 1e-18), 0.0, 1.0)
-        dist = np.linalg.norm(a + d * u[:, None] - p, axis=1)
-        k = int(np.argmin(dist))
-        return float(self.cum[k0 + k] + u[k] * length[k])
+    def _project(self, p, upto: int) -> float:
+        """Arc length of the point of the path nearest p ((x, y) [m]) among the segments from
+        the progress to a lookahead and a bit beyond (not the whole path: a path that comes
+        back near itself must not pull the progress forward or back), and not past waypoint
+        `upto`."""
+        seg_len, cum, xy = self._seg_len, self._cum, self._xy
+        last = len(seg_len) - 1  # at the path's end the window is its last segment
+        k0 = min(max(0, bisect.bisect_right(cum, self.s) - 1), last, upto - 1)
+        k1 = bisect.bisect_right(cum, self.s + 2 * self.cfg.lookahead + 0.1)
+        k1 = min(max(k1, k0 + 1), len(seg_len), upto)
+        px, py = float(p[0]), float(p[1])
+        best, k_best, u_best = math.inf, k0, 0.0
+        for k in range(k0, k1):
+            (ax, ay), (bx, by), length = xy[k], xy[k + 1], seg_len[k]
+            dx, dy = bx - ax, by - ay
+            u = ((px - ax) * dx + (py - ay) * dy) / max(length * length, 1e-18)
+            u = 0.0 if u < 0.0 else 1.0 if u > 1.0 else u
+            ex, ey = ax + dx * u - px, ay + dy * u - py
+            dist = math.sqrt(ex * ex + ey * ey)
+            if dist < best:  # (the first of equals, as argmin)
+                best, k_best, u_best = dist, k, u
+        return cum[k_best] + u_best * seg_len[k_best]
 
-    def _point_at(self, s: float, upto: int) -> np.ndarray:
-        """The path's point at arc length s [m]; past waypoint `upto` (the end, or a spin not
-        yet made), on the straight line on through it."""
-        if s >= self.cum[upto]:
-            direction = self.end_dir if upto == len(self.xy) - 1 else self._direction_into(upto)
-            return self.xy[upto] + direction * (s - self.cum[upto])
-        k = min(int(np.searchsorted(self.cum, s, side="right")) - 1, len(self.seg_len) - 1)
-        u = (s - self.cum[k]) / max(self.seg_len[k], 1e-18)
-        return self.xy[k] + (self.xy[k + 1] - self.xy[k]) * u
+    def _point_at(self, s: float, upto: int) -> tuple[float, float]:
+        """The path's point (x, y) [m] at arc length s [m]; past waypoint `upto` (the end, or
+        a spin not yet made), on the straight line on through it."""
+        cum, xy = self._cum, self._xy
+        if s >= cum[upto]:
+            direction = self.end_dir if upto == len(xy) - 1 else self._direction_into(upto)
+            (x, y), d = xy[upto], s - cum[upto]
+            return x + float(direction[0]) * d, y + float(direction[1]) * d
+        k = min(bisect.bisect_right(cum, s) - 1, len(self._seg_len) - 1)
+        u = (s - cum[k]) / max(self._seg_len[k], 1e-18)
+        (ax, ay), (bx, by) = xy[k], xy[k + 1]
+        return ax + (bx - ax) * u, ay + (by - ay) * u
 
     @property
     def _hold(self) -> int:
@@ -407,8 +434,9 @@ class TrackingFollower:
     def update(self, pos, quat=None) -> tuple[Outcome, str] | None:
         """Advance the progress from the body position pos (x, y, z) [m] and, at a spin, its
         orientation quat (xyzw); the outcome when the drive has ended, else None."""
-        p = np.asarray(pos[:2], dtype=float)
-        off = float(np.linalg.norm(p - self.end))
+        p = (float(pos[0]), float(pos[1]))
+        to_end = (p[0] - self._end[0], p[1] - self._end[1])
+        off = math.sqrt(to_end[0] * to_end[0] + to_end[1] * to_end[1])
         if off < self.cfg.r_end and not self.spins:  # the goal, once every spin is made
             return "success", "reached the goal"
         self.advanced = False
@@ -437,7 +465,7 @@ class TrackingFollower:
         if not self.spins:
             self.s = max(self.s, self._project(p, hold))
         self.gap = self.total - self.s
-        past = float(np.dot(p - self.end, self.end_dir))
+        past = to_end[0] * self._end_dir[0] + to_end[1] * self._end_dir[1]
         if self.s >= self.total and past > self.cfg.r_end:
             return "missed", (
                 f"passed the goal {off:.2f} m from it (success is within {self.cfg.r_end:g} m) "

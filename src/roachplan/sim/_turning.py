@@ -13,6 +13,7 @@ Pure functions of plain numbers; no simulation here (the sweep is sim/_calibrati
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -70,15 +71,20 @@ class TurningCurve:
         value): the inverse of `curvature`, clipped to the driver's range. Bisection in ln(r):
         the curve has no closed-form inverse, and 40 halvings of ln 3 are exact to 1e-12."""
         k = abs(curvature)
-        hi = math.log(max_ratio)
-        if not k < self.curvature(max_ratio):  # also inf and nan: the tightest turn there is
+        top, mids, below = _bisection_tree(self, max_ratio)
+        if not k < top:  # also inf and nan: the tightest turn there is
             return max_ratio
-        # curvature(exp(mid)) written out, the pole's log taken once: the driver asks this
-        # every control period, and the same operations in the same order give the same bits.
+        # The first _TREE_DEPTH halvings from the tree (their midpoints and curvatures are the
+        # same every call), the rest as they come: the driver asks this every control period.
+        lo, hi, node = 0.0, math.log(max_ratio), 0
+        for _ in range(_TREE_DEPTH):
+            if below[node] < k:
+                lo, node = mids[node], 2 * node + 2
+            else:
+                hi, node = mids[node], 2 * node + 1
         ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
         exp, log = math.exp, math.log
-        lo = 0.0
-        for _ in range(40):
+        for _ in range(_HALVINGS - _TREE_DEPTH):  # (_at_log_ratio, inline)
             mid = 0.5 * (lo + hi)
             x = log(exp(mid))
             if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
@@ -87,11 +93,45 @@ class TurningCurve:
                 hi = mid
         return math.exp(0.5 * (lo + hi))
 
+    @staticmethod
+    def _at_log_ratio(x: float, ks: float, rate: float, lock: float, pole: float) -> float:
+        """curvature(exp(x)) written out, the pole's log `pole` taken once, inf at and past
+        it: the same operations in the same order as `curvature`, so the same bits."""
+        if not x < pole:
+            return math.inf
+        return ks * (1.0 - math.exp(-rate * x)) + lock * x / (pole - x)
+
     def min_turning_radius(self, max_ratio: float, headroom: float = PLAN_HEADROOM) -> float:
         """Radius of the tightest arc a plan may ask for [m]: 1 / (headroom * curvature at the
         driver's largest ratio). headroom < 1 keeps part of the turning range for the driver's
         corrections, on top of the arc it follows."""
         return 1.0 / (headroom * self.curvature(max_ratio))
+
+
+_HALVINGS = 40
+"""ratio_for's bisection steps."""
+_TREE_DEPTH = 14
+"""Its first steps taken from a table (2^14 - 1 nodes, computed once per curve and range)."""
+
+
+@functools.lru_cache(maxsize=32)
+def _bisection_tree(curve: TurningCurve, max_ratio: float) -> tuple[float, list, list]:
+    """(curvature at max_ratio, the midpoints [ln ratio], the curvature at each [1/m]) of
+    ratio_for's first _TREE_DEPTH halvings of [0, ln max_ratio], as a heap: node i's lower
+    half is node 2i+1, its upper 2i+2. Made by the very arithmetic ratio_for does, so a walk
+    down it takes the same turns and reaches the same bits."""
+    pole = math.log(curve.lock_ratio)
+    mids, below = [0.0] * (2**_TREE_DEPTH - 1), [0.0] * (2**_TREE_DEPTH - 1)
+    bounds = [(0.0, math.log(max_ratio))]
+    for node in range(len(mids)):
+        lo, hi = bounds[node]
+        mid = 0.5 * (lo + hi)
+        mids[node] = mid
+        below[node] = TurningCurve._at_log_ratio(
+            math.log(math.exp(mid)), curve.kappa_sat, curve.rate, curve.lock, pole
+        )
+        bounds += [(lo, mid), (mid, hi)]
+    return curve.curvature(max_ratio), mids, below
 
 
 CALIBRATED_TURNING = TurningCurve()
