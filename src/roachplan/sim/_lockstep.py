@@ -58,6 +58,8 @@ def drive_lockstep(
     timestep = sims[0].cfg.timestep
     if any(s.cfg.timestep != timestep for s in sims):
         raise SimError("rollouts in lockstep share one timestep")
+    if any(s.robot != sims[0].robot for s in sims):
+        raise SimError("rollouts in lockstep share one robot description")
     spins = list(spins) or [()] * len(sims)
     drives = [
         Drive(path, cfg, spin, robot=sim.robot)
@@ -85,17 +87,19 @@ def drive_lockstep(
             break
         ids = np.array(running)
         every = None if len(running) == len(sims) else ids  # (None: all, no ids to check)
-        inputs = np.stack([sims[i].servo_inputs(n) for i in running], axis=1)  # (n, k, 6)
+        inputs = MujocoSimulation.servo_inputs_together([sims[i] for i in running], n)
         for i in running:  # (the batch's state rows: the simulations' own)
             mujoco.mj_getState(sims[i].model, sims[i].data, batch.state[i], _STATE)
         before = batch.warning[ids][:, _DIVERGED, 0].sum(axis=1)
         readings = np.empty((len(running), n, sensordata.shape[1]))
+        rows = slice(None) if every is None else ids  # (a slice: no copy for all of them)
         for k in range(n):
-            ctrl[ids] = inputs[k]
+            ctrl[rows] = inputs[k]
             batch.step(every)
-            readings[:, k] = sensordata[ids]
+            readings[:, k] = sensordata[rows]
         diverged = batch.warning[ids][:, _DIVERGED, 0].sum(axis=1) != before
+        energy = MujocoSimulation.metered(readings, timestep)  # (k, 6) [J]
         for j, i in enumerate(running):
             mujoco.mj_setState(sims[i].model, sims[i].data, batch.state[i], _STATE)
-            sims[i].advanced(n, readings[j], diverged=bool(diverged[j]))
+            sims[i].advanced(n, readings[j], diverged=bool(diverged[j]), energy=energy[j])
     return [r for r in results if r is not None]

@@ -60,3 +60,16 @@ class SideMotors:
     def advance(self, n: int, dt: float) -> None:
         """Move the phases on by n steps of dt [s] at the current speeds."""
         self.phase += self.omega * (n * dt)
+
+
+def targets_together(motors: list[SideMotors], n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """SideMotors.targets of several robots' motors (one robot description) at once: two (n,
+    k, 6) arrays, [:, j] what motors[j].targets(n, dt) gives, bit for bit (the same
+    element-wise operations, one call for all)."""
+    robot = motors[0].robot
+    sides, offsets = robot.leg_sides, robot.leg_phase_offsets
+    phase = np.stack([m.phase for m in motors])[:, sides] + offsets  # (k, 6) [rad]
+    omega = np.stack([m.omega for m in motors])[:, sides]  # (k, 6) [rad/s]
+    ahead = np.arange(1, n + 1)[:, None] * dt  # (n, 1) [s], as targets makes it
+    q, dq_dphase = robot.leg_angle(phase[None] + ahead[:, :, None] * omega[None])
+    return q, dq_dphase * omega[None]
