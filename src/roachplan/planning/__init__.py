@@ -10,6 +10,9 @@ _getattr, __dir__, __all__ = lazy_exports(
     {
         "HeightField": "._heightfield",
         "heightfield_from_mesh": "._heightfield",
+        "GridCover": "._heightfield",
+        "grid_cover": "._heightfield",
+        "heightfield_from_cover": "._heightfield",
         "IsolationError": "._isolated",
         "run_isolated": "._isolated",
         "PLANNER_NAMES": "._names",
@@ -47,7 +50,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._config import MAX_TIME_LIMIT as MAX_TIME_LIMIT
     from ._config import PlannerConfig as PlannerConfig
     from ._config import ValidityConfig as ValidityConfig
+    from ._heightfield import GridCover as GridCover
     from ._heightfield import HeightField as HeightField
+    from ._heightfield import grid_cover as grid_cover
+    from ._heightfield import heightfield_from_cover as heightfield_from_cover
     from ._heightfield import heightfield_from_mesh as heightfield_from_mesh
     from ._isolated import IsolationError as IsolationError
     from ._isolated import run_isolated as run_isolated

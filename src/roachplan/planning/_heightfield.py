@@ -121,18 +121,89 @@ def heightfield_from_mesh(
     overhead [m]: a surface more than this above the lowest one at a grid point is overhead,
     not ground (a table top over the floor the camera saw under it): the point takes the
     highest surface within overhead of its lowest. None: the highest surface.
+    (grid_cover then heightfield_from_cover: the same, in two halves.)
     """
+    cover = grid_cover(vertices, faces, xy_min=xy_min, xy_max=xy_max, resolution=resolution)
+    return heightfield_from_cover(
+        cover,
+        np.asarray(vertices, dtype=np.float64)[:, 2],
+        ground_height=ground_height,
+        vertex_noise=vertex_noise,
+        overhead=overhead,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class GridCover:
+    """Which grid points each upward-facing triangle of a mesh covers, and where: everything
+    of a rasterising that depends on the mesh's horizontal layout only. The same mesh with its
+    vertices moved up or down (a capture's drawn sensor error) rasterises from it without
+    searching again (heightfield_from_cover), to the same bits as from scratch."""
+
+    x0: float
+    """World x of grid column 0 [m]."""
+    y0: float
+    """World y of grid row 0 [m]."""
+    resolution: float
+    """Grid spacing [m]."""
+    shape: tuple[int, int]
+    """(ny, nx) grid points."""
+    faces: np.ndarray
+    """(F, 3) int: the mesh's faces."""
+    at: np.ndarray
+    """(H,) int: flat grid index (row * nx + column) of each hit."""
+    face: np.ndarray
+    """(H,) int: the face (row of faces) that covers it."""
+    a: np.ndarray
+    """(H,) the hit's barycentric coordinate along the face's edge from corner 0 to 1 [-]."""
+    c: np.ndarray
+    """(H,) the same along the edge from corner 0 to 2 [-]."""
+
+    def at_corners(self, per_vertex: np.ndarray) -> np.ndarray:
+        """(H,) a per-vertex quantity ((V,): height [m], noise [m]) interpolated to the hits."""
+        v = per_vertex[self.faces[self.face]]  # (H, 3)
+        return v[:, 0] + self.a * (v[:, 1] - v[:, 0]) + self.c * (v[:, 2] - v[:, 0])
+
+
+def grid_cover(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    *,
+    xy_min: tuple[float, float],
+    xy_max: tuple[float, float],
+    resolution: float,
+) -> GridCover:
+    """The GridCover of a mesh (vertices (V, 3) world frame [m], only x and y read; faces (F,
+    3) int) on the grid from xy_min to xy_max [m] at resolution [m]."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     nx = int(np.floor((xy_max[0] - xy_min[0]) / resolution)) + 1
     ny = int(np.floor((xy_max[1] - xy_min[1]) / resolution)) + 1
-    noisy = vertex_noise is not None and bool(np.any(np.asarray(vertex_noise) > 0))
-    tri = vertices[faces]  # (F, 3, 3)
-    corner_noise = np.asarray(vertex_noise, dtype=np.float64)[faces] if noisy else None
-    at, z, sigma = _grid_hits(
-        tri, corner_noise, xy0=np.asarray(xy_min, dtype=np.float64), resolution=resolution,
-        shape=(ny, nx),
+    at, face, a, c = _grid_hits(
+        vertices[faces][:, :, :2], xy0=np.asarray(xy_min, dtype=np.float64),
+        resolution=resolution, shape=(ny, nx),
     )  # fmt: skip
+    return GridCover(
+        x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, shape=(ny, nx),
+        faces=faces, at=at, face=face, a=a, c=c,
+    )  # fmt: skip
+
+
+def heightfield_from_cover(
+    cover: GridCover,
+    heights: np.ndarray,
+    *,
+    ground_height: float | None,
+    vertex_noise: np.ndarray | None = None,
+    overhead: float | None = None,
+) -> HeightField:
+    """The top-surface HeightField of cover's mesh with its vertices at heights ((V,) [m]);
+    ground_height, vertex_noise and overhead as heightfield_from_mesh's."""
+    ny, nx = cover.shape
+    at = cover.at
+    z = cover.at_corners(np.asarray(heights, dtype=np.float64))
+    noisy = vertex_noise is not None and bool(np.any(np.asarray(vertex_noise) > 0))
+    sigma = cover.at_corners(np.asarray(vertex_noise, dtype=np.float64)) if noisy else None
     if overhead is not None and len(at):  # keep each point's surfaces within overhead of its lowest
         lowest = np.full(ny * nx, np.inf)
         np.minimum.at(lowest, at, z)
@@ -150,22 +221,21 @@ def heightfield_from_mesh(
         top = np.maximum(top, ground_height)
     top[~np.isfinite(top)] = np.nan
     return HeightField(
-        x0=float(xy_min[0]), y0=float(xy_min[1]), resolution=resolution, heights=top, noise=noise
+        x0=cover.x0, y0=cover.y0, resolution=cover.resolution, heights=top, noise=noise
     )
 
 
 def _grid_hits(
     tri: np.ndarray,
-    corner_noise: np.ndarray | None,
     *,
     xy0: np.ndarray,
     resolution: float,
     shape: tuple[int, int],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """(flat grid indices (H,), heights (H,) [m], noise (H,) [m] or None): every grid point
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(flat grid indices (H,), face (H,), barycentric a and c (H,) each): every grid point
     ((ny, nx) = shape, spacing resolution [m] from xy0 (2,)) an upward-facing triangle of tri
-    ((F, 3, 3) [m]) covers, with the triangle's height there and its corners' noise
-    (corner_noise (F, 3) [m]) interpolated alike."""
+    ((F, 3, 2) its corners' x and y [m]) covers, the triangle's index in tri, and where in
+    it (along its edges from corner 0 to 1 and to 2)."""
     ny, nx = shape
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
@@ -174,20 +244,19 @@ def _grid_hits(
     # vertical faces cover no area from above, tiny ones are sliver noise, and downward faces
     # are undersides (of a closed mesh, or of a surface wound outward/upward as the scene
     # loader leaves every mesh) -- skipping them also skips a closed mesh's large bottom.
-    keep = det > 1e-12
-    tri, det = tri[keep], det[keep]
-    if corner_noise is not None:
-        corner_noise = corner_noise[keep]
-    lo = np.maximum(np.ceil((tri[:, :, :2].min(1) - xy0) / resolution - 1e-9), 0).astype(np.int64)
-    hi = np.minimum(
-        np.floor((tri[:, :, :2].max(1) - xy0) / resolution + 1e-9), (nx - 1, ny - 1)
-    ).astype(np.int64)
+    kept = np.flatnonzero(det > 1e-12)
+    tri, det = tri[kept], det[kept]
+    lo = np.maximum(np.ceil((tri.min(1) - xy0) / resolution - 1e-9), 0).astype(np.int64)
+    hi = np.minimum(np.floor((tri.max(1) - xy0) / resolution + 1e-9), (nx - 1, ny - 1)).astype(
+        np.int64
+    )
     on_grid = np.all(hi >= lo, axis=1)
     # Vectorised over triangles of similar size: each bucket tests a bx x by block of grid
     # points per triangle, bx and by the next powers of two of its triangles' bounding boxes'
     # sides (not a square of the longer: a far floor's triangles are long and thin).
     side = 1 << np.ceil(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.int64)  # (F, 2)
-    ats, zs, sigmas = [np.zeros(0, dtype=np.int64)], [np.zeros(0)], [np.zeros(0)]
+    ats, fs = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    as_, cs = [np.zeros(0)], [np.zeros(0)]
     for bx, by in np.unique(side[on_grid], axis=0):
         idx = np.flatnonzero(on_grid & (side[:, 0] == bx) & (side[:, 1] == by))
         off = np.stack(np.meshgrid(np.arange(bx), np.arange(by)), axis=-1).reshape(-1, 2)
@@ -196,7 +265,7 @@ def _grid_hits(
             sel = idx[k : k + chunk]
             t, d = tri[sel], det[sel]
             cell = lo[sel, None, :] + off[None]  # (n, bx*by, 2) grid indices (i, j)
-            o = t[:, None, 0]  # (n, 1, 3) first corner; e1, e2 the edges from it
+            o = t[:, None, 0]  # (n, 1, 2) first corner; e1, e2 the edges from it
             e1, e2 = (t[:, None, 1] - o), (t[:, None, 2] - o)
             px = xy0[0] + cell[..., 0] * resolution - o[..., 0]
             py = xy0[1] + cell[..., 1] * resolution - o[..., 1]
@@ -206,10 +275,7 @@ def _grid_hits(
             inside = (a >= -eps) & (c >= -eps) & (a + c <= 1 + eps)
             inside &= np.all(cell <= hi[sel, None, :], axis=-1)
             ats.append((cell[..., 1] * nx + cell[..., 0])[inside])
-            zs.append((o[..., 2] + a * e1[..., 2] + c * e2[..., 2])[inside])
-            if corner_noise is not None:
-                n = corner_noise[sel][:, None, :]  # (n, 1, 3)
-                sigmas.append((n[..., 0] + a * (n[..., 1] - n[..., 0])
-                               + c * (n[..., 2] - n[..., 0]))[inside])  # fmt: skip
-    sigma = np.concatenate(sigmas) if corner_noise is not None else None
-    return np.concatenate(ats), np.concatenate(zs), sigma
+            fs.append(np.broadcast_to(kept[sel][:, None], inside.shape)[inside])
+            as_.append(a[inside])
+            cs.append(c[inside])
+    return np.concatenate(ats), np.concatenate(fs), np.concatenate(as_), np.concatenate(cs)

@@ -1,7 +1,7 @@
 """The MuJoCo engine behind the physics seam (sim/_engine.py): the same terrain, ground and roach
 as the PyBullet engine (sim/_pybullet.py), its MJCF model generated from RobotConfig.
 
-The model (`build_spec`):
+The model (`build_world_model`):
   - world: the terrain as a height field (`hfield` geom, below) and, when the world has one,
     the ground as an infinite plane at z = ground_height. Both static, in geom group 0.
   - `body`: a free body, the box of RobotConfig's body (its frame RobotConfig's: x forward,
@@ -48,7 +48,7 @@ import numpy as np
 from mujoco import rollout
 
 from ._config import SimConfig
-from ._motors import SideMotors
+from ._motors import SideMotors, targets_together
 from ._placement import (
     DROP_CLEARANCE,
     ground_height,
@@ -59,7 +59,7 @@ from ._placement import (
 from ._robot import LEG_NAMES, RobotConfig
 
 if TYPE_CHECKING:
-    from roachplan.planning import HeightField
+    from roachplan.planning import GridCover, HeightField
 
 FIELD_RESOLUTION = 0.005
 """Grid spacing of the terrain's height field [m]. MuJoCo joins the grid points into flat
@@ -103,7 +103,7 @@ implicitly, and so lags the Buehler clock's jumps in speed) spent 20 % more ener
 
 BODY_SLOPE_DEG = 30.0
 """Steepest slope [deg] under which the body's box, cut into pieces along its length for the
-height field (build_spec), clears the field's cells: over it a piece's lowest corner is above
+height field (build_world_model), clears the field's cells: over it a piece's lowest corner is above
 every cell under it, and MuJoCo skips those cells without a collision test. (The planner
 stands the robot on slopes up to 25 deg.)"""
 
@@ -171,27 +171,54 @@ def terrain_field(
     max_points: each point the highest surface within OVERHEAD of the lowest there, at least
     the ground's (ground_height [m], None: no plane), NaN where there is none. None when no
     upward face covers a grid point (no faces, or only walls)."""
-    from roachplan.planning import heightfield_from_mesh
+    from roachplan.planning import heightfield_from_cover
 
     if len(faces) == 0:
         return None
-    corners = vertices[faces].reshape(-1, 3)
-    lo, hi = corners[:, :2].min(axis=0), corners[:, :2].max(axis=0)
-    width, depth = hi - lo
-    while (width / resolution + 1) * (depth / resolution + 1) > max_points:
-        resolution *= 1.25
-    field = heightfield_from_mesh(
-        vertices,
-        faces,
-        xy_min=(float(lo[0]), float(lo[1])),
-        xy_max=(float(hi[0]), float(hi[1])),
-        resolution=resolution,
-        ground_height=ground_height,
-        overhead=OVERHEAD,
+    cover = _cached_cover(vertices, faces, resolution, max_points)
+    field = heightfield_from_cover(
+        cover, vertices[:, 2], ground_height=ground_height, overhead=OVERHEAD
     )
     if min(field.heights.shape) < 2 or not np.any(np.isfinite(field.heights)):
         return None
     return field
+
+
+_COVERS: dict[tuple, GridCover] = {}
+_COVERS_KEPT = 2
+
+
+def _cached_cover(
+    vertices: np.ndarray, faces: np.ndarray, resolution: float, max_points: int
+) -> GridCover:
+    """The grid cover (planning's grid_cover) of the terrain's top surface at `resolution`
+    [m] or coarser to keep within max_points, kept for the last _COVERS_KEPT terrains by
+    their horizontal layout: a capture's rollouts each move its vertices up or down by the
+    drawn sensor error, and finding the grid points each triangle covers took most of
+    building their worlds (0.37 of 0.44 s on kinect_bridge); the heights from the cover come
+    to the same bits."""
+    from roachplan.planning import grid_cover
+
+    xy = np.ascontiguousarray(vertices[:, :2])
+    digest = hashlib.blake2b(xy.tobytes(), digest_size=16)
+    digest.update(np.ascontiguousarray(faces).tobytes())
+    key = (digest.hexdigest(), vertices.shape, faces.shape, resolution, max_points)
+    if key not in _COVERS:
+        while len(_COVERS) >= _COVERS_KEPT:
+            _COVERS.pop(next(iter(_COVERS)))
+        corners = xy[faces].reshape(-1, 2)
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        width, depth = hi - lo
+        while (width / resolution + 1) * (depth / resolution + 1) > max_points:
+            resolution *= 1.25
+        _COVERS[key] = grid_cover(
+            vertices,
+            faces,
+            xy_min=(float(lo[0]), float(lo[1])),
+            xy_max=(float(hi[0]), float(hi[1])),
+            resolution=resolution,
+        )
+    return _COVERS[key]
 
 
 _FIELDS: dict[tuple, HeightField | None] = {}
@@ -229,15 +256,15 @@ def field_elevation(heights: np.ndarray, ground_height: float | None) -> tuple[n
     return h - low, low
 
 
-def build_spec(
+def build_world_model(
     robot: RobotConfig,
     cfg: SimConfig,
     *,
     field: HeightField | None = None,
     ground_height: float | None = None,
-) -> tuple[mujoco.MjSpec, float | None]:
-    """(the MJCF model of the world: the terrain's height field (a planning HeightField, or
-    None), a ground plane at ground_height [m] (None: none) and the roach, standing at the
+) -> tuple[mujoco.MjModel, float | None]:
+    """(the compiled model of the world: the terrain's height field (a planning HeightField,
+    or None), a ground plane at ground_height [m] (None: none) and the roach, standing at the
     origin; the height of the field's hole level [m], None without holes)."""
     spec = mujoco.MjSpec()
     spec.modelname = "roach"
@@ -250,18 +277,22 @@ def build_spec(
         "friction": [cfg.friction, 0.005, 0.0001],  # (torsion, rolling: MuJoCo's, unused)
         "solref": [CONTACT_TIMECONST, 1.0],
     }
-    hole_level = _add_terrain(spec, field, ground_height, contact)
+    hole_level, elevation = _add_terrain(spec, field, ground_height, contact)
     _add_robot(spec, robot, contact, on_field=field is not None)
-    return spec, hole_level
+    model = spec.compile()
+    if elevation is not None:
+        model.hfield_data[:] = elevation.ravel()
+    return model, hole_level
 
 
 def _add_terrain(
     spec: mujoco.MjSpec, field: HeightField | None, ground_height: float | None, contact: dict
-) -> float | None:
+) -> tuple[float | None, np.ndarray | None]:
     """Add the field (a planning HeightField, or None) and the ground plane at ground_height
-    [m] (None: none) to spec's world; the field's hole level [m], None without holes."""
+    [m] (None: none) to spec's world; (the field's hole level [m], None without holes; its
+    elevation data ((ny, nx) float32 in [0, 1]) for the compiled model, None without one)."""
     world = spec.worldbody
-    hole_level = None
+    hole_level = data = None
     if field is not None:
         elevation, low = field_elevation(field.heights, ground_height)
         ny, nx = elevation.shape
@@ -275,8 +306,11 @@ def _add_terrain(
             ncol=nx,
             size=[half[0], half[1], max(rise, 1e-6), FIELD_BASE],
         )
-        # MuJoCo scales the elevation to [0, 1] of size[2]; given so, it stays as it is.
-        hfield.userdata = (elevation / rise if rise > 0 else elevation).astype(np.float32).ravel()
+        # MuJoCo scales the elevation to [0, 1] of size[2]; given so, it stays as it is. It
+        # goes into the compiled model (build_world_model): through the spec, numpy's array
+        # became a list first (20 ms of a capture's 55 ms rollout world).
+        data = (elevation / rise if rise > 0 else elevation).astype(np.float32)
+        hfield.userdata = [0.0] * data.size  # (a list of floats: 8 ms where an array took 30)
         world.add_geom(
             name="terrain",
             type=mujoco.mjtGeom.mjGEOM_HFIELD,
@@ -298,7 +332,7 @@ def _add_terrain(
             conaffinity=_PLANE_BIT,
             **contact,
         )
-    return hole_level
+    return hole_level, data
 
 
 def _add_robot(spec: mujoco.MjSpec, robot: RobotConfig, contact: dict, *, on_field: bool):
@@ -392,14 +426,15 @@ class MujocoSimulation:
         self.robot = robot
         self.cfg = cfg
         field = _cached_field(terrain_vertices, terrain_faces, ground_height)
-        spec, self._hole_level = build_spec(robot, cfg, field=field, ground_height=ground_height)
-        self.model: mujoco.MjModel = spec.compile()
+        self.model, self._hole_level = build_world_model(
+            robot, cfg, field=field, ground_height=ground_height
+        )
         self.data: mujoco.MjData = mujoco.MjData(self.model)
         m = self.model
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "terrain")
         self._body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "body")
         self._nominal = (float(m.body_mass[self._body]), m.body_inertia[self._body].copy())
-        self._free = robot.body_mass > 0  # the body has its free joint (build_spec)
+        self._free = robot.body_mass > 0  # the body has its free joint (build_world_model)
         self._legs_q = slice(7, 13) if self._free else slice(0, 6)  # the hips' qpos
         self._legs_dq = slice(6, 12) if self._free else slice(0, 6)  # and qvel
         self._rollout: rollout.Rollout | None = rollout.Rollout(nthread=0)
@@ -593,18 +628,35 @@ class MujocoSimulation:
         q, dq = self._motors.targets(n, self.cfg.timestep)  # (n, 6) each
         return r.motor_kp * q + r.motor_kd * dq
 
-    def advanced(self, n: int, sensors: np.ndarray, *, diverged: bool) -> None:
+    @staticmethod
+    def servo_inputs_together(sims: list[MujocoSimulation], n: int) -> np.ndarray:
+        """(n, k, 6): [:, j] what sims[j].servo_inputs(n) gives, bit for bit, in one pass
+        (rollouts in lockstep, sim/_lockstep.py; one robot description)."""
+        r = sims[0].robot
+        q, dq = targets_together([s._motors for s in sims], n, sims[0].cfg.timestep)
+        return r.motor_kp * q + r.motor_kd * dq
+
+    @staticmethod
+    def metered(sensors: np.ndarray, dt: float) -> np.ndarray:
+        """Each leg's energy over steps of dt [s] from their sensor readings ((..., n,
+        nsensordata), each step's forward pass): (..., 6) [J]. The meter: E += |tau dq/dt| dt
+        per leg (Tong 2018, 3.4), tau the servo's force as applied (after the torque limit),
+        dq/dt the hip's speed as the step began (both are the sensors of the step's forward
+        pass, as PyBullet's meter reads them)."""
+        tau, dq = sensors[..., :6], sensors[..., 6:12]
+        return np.abs(tau * dq).sum(axis=-2) * dt
+
+    def advanced(
+        self, n: int, sensors: np.ndarray, *, diverged: bool, energy: np.ndarray | None = None
+    ) -> None:
         """After n steps with servo_inputs(n): meter them from their sensor readings ((n,
-        nsensordata), each step's forward pass) and move the motors' phase and the clock on.
-        diverged: MuJoCo found the state not finite and reset it meanwhile (it then goes on
-        from its model's pose; the drive reads a body at no finite place, as PyBullet's)."""
+        nsensordata), each step's forward pass; or their energy per leg ((6,) [J], metered
+        for several at once) and move the motors' phase and the clock on. diverged: MuJoCo
+        found the state not finite and reset it meanwhile (it then goes on from its model's
+        pose; the drive reads a body at no finite place, as PyBullet's)."""
         self._diverged = self._diverged or diverged
-        # The meter: E += |tau dq/dt| dt per leg (Tong 2018, 3.4), tau the servo's force as
-        # applied (after the torque limit), dq/dt the hip's speed as the step began (both are
-        # the sensors of the step's forward pass, as PyBullet's meter reads them).
         dt = self.cfg.timestep
-        tau, dq = sensors[:, :6], sensors[:, 6:12]
-        self.energy_per_leg += np.abs(tau * dq).sum(axis=0) * dt
+        self.energy_per_leg += self.metered(sensors, dt) if energy is None else energy
         self._motors.advance(n, dt)
         self.time += n * dt
 
