@@ -3,6 +3,7 @@ robot's live pose, judged by the loop's own safety checks. Real planner, both en
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -67,7 +68,7 @@ def test_on_its_path_the_robot_holds_and_facing_off_the_bridge_edge_it_does_not(
     world, planned = bridge
     world = world.with_sim(*_engine_settings(world, engine))
     smap = SafetyMap.from_world(world)
-    cfg = LookAheadConfig(draws=4, horizon=2.0)
+    cfg = LookAheadConfig(draws=4, horizon=2.0, robot_draws=False)  # (the pose's noise only)
     here = _pose_on_path(planned, 0.3)
     on = look_ahead(
         world, planned.path_xyz, planned.spins, here, cfg,
@@ -89,6 +90,17 @@ def test_on_its_path_the_robot_holds_and_facing_off_the_bridge_edge_it_does_not(
         safety=SafetyConfig(), safety_map=smap, seed=1,
     )  # fmt: skip
     assert again.failures == off.failures  # (one seed, one answer)
+    # The robot drawn from the scene's uncertainty too (friction, mass, motor speeds): on the
+    # path it mostly holds still, and one seed is one answer.
+    drawn = [
+        look_ahead(
+            world, planned.path_xyz, planned.spins, here, dataclasses.replace(cfg, robot_draws=True),
+            safety=SafetyConfig(), safety_map=smap, seed=1,
+        )
+        for _ in range(2)
+    ]  # fmt: skip
+    assert drawn[0] == dataclasses.replace(drawn[1], wall_time=drawn[0].wall_time)
+    assert drawn[0].p_hold >= 0.5, drawn[0]
 
 
 def _engine_settings(world, engine: str):
@@ -155,3 +167,23 @@ def test_what_happened_over_each_horizon_scores_the_predictions():
     assert by_bin[(0.0, 0.5)]["scored"] == 1 and by_bin[(0.0, 0.5)]["observed"] == 0.0
     assert by_bin[(0.8, 0.95)]["scored"] == 1 and by_bin[(0.8, 0.95)]["observed"] == 1.0
     assert math.isnan(look_ahead_reliability([])["brier"])
+
+
+@pytest.mark.slow
+def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
+    """plan_clear_of: a point on the seed's own path (on its bridge) is a place to keep clear
+    of; the plan it gives keeps at least AVOID_RADIUS from it (another seed's plan), and says
+    how far. A point within the radius of the start is not avoided (no path could)."""
+    from roachplan.robot import AVOID_RADIUS, distance_to_path, plan_clear_of
+
+    world, planned = bridge
+    start = world.start
+    spot = tuple(planned.path_xyz[len(planned.path_xyz) // 2, :2])
+    chosen, clearance = plan_clear_of(world, start, 0, [spot])
+    assert chosen.found and chosen.seed != 0
+    xy = np.asarray(chosen.path_xyz)[:, :2]
+    assert clearance == pytest.approx(distance_to_path(spot, xy)) and clearance >= AVOID_RADIUS
+    near_start = [(start[0] + 0.01, start[1])]
+    same, clear = plan_clear_of(world, start, 0, near_start)
+    assert same.seed == 0 and clear == math.inf
+    assert np.array_equal(same.path_xyz, planned.path_xyz)

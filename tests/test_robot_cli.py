@@ -317,8 +317,8 @@ def test_a_robot_commands_bad_flag_loads_nothing_heavy():
 def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tmp_path):
     """--guard: a look-ahead whose rollouts start 30 cm off the path (--look-ahead-noise 0.3,
     beyond the 0.15 m deviation stop: nearly every rollout fails) holds the robot at once; it is
-    re-planned from where it stands and goes on (--go), each leg its own log, until the
-    re-plans run out."""
+    re-planned from where it stands, clear of where those rollouts failed, and goes on (--go),
+    each leg its own log, until the re-plans run out."""
     log = tmp_path / "run.mcap"
     with twin(*MOCAP) as (ready, control):
         proc = robot(
@@ -347,3 +347,7 @@ def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tm
     # ... in the frame the first leg measured (not measured again from a robot mid-way).
     assert second.settings["transform"] == first.settings["transform"]
     assert first.settings["transform_measured"] and not second.settings["transform_measured"]
+    # ... keeping clear of where the rollouts that held it failed (the last look-ahead's).
+    failed = [f[:2] for f in first.lookaheads[-1]["failures"]]
+    assert failed and second.plan["avoid"] == failed
+    assert f"from the {len(failed)} places its rollouts failed" in err

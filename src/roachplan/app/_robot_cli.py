@@ -200,7 +200,9 @@ def _ask_go(loop) -> bool:
 
 def cmd_robot(args: argparse.Namespace) -> int:
     robot_settings(args, None)  # (every flag refused before the scene loads)
-    from roachplan.robot import drive_robot
+    import numpy as np
+
+    from roachplan.robot import distance_to_path, drive_robot
     from roachplan.scenes import build_world, load_scene
 
     from ._scene_cli import scene_inputs
@@ -220,13 +222,20 @@ def cmd_robot(args: argparse.Namespace) -> int:
     for note in world.notes:
         print(f"roachplan: {note}", file=sys.stderr)
 
+    avoid: list[tuple[float, float]] = []  # (a re-plan's: where the rollouts failed)
+
     def ready(loop) -> bool:
         path = loop.path
         length = float(sum(math.dist(a[:2], b[:2]) for a, b in zip(path, path[1:], strict=False)))
         x, y, yaw = _here(loop)
+        clear = ""
+        if avoid:
+            xy = np.asarray(path, dtype=float)[:, :2]
+            keeps = min(distance_to_path(p, xy) for p in avoid)
+            clear = f"; it keeps {keeps:.2f} m from the {len(avoid)} places its rollouts failed"
         print(
             f"roachplan: the robot stands at ({x:.3f}, {y:.3f}) m, {math.degrees(yaw):.0f} deg; "
-            f"planned {len(path)} waypoints, {length:.2f} m to the goal",
+            f"planned {len(path)} waypoints, {length:.2f} m to the goal{clear}",
             file=sys.stderr,
             flush=True,
         )
@@ -253,7 +262,10 @@ def cmd_robot(args: argparse.Namespace) -> int:
                 force=args.force,
             )
         settings = dataclasses.replace(settings, transform=run.transform, log=log)
-        run = drive_robot(world, settings, ready=ready)
+        # Steer clear of where the rollouts that held it failed (the guard's look-ahead: the
+        # last one made); ready() says how far the new path keeps from them.
+        avoid[:] = [(x, y) for x, y, _ in run.lookaheads[-1].failures] if run.lookaheads else []
+        run = drive_robot(world, settings, ready=ready, avoid=avoid)
     r = run.result
     summary = {
         "scene": scene.name,
@@ -270,8 +282,15 @@ def cmd_robot(args: argparse.Namespace) -> int:
         else {k: run.prediction[k] for k in ("outcome", "reason", "drive_time")},
         "log": None if run.log is None else str(run.log),
         "held": [
-            {"detail": h.result.detail, "log": None if h.log is None else str(h.log)} for h in held
+            {
+                "detail": h.result.detail,
+                "log": None if h.log is None else str(h.log),
+                "failures": [list(f) for f in h.lookaheads[-1].failures] if h.lookaheads else [],
+            }
+            for h in held
         ],
+        "plan_seed": run.plan_seed,
+        "clearance": run.clearance,
         "lookaheads": len(run.lookaheads),
         "lowest_p_hold": min((a.p_hold for a in run.lookaheads), default=None),
     }

@@ -71,6 +71,8 @@ _getattr, __dir__, __all__ = lazy_exports(
         "reference_energy": "._trial",
         "run_trial": "._trial",
         "LocalPool": "._workers",
+        "WorldDraw": "._uncertainty",
+        "draw": "._uncertainty",
     },
 )
 if not TYPE_CHECKING:  # (a type checker sees the names imported below instead, and so
@@ -140,4 +142,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._trial import plan_many as plan_many
     from ._trial import reference_energy as reference_energy
     from ._trial import run_trial as run_trial
+    from ._uncertainty import WorldDraw as WorldDraw
+    from ._uncertainty import draw as draw
     from ._workers import LocalPool as LocalPool

@@ -72,6 +72,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotSettings": "._config",
         "RobotRun": "._run",
         "drive_robot": "._run",
+        "plan_clear_of": "._run",
+        "AVOID_RADIUS": "._run",
         "predict": "._run",
         "LookAhead": "._lookahead",
         "LookAheadConfig": "._lookahead",
@@ -163,8 +165,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import RunLog as RunLog
     from ._record import RunRecorder as RunRecorder
     from ._record import read_run as read_run
+    from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import RobotRun as RobotRun
     from ._run import drive_robot as drive_robot
+    from ._run import plan_clear_of as plan_clear_of
     from ._run import predict as predict
     from ._safety import SafetyConfig as SafetyConfig
     from ._safety import SafetyMap as SafetyMap

@@ -14,8 +14,10 @@ going at its end, is a rollout that holds.
 The legs start at `phase`, the (left, right) motor phase [rad] the commands sent give (their
 integral: LookAheadRunner keeps it from the loop's commands, as compare's windows do from a
 log; reset at phase 0, a window's turn was off by 0.24 rad RMS, at the commands' phase by 0.03).
-What it does not model yet: the pose's latency (the pose is taken as now). The world's robot is
-the scene's, so a scene naming a fitted robot file looks ahead with the fit.
+Each rollout's robot is drawn from the scene's uncertainty (friction, body mass, the two motors'
+speeds: experiments.draw, as choose's rollouts; robot_draws), round the scene's robot, so a
+scene naming a fitted robot file looks ahead with the fit. A rollout ends at its first failure.
+What it does not model yet: the pose's latency (the pose is taken as now).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from
 np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop about once a
@@ -60,6 +62,10 @@ class LookAheadConfig:
     """Standard deviation of the pose's position error, each horizontal axis [m]."""
     yaw_sd_deg: float = s(3.0, non_negative("deg"))
     """Standard deviation of the pose's heading error [deg]."""
+    robot_draws: bool = True
+    """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
+    each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
+    scene's robot (its fitted robot file, if it names one) as it is."""
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -136,6 +142,7 @@ def look_ahead(
     """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
     seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
     safety_map."""
+    from roachplan.experiments import draw
     from roachplan.sim import drive_path
 
     t0 = time.perf_counter()
@@ -155,19 +162,30 @@ def look_ahead(
         stopped: list[tuple[float, float, str]] = []
 
         def on_frame(f, stopped=stopped) -> None:
-            if stopped:
-                return
             stop = check_pose(
                 safety, safety_map, path_xy, now=0.0, t_receive=0.0, position_world=f.p_world_body
             )
             if stop is not None:
                 stopped.append((float(f.p_world_body[0]), float(f.p_world_body[1]), stop.reason))
+                raise _Stopped  # (the rollout has failed: no need to walk on)
 
         with ahead.simulation() as sim:  # (a fresh one each: a rollout is its seed's alone)
+            if cfg.robot_draws:
+                w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
+                sim.perturb(
+                    friction=world.scene.sim.friction * w.friction_scale,
+                    mass_scale=w.mass_scale,
+                    motor_gain=w.motor_gain,
+                )
             surface = float(world.heightfield.sample(np.array(start[:2])))
             sim.reset(*start, surface=surface, phase=phase)
-            driven = drive_path(sim, rest, ahead.scene.driver, on_frame=on_frame, spins=rest_spins)
-        if stopped:
+            try:
+                driven = drive_path(
+                    sim, rest, ahead.scene.driver, on_frame=on_frame, spins=rest_spins
+                )
+            except _Stopped:
+                driven = None
+        if driven is None:
             failures.append(stopped[0])
         elif driven.outcome in ("success", "timeout"):
             holds += 1
@@ -182,6 +200,10 @@ def look_ahead(
         failures=tuple(failures),
         wall_time=time.perf_counter() - t0,
     )
+
+
+class _Stopped(Exception):
+    """A look-ahead's rollout met a stop of the loop's safety checks."""
 
 
 def _look_in(world: World, path_xyz, spins, pose, cfg, **settings) -> LookAhead:

@@ -23,7 +23,7 @@ from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner
 from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
-from ._safety import SafetyMap
+from ._safety import SafetyMap, distance_to_path
 from ._transform import FrameTransform, measure_transform, yaw_of
 
 if TYPE_CHECKING:
@@ -43,6 +43,10 @@ class RobotRun:
     prediction: dict | None
     lookaheads: tuple[LookAhead, ...] = ()
     """The look-aheads made while it drove (RobotSettings.look_ahead), in order."""
+    plan_seed: int | None = None
+    """The seed of the plan it drove (None: a plan given)."""
+    clearance: float | None = None
+    """How far its path kept from the points it was to avoid [m] (None: none given)."""
 
 
 def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
@@ -55,6 +59,47 @@ def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
             )
         time.sleep(0.01)
     return sample
+
+
+AVOID_RADIUS = 0.05
+"""How far a re-plan keeps its path from where the look-ahead's rollouts failed [m]: the
+body's half length, about the spread of its feet."""
+AVOID_TRIES = 4
+"""Plans (seeds) a re-plan tries for one that keeps clear of them."""
+
+
+def plan_clear_of(
+    world: World,
+    start: tuple[float, float, float],
+    seed: int,
+    avoid: Sequence[tuple[float, float]] = (),
+    *,
+    radius: float = AVOID_RADIUS,
+    tries: int = AVOID_TRIES,
+) -> tuple[PlanResult, float]:
+    """A plan from start (x, y [m], yaw [rad], world frame) to the scene's goal that keeps
+    `radius` from every point of avoid ((x, y) [m]: where a look-ahead's rollouts failed),
+    and its clearance (the least distance of its path to those points [m]; inf with none):
+    the plans of seeds seed, seed + 1, ... up to `tries`, the first that keeps clear, else
+    the one that keeps clearest (of those found). Points within radius of start are not
+    avoided (no path from there can be). No points to avoid: the plan of seed."""
+    from roachplan.experiments import plan as plan_trial
+
+    points = [p for p in avoid if math.dist(p[:2], start[:2]) >= radius]
+    best: tuple[PlanResult, float] | None = None
+    for k in range(tries if points else 1):
+        planned = plan_trial(world, seed=seed + k, start=start)
+        if not planned.found:
+            best = best or (planned, math.inf)
+            continue
+        xy = np.asarray(planned.path_xyz, dtype=float)[:, :2]
+        clear = min((distance_to_path(p, xy) for p in points), default=math.inf)
+        if best is None or not best[0].found or clear > best[1]:
+            best = (planned, clear)
+        if clear >= radius:
+            break
+    assert best is not None  # (tries >= 1)
+    return best
 
 
 def start_height(world: World, xy) -> float:
@@ -93,6 +138,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     listeners: Sequence[Callable[[LoopEvent], None]] = (),
     on_loop: Callable[[RobotLoop], None] | None = None,
     ready: Callable[[RobotLoop], bool] | None = None,
+    avoid: Sequence[tuple[float, float]] = (),
 ) -> RobotRun:
     """Plan from where the robot stands (or take `plan`), Go, drive until the goal or a stop,
     and record it. source/link: already open ones (default: opened from the settings and
@@ -100,7 +146,9 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     ready(loop): the user's Go - called once the loop runs (sending stop frames: nothing
     moves) with the plan made (loop.path), it returns True to drive, False not to (the run
     then ends as "cancel"); None: go at once. Ctrl-C and SIGTERM stop the robot, while it
-    waits for Go too (when called from the main thread)."""
+    waits for Go too (when called from the main thread). avoid: points (x, y) [m] the plan
+    keeps clear of (plan_clear_of: where a look-ahead's rollouts failed, re-planning after the
+    guard held the robot)."""
     own_source = source is None
     own_link = link is None
     source = source or open_pose_source(settings.source, **settings.source_settings)
@@ -116,11 +164,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         )
         p, q = transform.apply(sample.position, sample.quat)
         here = (p[0], p[1], yaw_of(q))
+        clearance = None
         if plan is None:
-            from roachplan.experiments import plan as plan_trial
-
             seed = scene.seed if settings.seed is None else settings.seed
-            plan = plan_trial(world, seed=seed, start=here)
+            plan, clearance = plan_clear_of(world, here, seed, avoid)
             if not plan.found:
                 raise RobotError(
                     f"no plan from where the robot stands ({here[0]:.3f}, {here[1]:.3f}, "
@@ -142,6 +189,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     "seed": plan.seed,
                     "start": list(here),
                     "goal": list(scene.goal),
+                    # (a re-plan's: where the look-ahead's rollouts failed, and how far its
+                    # path keeps from them [m]; null: none to keep clear of)
+                    "avoid": [list(p[:2]) for p in avoid],
+                    "clearance": None if clearance in (None, math.inf) else clearance,
                 },
             )
         loop = RobotLoop(
@@ -197,6 +248,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             log=log,
             prediction=prediction,
             lookaheads=tuple(watcher.results) if watcher is not None else (),
+            plan_seed=plan.seed,
+            clearance=None
+            if not avoid or clearance is None or clearance == math.inf
+            else clearance,
         )
     finally:
         if recorder is not None:

@@ -1,0 +1,152 @@
+"""Guarded against unguarded runs of the robot loop, side by side in one run: the same twin with
+hidden parameters, the same plans' seeds, through the real command line (`roachplan twin`,
+`roachplan robot --go --json`), 127.0.0.1 only. Unguarded: the loop alone (its safety stops).
+Guarded: `--look-ahead --guard P --replans N`: the look-ahead holds the robot before a predicted
+stop and the command re-plans from where it stands, steering clear of where the rollouts failed.
+
+    .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3]
+        [--friction 0.7] [--motor-mismatch 0.06] [--motor-gain 0.95] [--scene double_bridge_rough]
+
+Prints each run (outcome, legs, drive time, share of control periods late) and, per setting,
+how many reached the goal with a 95 % interval, the falls, and the stops by reason. The goal
+(a hidden-parameter twin where unguarded runs stop or fall at least 1 time in 4): guarded runs
+reach the goal at least 90 % of the time with no fall. A run is a whole crossing: a guarded run
+that was held and re-planned and then reached the goal is a success.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+ROACHPLAN = [sys.executable, "-m", "roachplan"]
+MOCAP = ["--latency", "0.04", "--noise", "0.002"]
+"""The twin's motion capture: 40 ms late, 2 mm of noise (as bench_robot's)."""
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The 95 % Wilson score interval of k successes in n."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def one_run(args, k: int, guarded: bool, tmp: Path) -> dict:
+    """Run k (the twin's noise seed and the plan's seed are k): the robot against a fresh twin;
+    the command's JSON summary, with the wall time."""
+    hidden = [
+        "--friction", str(args.friction),
+        "--motor-mismatch", str(args.motor_mismatch),
+        "--motor-gain", str(args.motor_gain),
+    ]  # fmt: skip
+    twin = subprocess.Popen(
+        [*ROACHPLAN, "twin", "--scene", args.scene, *hidden, *MOCAP, "--seed", str(k)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert twin.stdout is not None
+        ready = json.loads(twin.stdout.readline())
+        flags = ["--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans)]
+        log = tmp / f"{'guarded' if guarded else 'unguarded'}-{k}.mcap"
+        t = time.monotonic()
+        ran = subprocess.run(
+            [
+                *ROACHPLAN,
+                "robot",
+                "--scene",
+                args.scene,
+                "--go",
+                "--json",
+                "--no-predict",
+                "--seed",
+                str(k),
+                "--natnet-port",
+                str(ready["natnet_port"]),
+                "--robot",
+                f"127.0.0.1:{ready['command_port']}",
+                "-o",
+                str(log),
+                *(flags if guarded else []),
+            ],  # fmt: skip
+            capture_output=True,
+            text=True,
+            timeout=600,
+            check=False,
+        )
+        wall = time.monotonic() - t
+    finally:
+        twin.terminate()
+        twin.wait()
+    if not ran.stdout.strip():
+        return {"reason": "error", "detail": ran.stderr.strip()[-300:], "wall": wall}
+    return {**json.loads(ran.stdout), "wall": wall}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("--runs", type=int, default=20, help="runs of each setting")
+    ap.add_argument("--guard", type=float, default=0.5, help="the guard's threshold")
+    ap.add_argument("--replans", type=int, default=3, help="re-plans a guarded run may make")
+    ap.add_argument("--scene", default="double_bridge_rough")
+    ap.add_argument("--friction", type=float, default=0.7, help="hidden: ground friction")
+    ap.add_argument(
+        "--motor-mismatch", type=float, default=0.06, help="hidden: L x (1+d), R x (1-d)"
+    )
+    ap.add_argument("--motor-gain", type=float, default=0.95, help="hidden: both motors x this")
+    args = ap.parse_args()
+    print(
+        f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {args.scene}, twin "
+        f"friction {args.friction}, motor mismatch {args.motor_mismatch}, motor gain "
+        f"{args.motor_gain}; guard {args.guard}, up to {args.replans} re-plans",
+        flush=True,
+    )
+    results: dict[str, list[dict]] = {"unguarded": [], "guarded": []}
+    with TemporaryDirectory() as tmp:
+        for k in range(args.runs):  # (the settings interleaved: the machine's load falls alike)
+            for name, runs in results.items():
+                r = one_run(args, k, name == "guarded", Path(tmp))
+                runs.append(r)
+                late = r.get("late", 0) / max(r.get("periods", 0) or 1, 1)
+                print(
+                    f"{name:9s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
+                    f"drive {r.get('drive_time') or 0:5.1f} s, late {100 * late:4.1f} %, "
+                    f"lowest P(hold) {r.get('lowest_p_hold')}; {r.get('detail', '')[:90]}",
+                    flush=True,
+                )
+    print()
+    for name, runs in results.items():
+        ok = sum(r.get("success", False) for r in runs)
+        lo, hi = wilson(ok, len(runs))
+        reasons = collections.Counter(r["reason"] for r in runs if not r.get("success"))
+        falls = sum(r["reason"] in ("fell", "flipped") for r in runs)
+        held = sum(len(r.get("held", [])) for r in runs)
+        late = sum(r.get("late", 0) for r in runs) / max(sum(r.get("periods", 0) for r in runs), 1)
+        print(
+            f"{name:9s}: reached the goal {ok}/{len(runs)} ({100 * ok / max(len(runs), 1):.0f} %, "
+            f"95 % interval {100 * lo:.0f}-{100 * hi:.0f} %), falls {falls}, held and re-planned "
+            f"{held} times, control periods late {100 * late:.1f} %; stops: "
+            + (", ".join(f"{n} {c}" for c, n in reasons.items()) or "none")
+        )
+    unguarded = results["unguarded"]
+    stopped = sum(not r.get("success") for r in unguarded) / max(len(unguarded), 1)
+    print(
+        f"the setting: unguarded runs stopped or fell {100 * stopped:.0f} % of the time "
+        f"({'at least' if stopped >= 0.25 else 'LESS than'} 1 in 4); goal for guarded: at least "
+        "90 % reached with no fall"
+    )
+
+
+if __name__ == "__main__":
+    main()
