@@ -61,6 +61,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_choose.py
 	$(BIN)/python benchmarks/bench_engines.py
 	$(BIN)/python benchmarks/bench_fidelity.py
+	$(BIN)/python benchmarks/bench_guard.py
 	$(BIN)/python benchmarks/load_test.py
 
 # Five browsers clicking and uploading at once for 2 minutes; needs chromium.

@@ -5,7 +5,8 @@ Guarded: `--look-ahead --guard P --replans N`: the look-ahead holds the robot be
 stop and the command re-plans from where it stands, steering clear of where the rollouts failed.
 
     .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3]
-        [--friction 0.7] [--motor-mismatch 0.06] [--motor-gain 0.95] [--scene double_bridge_rough]
+        [--friction 0.6] [--motor-mismatch 0.12] [--motor-gain 0.95] [--scene double_bridge_rough]
+        [--look-ahead-engine mujoco]
 
 Prints each run (outcome, legs, drive time, share of control periods late) and, per setting,
 how many reached the goal with a 95 % interval, the falls, and the stops by reason. The goal
@@ -58,7 +59,10 @@ def one_run(args, k: int, guarded: bool, tmp: Path) -> dict:
     try:
         assert twin.stdout is not None
         ready = json.loads(twin.stdout.readline())
-        flags = ["--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans)]
+        flags = [
+            "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
+            "--look-ahead-engine", args.look_ahead_engine,
+        ]  # fmt: skip
         log = tmp / f"{'guarded' if guarded else 'unguarded'}-{k}.mcap"
         t = time.monotonic()
         ran = subprocess.run(
@@ -99,6 +103,11 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=20, help="runs of each setting")
     ap.add_argument("--guard", type=float, default=0.5, help="the guard's threshold")
     ap.add_argument("--replans", type=int, default=3, help="re-plans a guarded run may make")
+    ap.add_argument(
+        "--look-ahead-engine",
+        default="mujoco",
+        help="the look-ahead's engine (its lockstep: faster)",
+    )
     ap.add_argument("--scene", default="double_bridge_rough")
     ap.add_argument("--friction", type=float, default=0.7, help="hidden: ground friction")
     ap.add_argument(
@@ -109,7 +118,8 @@ def main() -> None:
     print(
         f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {args.scene}, twin "
         f"friction {args.friction}, motor mismatch {args.motor_mismatch}, motor gain "
-        f"{args.motor_gain}; guard {args.guard}, up to {args.replans} re-plans",
+        f"{args.motor_gain}; guard {args.guard}, up to {args.replans} re-plans, look-ahead in "
+        f"{args.look_ahead_engine}",
         flush=True,
     )
     results: dict[str, list[dict]] = {"unguarded": [], "guarded": []}

@@ -187,3 +187,25 @@ def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
     same, clear = plan_clear_of(world, start, 0, near_start)
     assert same.seed == 0 and clear == math.inf
     assert np.array_equal(same.path_xyz, planned.path_xyz)
+
+
+def test_a_look_ahead_is_drawn_as_the_stretch_it_covered_in_its_risk_colour():
+    """replay's (and the page's) drawing of a look-ahead: from the path's point nearest its
+    start, horizon x RISK_SPEED along the path, green when every rollout held, red when none
+    did; a red square round each failed rollout's end."""
+    from roachplan.app._draw import FAILED, RISK_SPEED, look_ahead_lines, risk_colour
+
+    path = np.array([[0.0, 0.0, 0.1], [0.3, 0.0, 0.1], [0.3, 1.0, 0.1]])
+    ahead = {"start": [0.1, 0.02, 0.0], "horizon": 2.0, "p_hold": 0.25,
+             "failures": [[0.35, 0.2, "deviation"]]}  # fmt: skip
+    (name, stretch, colour), (fname, square, fcolour) = look_ahead_lines(ahead, path)
+    assert name == "" and colour == risk_colour(0.25) and fname == "failed/0" and fcolour == FAILED
+    assert np.allclose(stretch[0], [0.1, 0.0, 0.11]) and np.allclose(stretch[-1], [0.3, 0.2, 0.11])
+    length = np.sum(np.linalg.norm(np.diff(stretch[:, :2], axis=0), axis=1))
+    assert length == pytest.approx(2.0 * RISK_SPEED)
+    assert np.allclose(square.mean(axis=0)[:2], [0.35, 0.2], atol=0.005) and np.ptp(
+        square[:, 0]
+    ) == pytest.approx(0.02)
+    green, yellow, red = risk_colour(1.0), risk_colour(0.5), risk_colour(0.0)
+    assert green[1] > 150 and green[0] == 0 and red[0] > 200 and red[1] == 0
+    assert yellow[0] > 150 and yellow[1] > 150

@@ -135,6 +135,10 @@ def wait_for(stream, text: str, timeout: float) -> str:
         (["robot", "--look-ahead", "--guard", "2"], "--guard 2: expected a number from 0 to 1"),
         (["robot", "--guard", "0.5"], "--guard holds the robot on what the look-ahead says"),
         (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
+        (
+            ["robot", "--look-ahead", "--look-ahead-engine", "ode"],
+            "--look-ahead-engine ode: expected one of pybullet, mujoco",
+        ),
         (["compare", "x.mcap", "--latency", "3"], "--latency 3: expected a number from 0 to 1"),
         (["compare", "missing.mcap"], "run log missing.mcap: cannot read it"),
         (["fit", "a.mcap", "-o", "r.yaml", "--parameters", "foo"], "--parameters foo: expected"),
@@ -249,6 +253,11 @@ def _compare_fit_replay(log, tmp_path) -> None:
     r = roachplan("compare", str(log), "--latency", "0.04")
     assert r.returncode == 0 and "end error: open loop" in r.stdout, r.stderr
     assert "scored against what happened over their horizon" in r.stdout
+    # Over several logs (here the one twice): the look-ahead scored over all of them.
+    r = roachplan("compare", str(log), str(log), "--look-ahead-only", "--json")
+    assert r.returncode == 0, r.stderr
+    pooled = json.loads(r.stdout)
+    assert pooled["logs"] == 2 and pooled["look_ahead"]["scored"] == 2 * c["look_ahead"]["scored"]
     out_file = tmp_path / "roach.yaml"
     r = roachplan(
         "fit", str(log), "-o", str(out_file), "--latency", "0.04", "--evaluations", "4",
@@ -351,3 +360,14 @@ def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tm
     failed = [f[:2] for f in first.lookaheads[-1]["failures"]]
     assert failed and second.plan["avoid"] == failed
     assert f"from the {len(failed)} places its rollouts failed" in err
+    # The legs' look-aheads over both logs: the guard ended each leg, so none is scored.
+    r = roachplan("compare", str(log), str(tmp_path / "run-2.mcap"), "--look-ahead-only")
+    assert r.returncode == 0, r.stderr
+    assert "over 2 of 2 runs" in r.stdout and "0 scored" in r.stdout, r.stdout
+    # replay shows the second leg's look-aheads on its path, and what it was re-planned clear of.
+    page = tmp_path / "leg2.html"
+    r = roachplan("replay", str(tmp_path / "run-2.mcap"), "-o", str(page))
+    assert r.returncode == 0, r.stderr
+    text = page.read_text()
+    assert "the lowest chance of going on 1 s" in text and "red squares" in text
+    assert f"clear of {len(failed)} places its rollouts failed" in text

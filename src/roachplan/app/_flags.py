@@ -156,6 +156,10 @@ FLAGS: dict[str, tuple[str, Callable[[], Check]]] = {
         "--look-ahead-period",
         _of("roachplan.robot", "RobotSettings", "look_ahead_period"),
     ),
+    "look_ahead_engine": (
+        "--look-ahead-engine",
+        _of("roachplan.robot", "LookAheadConfig", "engine"),
+    ),
     "latency": ("--latency", _of("roachplan.robot", "FitConfig", "latency")),
     "evaluations": ("--evaluations", _of("roachplan.robot", "FitConfig", "max_evaluations")),
     "rounds": ("--rounds", _of("roachplan.robot", "FitConfig", "rounds")),

@@ -818,6 +818,13 @@ def _add_robot_parser(sub) -> None:
         help="how often a look-ahead starts [s] (default 1)",
     )
     p.add_argument(
+        "--look-ahead-engine",
+        default=None,
+        metavar="ENGINE",
+        help="the engine its rollouts run in: pybullet or mujoco (default: the scene's; "
+        "mujoco steps them in lockstep, several times as fast)",
+    )
+    p.add_argument(
         "-o",
         "--output",
         default=None,
@@ -851,9 +858,20 @@ def _add_log_parsers(sub) -> None:
 
     p = sub.add_parser(
         "compare",
-        help="how well the simulation predicted a robot run: open loop, closed loop, windows",
+        help="how well the simulation predicted robot runs: open loop, closed loop, windows, "
+        "and the look-ahead's chances against what happened",
     )
-    p.add_argument("log", metavar="LOG.mcap", help="a run log (`roachplan robot -o`)")
+    p.add_argument(
+        "logs",
+        nargs="+",
+        metavar="LOG.mcap",
+        help="run logs (`roachplan robot -o`); with several, the look-ahead is scored over all",
+    )
+    p.add_argument(
+        "--look-ahead-only",
+        action="store_true",
+        help="only score the logs' look-aheads (no simulation of the runs)",
+    )
     p.add_argument(
         "--robot-file",
         default=None,

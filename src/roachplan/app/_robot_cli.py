@@ -149,7 +149,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         if getattr(args, f"robot_{k}") is not None
     }
     loop = LoopConfig(rate=args.robot_rate, safety=SafetyConfig(**safety))
-    names = {"draws": "draws", "horizon": "horizon", "noise": "position_sd"}
+    names = {"draws": "draws", "horizon": "horizon", "noise": "position_sd", "engine": "engine"}
     ahead = {
         field: getattr(args, f"look_ahead_{k}")
         for k, field in names.items()
@@ -355,24 +355,57 @@ def _fit_config(args: argparse.Namespace):
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    from roachplan.robot import look_ahead_reliability, params_of_robot_file, read_run
+
+    logs = [read_run(path) for path in args.logs]  # (every log read before any is simulated)
+    params = params_of_robot_file(args.robot_file) if args.robot_file else None
+    compared = [] if args.look_ahead_only else [_compare_one(log, args, params) for log in logs]
+    with_ahead = [log for log in logs if log.lookaheads]
+    ahead = look_ahead_reliability(with_ahead) if with_ahead else None
+    if args.json:
+        if len(logs) == 1 and compared:  # (one log: its comparison's fields at the top)
+            print(json.dumps({**compared[0], "look_ahead": _json_safe(ahead)}))
+        else:
+            runs = [{"log": str(log.path), **c} for log, c in zip(logs, compared, strict=True)]
+            print(json.dumps({"runs": runs, "logs": len(logs), "look_ahead": _json_safe(ahead)}))
+        return 0
+    if ahead is None:
+        print("look-ahead: none recorded in " + ("this log" if len(logs) == 1 else "these logs"))
+        return 0
+    made = sum(len(log.lookaheads) for log in logs)
+    over = "" if len(logs) == 1 else f" over {len(with_ahead)} of {len(logs)} runs"
+    brier = f"Brier score {ahead['brier']:.3f}" if ahead["scored"] else "no Brier score"
+    print(
+        f"look-ahead{over}: {made} made, {ahead['scored']} scored against what happened over "
+        f"their horizon (a run the guard, Stop or a signal ended scores none), {brier}"
+    )
+    for b in ahead["bins"]:
+        if b["scored"]:
+            few = " (fewer than 20: says little)" if b["scored"] < 20 else ""
+            print(
+                f"  predicted {b['bin'][0]:g}-{b['bin'][1]:g}: {b['scored']} scored, mean "
+                f"predicted {b['predicted']:.2f}, held {b['observed']:.2f}{few}"
+            )
+    return 0
+
+
+def _json_safe(ahead: dict | None) -> dict | None:
+    """The reliability's JSON: a Brier score of nothing scored is null, not NaN."""
+    if ahead is None or ahead["scored"]:
+        return ahead
+    return {**ahead, "brier": None}
+
+
+def _compare_one(log, args: argparse.Namespace, params) -> dict:
+    """compare() of one run log, printed (without --json); its JSON."""
     import numpy as np
 
-    from roachplan.robot import (
-        compare,
-        log_world,
-        look_ahead_reliability,
-        params_of_robot_file,
-        read_run,
-    )
+    from roachplan.robot import compare, log_world
 
-    log = read_run(args.log)
     world = log_world(log, args.scene)
-    params = params_of_robot_file(args.robot_file) if args.robot_file else None
     c = compare(log, world, params=params, latency=args.latency or 0.0)
-    ahead = look_ahead_reliability([log]) if log.lookaheads else None
     if args.json:
-        print(json.dumps({**c.to_json(), "look_ahead": ahead}))
-        return 0
+        return c.to_json()
     p = c.params
     print(
         f"{log.path.name}: scene {world.scene.name}; simulated with friction {p.friction:.3f}, "
@@ -395,21 +428,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
         f"{float(np.sqrt(np.mean(c.windows.position**2))):.3f} m, turn rms "
         f"{math.degrees(float(np.sqrt(np.mean(c.windows.heading**2)))):.1f} deg)\n"
         f"outcome: the robot {c.robot_outcome}, the simulation {c.sim_outcome}: "
-        f"{'they agree' if c.outcome_agrees else 'they DISAGREE'}"
+        f"{'they agree' if c.outcome_agrees else 'they DISAGREE'}\n"
     )
-    if ahead is not None:
-        rows = ", ".join(
-            f"{b['bin'][0]:g}-{b['bin'][1]:g}: {b['scored']} predicted {b['predicted']:.2f}, "
-            f"held {b['observed']:.2f}"
-            for b in ahead["bins"]
-            if b["scored"]
-        )
-        print(
-            f"look-ahead: {len(log.lookaheads)} made, {ahead['scored']} scored against what "
-            f"happened over their horizon, Brier score {ahead['brier']:.3f}"
-            + (f" ({rows})" if rows else "")
-        )
-    return 0
+    return c.to_json()
 
 
 def _every(t, step: float) -> list[int]:

@@ -27,6 +27,7 @@ np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
@@ -38,8 +39,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from roachplan._settings import check_settings, integer, non_negative, positive
+from roachplan._settings import (
+    check_settings,
+    integer,
+    non_negative,
+    one_of,
+    optional,
+    positive,
+)
 from roachplan._settings import setting as s
+from roachplan.sim import ENGINES
 
 from ._safety import SafetyConfig, SafetyMap, check_pose
 from ._transform import yaw_of
@@ -62,6 +71,11 @@ class LookAheadConfig:
     """Standard deviation of the pose's position error, each horizontal axis [m]."""
     yaw_sd_deg: float = s(3.0, non_negative("deg"))
     """Standard deviation of the pose's heading error [deg]."""
+    engine: str | None = s(None, optional(one_of(ENGINES)))
+    """The physics engine its rollouts run in ("pybullet", "mujoco"; None: the scene's). Under
+    MuJoCo a look-ahead's rollouts step together in lockstep (sim/_lockstep.py): about 5 times
+    as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead
+    the scene's engine does not take is less faithful to it (docs: the engines' fidelity)."""
     robot_draws: bool = True
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
@@ -127,6 +141,32 @@ def remaining_path(
     return rest, kept
 
 
+def _drawn_worlds(world: World, ahead: World, cfg: LookAheadConfig, pose, *, seed: int, phase):
+    """A look-ahead's cfg.draws simulations of `ahead` (world under the look-ahead's engine and
+    horizon), each fresh (a rollout is its seed's alone), reset at pose (x, y, yaw) moved by
+    the pose's noise drawn from (seed, k), the legs at phase, its robot drawn from the scene's
+    uncertainty (cfg.robot_draws). A generator: the caller closes each."""
+    from roachplan.experiments import draw
+
+    x0, y0, yaw0 = pose
+    for k in range(cfg.draws):
+        rng = np.random.default_rng((seed, k))
+        dx, dy = rng.normal(0.0, cfg.position_sd, 2)
+        dyaw = math.radians(float(rng.normal(0.0, cfg.yaw_sd_deg)))
+        start = (x0 + float(dx), y0 + float(dy), yaw0 + dyaw)
+        sim = ahead.simulation()
+        if cfg.robot_draws:
+            w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
+            sim.perturb(
+                friction=ahead.scene.sim.friction * w.friction_scale,
+                mass_scale=w.mass_scale,
+                motor_gain=w.motor_gain,
+            )
+        surface = float(world.heightfield.sample(np.array(start[:2])))
+        sim.reset(*start, surface=surface, phase=phase)
+        yield sim
+
+
 def look_ahead(
     world: World,
     path_xyz: np.ndarray,
@@ -142,56 +182,69 @@ def look_ahead(
     """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
     seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
     safety_map."""
-    from roachplan.experiments import draw
-    from roachplan.sim import drive_path
+    from roachplan.scenes import with_engine
+    from roachplan.sim import drive_lockstep, drive_path
 
     t0 = time.perf_counter()
     x0, y0, yaw0 = (float(v) for v in pose)
     rest, rest_spins = remaining_path(path_xyz, spins, (x0, y0))
-    ahead = world.with_sim(
-        world.scene.sim, dataclasses.replace(world.scene.driver, time_limit=cfg.horizon)
-    )
+    scene = world.scene if cfg.engine is None else with_engine(world.scene, cfg.engine)
+    ahead = world.with_sim(scene.sim, dataclasses.replace(scene.driver, time_limit=cfg.horizon))
     path_xy = np.asarray(path_xyz, dtype=float)[:, :2]
+
+    def stop_at(p_world_body) -> tuple[float, float, str] | None:
+        """Where and why the loop's safety checks would stop the robot at this position."""
+        stop = check_pose(
+            safety, safety_map, path_xy, now=0.0, t_receive=0.0, position_world=p_world_body
+        )
+        return (
+            None if stop is None else (float(p_world_body[0]), float(p_world_body[1]), stop.reason)
+        )
+
+    with contextlib.ExitStack() as stack:
+        sims = [
+            stack.enter_context(sim)
+            for sim in _drawn_worlds(world, ahead, cfg, (x0, y0, yaw0), seed=seed, phase=phase)
+        ]
+        if ahead.scene.sim.engine == "mujoco" and len(sims) > 1:
+            # In lockstep; the safety checks then read each trajectory's frames (the frames
+            # drive_path's on_frame sees).
+            driven = drive_lockstep(
+                sims, [rest] * len(sims), ahead.scene.driver, [rest_spins] * len(sims)
+            )
+            stops = [
+                next(filter(None, (stop_at(f[1:]) for f in d.trajectory)), None) for d in driven
+            ]
+        else:
+            driven, stops = [], []
+            for sim in sims:
+                stopped: list[tuple[float, float, str]] = []
+
+                def on_frame(f, stopped=stopped) -> None:
+                    stop = stop_at(f.p_world_body)
+                    if stop is not None:
+                        stopped.append(stop)
+                        raise _Stopped  # (the rollout has failed: no need to walk on)
+
+                try:
+                    driven.append(
+                        drive_path(
+                            sim, rest, ahead.scene.driver, on_frame=on_frame, spins=rest_spins
+                        )
+                    )
+                except _Stopped:
+                    driven.append(None)
+                stops.append(stopped[0] if stopped else None)
     holds = 0
     failures: list[tuple[float, float, str]] = []
-    for k in range(cfg.draws):
-        rng = np.random.default_rng((seed, k))
-        dx, dy = rng.normal(0.0, cfg.position_sd, 2)
-        dyaw = math.radians(float(rng.normal(0.0, cfg.yaw_sd_deg)))
-        start = (x0 + float(dx), y0 + float(dy), yaw0 + dyaw)
-        stopped: list[tuple[float, float, str]] = []
-
-        def on_frame(f, stopped=stopped) -> None:
-            stop = check_pose(
-                safety, safety_map, path_xy, now=0.0, t_receive=0.0, position_world=f.p_world_body
-            )
-            if stop is not None:
-                stopped.append((float(f.p_world_body[0]), float(f.p_world_body[1]), stop.reason))
-                raise _Stopped  # (the rollout has failed: no need to walk on)
-
-        with ahead.simulation() as sim:  # (a fresh one each: a rollout is its seed's alone)
-            if cfg.robot_draws:
-                w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
-                sim.perturb(
-                    friction=world.scene.sim.friction * w.friction_scale,
-                    mass_scale=w.mass_scale,
-                    motor_gain=w.motor_gain,
-                )
-            surface = float(world.heightfield.sample(np.array(start[:2])))
-            sim.reset(*start, surface=surface, phase=phase)
-            try:
-                driven = drive_path(
-                    sim, rest, ahead.scene.driver, on_frame=on_frame, spins=rest_spins
-                )
-            except _Stopped:
-                driven = None
-        if driven is None:
-            failures.append(stopped[0])
-        elif driven.outcome in ("success", "timeout"):
+    for d, stop in zip(driven, stops, strict=True):
+        if stop is not None:
+            failures.append(stop)
+        elif d is not None and d.outcome in ("success", "timeout"):
             holds += 1
-        else:
-            _, x, y, _ = driven.trajectory[-1]
-            failures.append((float(x), float(y), driven.outcome))
+        elif d is not None:
+            _, x, y, _ = d.trajectory[-1]
+            failures.append((float(x), float(y), d.outcome))
     return LookAhead(
         start=(x0, y0, yaw0),
         horizon=cfg.horizon,
