@@ -1,7 +1,7 @@
 """The page's Robot folder in headless Chromium, against a twin this test starts (127.0.0.1
 only): Route from robot plans from where the twin stands and holds it, Go drives it with its
-live pose drawn and its deviation plotted, Stop stops it (zero commands, repeated), and the run
-is logged."""
+live pose drawn, its deviation plotted and the look-ahead's chance shown, Stop stops it (zero
+commands, repeated), and the run is logged."""
 
 from __future__ import annotations
 
@@ -26,6 +26,12 @@ def type_into(page, label: str, value: str) -> None:
     box = row.locator("input").last
     box.fill(value)
     box.press("Enter")
+
+
+def tick(page, label: str) -> None:
+    """Tick the checkbox of the GUI row labelled `label`."""
+    row = page.locator(f"xpath=//label[text()='{label}']/ancestor::div[.//input][1]")
+    row.locator("input[type=checkbox]").first.check()
 
 
 def stopped_run(app, commands: list[list], state: dict, t_stop: float):
@@ -60,6 +66,7 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
             with browser_pages(f"http://127.0.0.1:{app.port}") as (page,):
                 type_into(page, "Source address", f"127.0.0.1:{ready['natnet_port']}")
                 type_into(page, "Sink address", f"127.0.0.1:{ready['command_port']}")
+                tick(page, "Look ahead")
                 page.get_by_role("button", name="Route from robot").click()
                 page.get_by_text(re.compile(r"The robot is held: press")).first.wait_for(
                     timeout=120_000
@@ -77,6 +84,11 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
                 )
                 time.sleep(4.0)
                 moved = tuple(node.position)
+                # The look-ahead beside the loop: its chance in the report, the path ahead
+                # drawn in its colour.
+                page.get_by_text(re.compile(r"look-ahead: \d\.\d\d chance")).first.wait_for(
+                    timeout=30_000
+                )
                 page.screenshot(path=artifacts / "robot-02-driving.png")
                 assert page.get_by_text(re.compile(r"deviation \d+\.\d cm")).count() >= 1
                 t_stop = time.monotonic()
@@ -96,3 +108,4 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
     print(f"page open: {late} of {periods} control periods late ({100 * late / periods:.1f} %)")
     assert periods > 100 and late < 0.5 * periods  # (the 10 % goal: benchmarks/bench_robot.py)
     assert run.prediction is not None and len(run.poses["t_receive"]) > 100
+    assert run.lookaheads and all(0.0 <= a["p_hold"] <= 1.0 for a in run.lookaheads)

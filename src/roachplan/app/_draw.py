@@ -15,6 +15,11 @@ BLACK, BLUE = (0, 0, 0), (30, 90, 255)
 LIVE = (0, 170, 90)
 """Where the real robot went (its live poses): green, beside the plan (black) and the
 simulation's prediction (blue)."""
+RISK_SPEED = 0.2
+"""The roach's walking speed on flat ground [m/s] (a 10 s straight floor walk: 2.05 m): how far
+along the path a look-ahead's horizon is drawn to reach."""
+FAILED = (200, 0, 0)
+"""Where a look-ahead's rollout failed: a small red square."""
 MARKER_COLOURS = {"start": (30, 160, 60), "goal": (40, 80, 220)}
 INVALID = (220, 30, 30)
 TERRAIN_COLOUR = (196, 164, 120)
@@ -377,3 +382,39 @@ def projected_pixels(length: float, distance: float, fov: float, image_height: i
     """How many pixels a thing of this length [m] spans, face on, at distance [m] from a camera
     with vertical field of view fov [rad] over image_height [px]."""
     return length * image_height / (2 * distance * math.tan(fov / 2))
+
+
+_SQUARE = ((-0.01, -0.01), (0.01, -0.01), (0.01, 0.01), (-0.01, 0.01), (-0.01, -0.01))
+"""A closed square 2 cm across round the origin [m]."""
+
+
+def risk_colour(p_hold: float) -> tuple[int, int, int]:
+    """A look-ahead's chance of holding [0, 1] as a colour: green at 1, yellow at 0.5, red at 0."""
+    p = min(max(float(p_hold), 0.0), 1.0)
+    return (round(230 * min(1.0, 2 * (1 - p))), round(190 * min(1.0, 2 * p)), 0)
+
+
+def look_ahead_lines(lookahead: dict, path_xyz) -> list[tuple[str, np.ndarray, tuple]]:
+    """What to draw of one look-ahead (its /lookahead record: start, horizon, p_hold, failures)
+    on the plan path_xyz ((N, 3) world frame [m]): ("", the stretch of the path it looked over,
+    from the point nearest its start, horizon x RISK_SPEED along, 1 cm up (M, 3) [m], its
+    risk_colour), and ("failed/j", a square 2 cm across round rollout j's end, at the path's
+    height nearby, FAILED) per failed rollout. Names are suffixes for the caller's node."""
+    from roachplan.robot import remaining_path
+
+    path = np.asarray(path_xyz, dtype=float)
+    rest, _ = remaining_path(path, (), lookahead["start"][:2])
+    steps = np.linalg.norm(np.diff(rest[:, :2], axis=0), axis=1)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    reach = float(lookahead["horizon"]) * RISK_SPEED
+    n = int(np.searchsorted(along, reach, side="right"))
+    stretch = rest[:n]
+    if n < len(rest) and steps[n - 1] > 0:  # (the last piece cut at the reach)
+        u = (reach - along[n - 1]) / steps[n - 1]
+        stretch = np.vstack([stretch, rest[n - 1] + u * (rest[n] - rest[n - 1])])
+    out = [("", stretch + [0.0, 0.0, 0.01], risk_colour(lookahead["p_hold"]))]
+    for j, (x, y, *_) in enumerate(lookahead["failures"]):
+        z = float(path[np.argmin(np.sum((path[:, :2] - (x, y)) ** 2, axis=1)), 2]) + 0.01
+        square = np.array([(x + dx, y + dy, z) for dx, dy in _SQUARE])
+        out.append((f"failed/{j}", square, FAILED))
+    return out

@@ -39,6 +39,7 @@ from ._draw import (
     LIVE,
     MARKER_COLOURS,
     SceneView,
+    look_ahead_lines,
     on_surface,
     wxyz_from_xyzw,
     yaw_wxyz,
@@ -456,6 +457,37 @@ def is_run_log(path: Path) -> bool:
     return path.name.endswith((".mcap", ".mcap.partial")) and not path.is_dir()
 
 
+def _look_ahead_shown(log, path) -> tuple[list, list]:
+    """(lines, rows) of a run log's look-aheads on its plan `path` ((N, 3) [m]; empty: none
+    drawn): each one's stretch of the path ahead in its risk colour and its rollouts' failures
+    (look_ahead_lines), the lowest chance seen, and a re-plan's places kept clear of."""
+    lines, rows = [], []
+    if log.lookaheads and len(path):
+        for k, ahead in enumerate(log.lookaheads):
+            for suffix, points, colour in look_ahead_lines(ahead, path):
+                name = f"/lookahead/{k}" + (f"/{suffix}" if suffix else "")
+                lines.append((name, tuple(map(tuple, points.tolist())), colour))
+        low = min(log.lookaheads, key=lambda a: a["p_hold"])
+        rows.append(
+            (
+                "look-ahead",
+                f"{len(log.lookaheads)} made; the lowest chance of going on {low['horizon']:g} s "
+                f"{low['p_hold']:.2f}, from ({low['start'][0]:.2f}, {low['start'][1]:.2f})",
+            )
+        )
+    plan = log.plan or {}
+    if plan.get("avoid"):
+        clear = plan.get("clearance")
+        rows.append(
+            (
+                "re-planned",
+                f"clear of {len(plan['avoid'])} places its rollouts failed"
+                + ("" if clear is None else f": its path keeps {clear:.2f} m"),
+            )
+        )
+    return lines, rows
+
+
 def run_replay(path: Path, *, scene: str | None = None) -> Replay:
     """A robot run as a replay: the plan (black), the simulation's prediction from the robot's
     start (blue) and where the robot went (green), the robot walking its logged poses (legs
@@ -532,6 +564,10 @@ def run_replay(path: Path, *, scene: str | None = None) -> Replay:
             rows.append(
                 ("robot's end to predicted", f"{float(np.linalg.norm(p[-1, :2] - end)):.3f} m")
             )
+    lines = [("/live/track", tuple(map(tuple, p.tolist())), LIVE)] if len(p) >= 2 else []
+    look_lines, look_rows = _look_ahead_shown(log, record["path"])
+    lines += look_lines
+    rows += look_rows
     note = "" if frames else "no pose of the robot was logged between Go and the stop"
     return Replay(
         title=f"{world.scene.name}: robot run {path.name}",
@@ -541,8 +577,14 @@ def run_replay(path: Path, *, scene: str | None = None) -> Replay:
         frames=tuple(frames),
         note=note,
         rows=tuple(rows),
-        lines=(("/live/track", tuple(map(tuple, p.tolist())), LIVE),) if len(p) >= 2 else (),
-        legend="planned path black, the simulation's prediction blue, the robot green",
+        lines=tuple(lines),
+        legend="planned path black, the simulation's prediction blue, the robot green"
+        + (
+            "; the look-ahead's chance along the path ahead, green (holds) to red, and where "
+            "its rollouts failed, red squares"
+            if log.lookaheads
+            else ""
+        ),
     )
 
 

@@ -55,6 +55,10 @@ class RobotForm:
     link_settings: dict[str, Any]
     transform: FrameTransform | None
     """None: measured from the first pose, the robot placed at the start marker."""
+    look_ahead: bool = False
+    """Look ahead of the robot while it drives (robot.watch_ahead)."""
+    guard: float | None = None
+    """Hold the robot when a look-ahead's chance falls under this [0, 1] (None: never)."""
 
 
 class RobotPanel:
@@ -90,6 +94,22 @@ class RobotPanel:
                 hint=f"T_world_mocap as x,y,z,yaw_deg, or '{MEASURE}' (the robot placed at "
                 f"the start marker)",
             )
+            self.look_ahead = gui.add_checkbox(
+                "Look ahead",
+                False,
+                hint="While it drives, about once a second simulate short rollouts of the rest "
+                "of the plan from its live pose: the chance it goes on 3 s without a stop or a "
+                "fall, drawn on the path ahead (green to red)",
+            )
+            self.guard = gui.add_number(
+                "Guard",
+                0.0,
+                min=0.0,
+                max=1.0,
+                step=0.05,
+                hint="With Look ahead: hold the robot when the chance falls under this (0: "
+                "never); Route from robot then re-plans from where it stands",
+            )
             self.plan_button = gui.add_button(
                 "Route from robot", hint="Plan from where the robot stands; it is held until Go"
             )
@@ -116,7 +136,8 @@ class RobotPanel:
         """The settings as typed, checked by the robot's validators; RobotError naming the box
         and what it accepts."""
         from roachplan import SettingError
-        from roachplan.robot import FrameTransform, NatNetSettings, RobotError
+        from roachplan._settings import setting_problem
+        from roachplan.robot import FrameTransform, NatNetSettings, RobotError, RobotSettings
         from roachplan.robot._checks import parse_address
 
         def address(box, name: str) -> tuple[str, int]:
@@ -161,12 +182,18 @@ class RobotPanel:
                     f"Frame transform {text!r}: expected x,y,z,yaw_deg (4 finite numbers) or "
                     f"'{MEASURE}'"
                 ) from None
+        guard = float(self.guard.value) if self.look_ahead.value else 0.0
+        why = setting_problem(RobotSettings, "guard", guard)
+        if why is not None:
+            raise RobotError(f"Guard {self.guard.value!r}: {why}")
         return RobotForm(
             source=source,
             source_settings=source_settings,
             link=link,
             link_settings=link_settings,
             transform=transform,
+            look_ahead=bool(self.look_ahead.value),
+            guard=guard if guard > 0 else None,
         )
 
     def show_transform(self, transform: FrameTransform) -> None:
@@ -179,6 +206,17 @@ class RobotPanel:
     def plot(self, t: np.ndarray, deviation_m: np.ndarray) -> None:
         self.deviation.data = (np.asarray(t, dtype=float), 100.0 * np.asarray(deviation_m))
         self.deviation.visible = True
+
+
+@dataclass(frozen=True)
+class LookAheadShown:
+    """A look-ahead's result for the page (the runner's thread puts it on the session's
+    queue; the command loop draws it)."""
+
+    t: float
+    """When it looked ahead [s, monotonic]."""
+    ahead: Any
+    """The LookAhead."""
 
 
 @dataclass(eq=False)
@@ -194,12 +232,19 @@ class RobotSession:
     recorder: RunRecorder | None
     log: Path
     events: queue.Queue = field(default_factory=queue.Queue)
-    """What the loop tells (its listener puts every event here)."""
+    """What the loop tells (its listener puts every event here), and the look-ahead's results
+    (LookAheadShown)."""
     went: bool = False
+    watcher: Any = None
+    """The look-ahead beside the loop (robot.watch_ahead; started at Go), or None."""
 
     def close(self) -> None:
-        """Stop the robot (if it moves), end the loop, close the log, the link and the source."""
+        """Stop the robot (if it moves), end the loop and the look-ahead, close the log, the
+        link and the source."""
         self.loop.close()
+        if self.watcher is not None:
+            self.watcher.close()
+            self.watcher = None
         if self.recorder is not None:
             self.recorder.close()
             self.recorder = None
@@ -259,6 +304,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
     panel = app.page.robot_panel
     form = panel.form()
     _close_session(app)  # (a robot still held or driven stops first)
+    app.page.view.remove("/lookahead")  # (the last run's look-ahead)
     start, goal = app.page.markers.valid_poses(app.world)
     app.page.set_status("Robot: connecting to the pose source ...")
     source = open_pose_source(form.source, **form.source_settings)
@@ -299,6 +345,23 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         # a thread waiting for it waits up to the switch interval (5 ms by default, a quarter
         # of a control period); 1 ms keeps its periods on time while the page is drawn.
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.001))
+        watcher = None
+        if form.look_ahead:
+            from roachplan.robot import LookAheadConfig, RobotSettings, watch_ahead
+
+            watcher = watch_ahead(
+                app.world,
+                path,
+                tuple(plan.spins),
+                loop,
+                cfg=LookAheadConfig(),
+                guard=form.guard,
+                period=RobotSettings().look_ahead_period,
+                seed=plan.seed,
+                safety=loop.cfg.safety,
+                recorder=recorder,
+                also=lambda t, ahead: events.put(LookAheadShown(t, ahead)),
+            )
         loop.start()  # (held: stop frames until Go)
     except BaseException:
         link.close()
@@ -314,6 +377,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         recorder=recorder,
         log=log,
         events=events,
+        watcher=watcher,
     )
     said = (
         f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
@@ -451,6 +515,8 @@ class _Live:
         self.result = None
         self.t0 = time.monotonic()
         self.shown = self.drawn = 0.0
+        self.ahead = None
+        """The newest look-ahead (a LookAhead), or None."""
 
     def step(self, events: list) -> bool:
         """Take the loop's events in; redraw at most 15 (the robot) and 2 (the rest) times a
@@ -474,6 +540,9 @@ class _Live:
                 self.last_command = ev
             elif isinstance(ev, FinishedEvent):
                 self.result = ev.result
+            elif isinstance(ev, LookAheadShown):
+                self.ahead = ev.ahead
+                self.show_ahead(ev.ahead)
         now = time.monotonic()
         if latest is not None and now - self.shown > 1 / 15:
             self.shown = now
@@ -486,13 +555,30 @@ class _Live:
             from ._draw import path_fraction
 
             done = path_fraction(self.path_xy, self.track[-1])
+            ahead = (
+                ""
+                if self.ahead is None
+                else f"; look-ahead: {self.ahead.p_hold:.2f} chance of going on "
+                f"{self.ahead.horizon:g} s"
+            )
             text = (
                 f"Robot: {100 * done:.0f} % of the path, {now - self.t0:.1f} s; deviation "
                 f"{100 * self.deviation[-1]:.1f} cm (max {100 * max(self.deviation):.1f} cm)"
+                f"{ahead}"
             )
             self.app.page.robot_panel.report.content = text
             self.app.loop.progress(done, text)
         return self.result is not None
+
+    def show_ahead(self, ahead) -> None:
+        """The newest look-ahead on the path ahead (its risk colour, its failures: red
+        squares), in place of the one before."""
+        from ._draw import look_ahead_lines
+
+        view = self.app.page.view
+        view.remove("/lookahead")
+        for suffix, points, colour in look_ahead_lines(ahead.to_json(), self.session.path):
+            view.draw("/lookahead" + (f"/{suffix}" if suffix else "/ahead"), points, colour)
 
     def draw(self) -> None:
         from ._draw import LIVE
@@ -518,6 +604,8 @@ def do_robot_go(app: App, cmd: RobotGoCmd) -> None:
     panel.go_button.disabled = True
     live = _Live(app, session)
     session.loop.go()
+    if session.watcher is not None:  # (looks ahead of a robot that drives)
+        session.watcher.start()
     try:
         app.loop.follow(_Followed(session), "Robot", live.step)
     except BaseException as exc:  # (the page failed to follow: the robot stops)

@@ -73,6 +73,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotRun": "._run",
         "drive_robot": "._run",
         "plan_clear_of": "._run",
+        "watch_ahead": "._run",
         "AVOID_RADIUS": "._run",
         "predict": "._run",
         "LookAhead": "._lookahead",
@@ -170,6 +171,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import drive_robot as drive_robot
     from ._run import plan_clear_of as plan_clear_of
     from ._run import predict as predict
+    from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig
     from ._safety import SafetyMap as SafetyMap
     from ._safety import Stop as Stop

@@ -209,8 +209,18 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             listeners=listeners,
         )
         if settings.look_ahead is not None or settings.guard is not None:
-            watcher = _look_ahead_runner(world, settings, path, spins, recorder=recorder, loop=loop)
-            loop.listeners.append(watcher.listen)
+            watcher = watch_ahead(
+                world,
+                path,
+                spins,
+                loop,
+                cfg=settings.look_ahead or LookAheadConfig(),
+                guard=settings.guard,
+                period=settings.look_ahead_period,
+                seed=scene.seed if settings.seed is None else settings.seed,
+                safety=settings.loop.safety,
+                recorder=recorder,
+            )
         restore = _stop_on_signals(loop)
         try:
             loop.start()
@@ -262,16 +272,29 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             source.close()
 
 
-def _look_ahead_runner(
-    world, settings: RobotSettings, path, spins, *, recorder, loop: RobotLoop
+def watch_ahead(
+    world: World,
+    path,
+    spins,
+    loop: RobotLoop,
+    *,
+    cfg: LookAheadConfig,
+    guard: float | None,
+    period: float,
+    seed: int,
+    safety,
+    recorder: RunRecorder | None,
+    also: Callable[[float, LookAhead], None] | None = None,
 ) -> LookAheadRunner:
-    """The look-ahead beside this drive's loop, each result recorded on /lookahead; under
-    settings.guard, the robot held (the loop stopped: "lookahead")."""
+    """A LookAheadRunner beside `loop` (its listener added; the caller starts it at Go and
+    closes it), each result recorded on /lookahead (recorder: None, none) and given to also(t,
+    result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
+    "lookahead", the chance and the rollouts' ends in its detail. The command line's robot
+    (drive_robot) and the page's Robot folder both look ahead through it."""
 
     def record(t: float, ahead: LookAhead) -> None:
         if recorder is not None:
             recorder.write("/lookahead", t, {"t": t, **ahead.to_json()})
-        guard = settings.guard
         if guard is not None and ahead.p_hold < guard and not loop.stopping:
             whys = sorted({why for *_, why in ahead.failures})
             x, y, _ = ahead.start
@@ -281,18 +304,22 @@ def _look_ahead_runner(
                 f"going on {ahead.horizon:g} s without a stop or a fall (guard {guard:g}; its "
                 f"rollouts ended: {', '.join(whys)})",
             )
+        if also is not None:
+            also(t, ahead)
 
-    return LookAheadRunner(
+    runner = LookAheadRunner(
         world,
         path,
         spins,
-        settings.look_ahead or LookAheadConfig(),
-        safety=settings.loop.safety,
+        cfg,
+        safety=safety,
         safety_map=SafetyMap.from_world(world),
-        period=settings.look_ahead_period,
-        seed=world.scene.seed if settings.seed is None else settings.seed,
+        period=period,
+        seed=seed,
         on_result=record,
     )
+    loop.listeners.append(runner.listen)
+    return runner
 
 
 def _scene_file(scene) -> Path | None:
