@@ -5,7 +5,7 @@ Guarded: `--look-ahead --guard P --replans N`: the look-ahead holds the robot be
 stop and the command re-plans from where it stands, steering clear of where the rollouts failed.
 
     .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3]
-        [--friction 0.6] [--motor-mismatch 0.12] [--motor-gain 0.95] [--scene double_bridge_rough]
+        [--friction 0.7] [--motor-mismatch 0.06] [--motor-gain 0.95] [--scene double_bridge_rough]
         [--look-ahead-engine mujoco]
 
 Prints each run (outcome, legs, drive time, share of control periods late) and, per setting,
