@@ -4,9 +4,13 @@ hidden parameters, the same plans' seeds, through the real command line (`roachp
 Guarded: `--look-ahead --guard P --replans N`: the look-ahead holds the robot before a predicted
 stop and the command re-plans from where it stands, steering clear of where the rollouts failed.
 
-    .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3]
+    .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3] [--fitted]
         [--friction 0.7] [--motor-mismatch 0.06] [--motor-gain 0.95] [--scene double_bridge_rough]
         [--look-ahead-engine mujoco]
+
+--fitted adds a third setting, guarded+fit: guarded runs whose scene names a robot file with the
+twin's hidden parameters (what `roachplan fit` recovers at best), so that the look-ahead
+simulates the robot it drives rather than one drawn round the nominal robot.
 
 Prints each run (outcome, legs, drive time, share of control periods late) and, per setting,
 how many reached the goal with a 95 % interval, the falls, and the stops by reason. The goal
@@ -43,9 +47,38 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def one_run(args, k: int, guarded: bool, tmp: Path) -> dict:
-    """Run k (the twin's noise seed and the plan's seed are k): the robot against a fresh twin;
-    the command's JSON summary, with the wall time."""
+def fitted_scene(args, tmp: Path) -> Path:
+    """A copy of the scene (in tmp) that names a robot file holding the twin's hidden
+    parameters: the best `roachplan fit` could recover from runs, so that the look-ahead
+    simulates the robot it is driving. Files the scene names are made absolute."""
+    import yaml
+
+    from roachplan.robot import SimParams
+    from roachplan.scenes import load_scene, write_robot_file
+
+    scene = load_scene(args.scene)
+    folder = Path(scene.path).parent
+    data = yaml.safe_load(Path(scene.path).read_text())
+    for item in data["terrain"]:
+        for key, value in item.items():
+            if isinstance(value, str) and (folder / value).is_file():
+                item[key] = str(folder / value)
+    robot_file = tmp / "hidden_roach.yaml"
+    hidden = SimParams(
+        friction=args.friction, motor_gain=args.motor_gain, motor_mismatch=args.motor_mismatch
+    )
+    write_robot_file(robot_file, hidden.robot_file())
+    data["robot"]["file"] = str(robot_file)
+    out = tmp / f"{scene.name}_fitted.yaml"
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
+def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
+    """Run k (the twin's noise seed and the plan's seed are k) of a setting ("unguarded", or
+    guarded: "guarded", "guarded+fit"): the robot, on `scene`, against a fresh twin of
+    args.scene with the hidden parameters; the command's JSON summary, with the wall time."""
+    guarded = setting != "unguarded"
     hidden = [
         "--friction", str(args.friction),
         "--motor-mismatch", str(args.motor_mismatch),
@@ -63,14 +96,14 @@ def one_run(args, k: int, guarded: bool, tmp: Path) -> dict:
             "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
             "--look-ahead-engine", args.look_ahead_engine,
         ]  # fmt: skip
-        log = tmp / f"{'guarded' if guarded else 'unguarded'}-{k}.mcap"
+        log = tmp / f"{setting}-{k}.mcap"
         t = time.monotonic()
         ran = subprocess.run(
             [
                 *ROACHPLAN,
                 "robot",
                 "--scene",
-                args.scene,
+                scene,
                 "--go",
                 "--json",
                 "--no-predict",
@@ -109,6 +142,12 @@ def main() -> None:
         help="the look-ahead's engine (its lockstep: faster)",
     )
     ap.add_argument("--scene", default="double_bridge_rough")
+    ap.add_argument(
+        "--fitted",
+        action="store_true",
+        help="also guarded runs whose scene names a robot file with the twin's hidden "
+        "parameters (the best a fit could give): the look-ahead then simulates that robot",
+    )
     ap.add_argument("--friction", type=float, default=0.7, help="hidden: ground friction")
     ap.add_argument(
         "--motor-mismatch", type=float, default=0.06, help="hidden: L x (1+d), R x (1-d)"
@@ -122,15 +161,19 @@ def main() -> None:
         f"{args.look_ahead_engine}",
         flush=True,
     )
-    results: dict[str, list[dict]] = {"unguarded": [], "guarded": []}
+    names = ("unguarded", "guarded", "guarded+fit") if args.fitted else ("unguarded", "guarded")
+    results: dict[str, list[dict]] = {name: [] for name in names}
     with TemporaryDirectory() as tmp:
+        scenes = {name: args.scene for name in names}
+        if args.fitted:
+            scenes["guarded+fit"] = str(fitted_scene(args, Path(tmp)))
         for k in range(args.runs):  # (the settings interleaved: the machine's load falls alike)
             for name, runs in results.items():
-                r = one_run(args, k, name == "guarded", Path(tmp))
+                r = one_run(args, k, name, Path(tmp), scenes[name])
                 runs.append(r)
                 late = r.get("late", 0) / max(r.get("periods", 0) or 1, 1)
                 print(
-                    f"{name:9s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
+                    f"{name:11s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
                     f"drive {r.get('drive_time') or 0:5.1f} s, late {100 * late:4.1f} %, "
                     f"lowest P(hold) {r.get('lowest_p_hold')}; {r.get('detail', '')[:90]}",
                     flush=True,
@@ -144,7 +187,7 @@ def main() -> None:
         held = sum(len(r.get("held", [])) for r in runs)
         late = sum(r.get("late", 0) for r in runs) / max(sum(r.get("periods", 0) for r in runs), 1)
         print(
-            f"{name:9s}: reached the goal {ok}/{len(runs)} ({100 * ok / max(len(runs), 1):.0f} %, "
+            f"{name:11s}: reached the goal {ok}/{len(runs)} ({100 * ok / max(len(runs), 1):.0f} %, "
             f"95 % interval {100 * lo:.0f}-{100 * hi:.0f} %), falls {falls}, held and re-planned "
             f"{held} times, control periods late {100 * late:.1f} %; stops: "
             + (", ".join(f"{n} {c}" for c, n in reasons.items()) or "none")
