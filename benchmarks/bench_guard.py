@@ -131,6 +131,16 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     return {**json.loads(ran.stdout), "wall": wall}
 
 
+def calibration(tmp: Path, setting: str) -> dict | None:
+    """The look-aheads of a setting's logs (every leg's) scored against what happened
+    (robot.look_ahead_reliability), or None without any."""
+    from roachplan.robot import look_ahead_reliability, read_run
+
+    logs = [read_run(p) for p in sorted(tmp.glob(f"{setting}-*.mcap"))]
+    logs = [log for log in logs if log.lookaheads]
+    return look_ahead_reliability(logs) if logs else None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=20, help="runs of each setting")
@@ -178,6 +188,7 @@ def main() -> None:
                     f"lowest P(hold) {r.get('lowest_p_hold')}; {r.get('detail', '')[:90]}",
                     flush=True,
                 )
+        reliability = {name: calibration(Path(tmp), name) for name in names if name != "unguarded"}
     print()
     for name, runs in results.items():
         ok = sum(r.get("success", False) for r in runs)
@@ -192,6 +203,18 @@ def main() -> None:
             f"{held} times, control periods late {100 * late:.1f} %; stops: "
             + (", ".join(f"{n} {c}" for c, n in reasons.items()) or "none")
         )
+    for name, ahead in reliability.items():
+        if ahead is None or not ahead["scored"]:
+            print(f"{name}: no look-ahead could be scored")
+            continue
+        bins = "; ".join(
+            f"{b['bin'][0]:g}-{b['bin'][1]:g}: {b['scored']} scored, predicted "
+            f"{b['predicted']:.2f}, held {b['observed']:.2f}"
+            + (" (goal: within 0.10)" if b["scored"] >= 20 else " (under 20: says little)")
+            for b in ahead["bins"]
+            if b["scored"]
+        )
+        print(f"{name} look-aheads: {ahead['scored']} scored, Brier {ahead['brier']:.3f}; {bins}")
     unguarded = results["unguarded"]
     stopped = sum(not r.get("success") for r in unguarded) / max(len(unguarded), 1)
     print(
