@@ -153,6 +153,9 @@ def main() -> None:
     )
     ap.add_argument("--scene", default="double_bridge_rough")
     ap.add_argument(
+        "--keep", default=None, metavar="DIR", help="keep the runs' logs in DIR (default: none)"
+    )
+    ap.add_argument(
         "--fitted",
         action="store_true",
         help="also guarded runs whose scene names a robot file with the twin's hidden "
@@ -173,7 +176,9 @@ def main() -> None:
     )
     names = ("unguarded", "guarded", "guarded+fit") if args.fitted else ("unguarded", "guarded")
     results: dict[str, list[dict]] = {name: [] for name in names}
-    with TemporaryDirectory() as tmp:
+    with TemporaryDirectory() as scratch:
+        tmp = args.keep or scratch
+        Path(tmp).mkdir(parents=True, exist_ok=True)
         scenes = {name: args.scene for name in names}
         if args.fitted:
             scenes["guarded+fit"] = str(fitted_scene(args, Path(tmp)))
