@@ -16,7 +16,8 @@ integral: LookAheadRunner keeps it from the loop's commands, as compare's window
 log; reset at phase 0, a window's turn was off by 0.24 rad RMS, at the commands' phase by 0.03).
 Each rollout's robot is drawn from the scene's uncertainty (friction, body mass, the two motors'
 speeds: experiments.draw, as choose's rollouts; robot_draws), round the scene's robot, so a
-scene naming a fitted robot file looks ahead with the fit. A rollout ends at its first failure.
+scene naming a fitted robot file looks ahead with the fit. Driven one at a time, a rollout ends
+at its first failure; in lockstep (MuJoCo) the safety checks read its frames afterwards.
 What it does not model yet: the pose's latency (the pose is taken as now).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from
@@ -40,6 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roachplan._settings import (
+    boolean,
     check_settings,
     integer,
     non_negative,
@@ -73,10 +75,10 @@ class LookAheadConfig:
     """Standard deviation of the pose's heading error [deg]."""
     engine: str | None = s(None, optional(one_of(ENGINES)))
     """The physics engine its rollouts run in ("pybullet", "mujoco"; None: the scene's). Under
-    MuJoCo a look-ahead's rollouts step together in lockstep (sim/_lockstep.py): about 5 times
-    as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead
-    the scene's engine does not take is less faithful to it (docs: the engines' fidelity)."""
-    robot_draws: bool = True
+    MuJoCo a look-ahead's rollouts step together in lockstep (sim/_lockstep.py): 3 to 4 times
+    as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead in
+    an engine other than the scene's is less faithful to it (docs: the engines' fidelity)."""
+    robot_draws: bool = s(True, boolean())
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
     scene's robot (its fitted robot file, if it names one) as it is."""
@@ -155,15 +157,19 @@ def _drawn_worlds(world: World, ahead: World, cfg: LookAheadConfig, pose, *, see
         dyaw = math.radians(float(rng.normal(0.0, cfg.yaw_sd_deg)))
         start = (x0 + float(dx), y0 + float(dy), yaw0 + dyaw)
         sim = ahead.simulation()
-        if cfg.robot_draws:
-            w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
-            sim.perturb(
-                friction=ahead.scene.sim.friction * w.friction_scale,
-                mass_scale=w.mass_scale,
-                motor_gain=w.motor_gain,
-            )
-        surface = float(world.heightfield.sample(np.array(start[:2])))
-        sim.reset(*start, surface=surface, phase=phase)
+        try:
+            if cfg.robot_draws:
+                w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
+                sim.perturb(
+                    friction=ahead.scene.sim.friction * w.friction_scale,
+                    mass_scale=w.mass_scale,
+                    motor_gain=w.motor_gain,
+                )
+            surface = float(world.heightfield.sample(np.array(start[:2])))
+            sim.reset(*start, surface=surface, phase=phase)
+        except BaseException:
+            sim.close()
+            raise
         yield sim
 
 
