@@ -209,3 +209,40 @@ def test_a_look_ahead_is_drawn_as_the_stretch_it_covered_in_its_risk_colour():
     green, yellow, red = risk_colour(1.0), risk_colour(0.5), risk_colour(0.0)
     assert green[1] > 150 and green[0] == 0 and red[0] > 200 and red[1] == 0
     assert yellow[0] > 150 and yellow[1] > 150
+
+
+def test_the_motors_mismatch_is_estimated_from_how_the_robot_turned_against_its_commands():
+    """estimate_mismatch: on an arc the calibrated curve gives for the actual speed ratio, it
+    recovers d exactly; the simulated roach told to walk straight with its motors at 1.06 and
+    0.94 (d = 0.06) curves, and the estimate from 4 s of its poses comes within 0.02; too
+    short a walk gives none."""
+    from roachplan.robot import estimate_mismatch
+    from roachplan.sim import DriverConfig, RobotConfig, SimConfig, open_floor
+
+    driver = DriverConfig()
+    curve, top = driver.turning, driver.max_ratio
+    d, left, right = 0.05, 20.0, 24.0  # told to turn left at ratio 1.2
+    actual = (right * (1 - d)) / (left * (1 + d))
+    kappa = curve.curvature(actual)  # [1/m]
+    s = np.linspace(0.0, 0.8, 41)  # along the arc [m]
+    poses = np.column_stack(
+        [s / 0.2, np.sin(kappa * s) / kappa, (1 - np.cos(kappa * s)) / kappa, kappa * s]
+    )
+    commands = np.column_stack([np.arange(0, 4, 0.02), np.full(200, left), np.full(200, right)])
+    assert estimate_mismatch(poses, commands, curve, top) == pytest.approx(d, abs=1e-6)
+    assert estimate_mismatch(poses[:3], commands, curve, top) is None  # (4 cm walked)
+
+    track = []
+    with open_floor(RobotConfig(), SimConfig()) as sim:
+        sim.perturb(friction=SimConfig().friction, mass_scale=1.0, motor_gain=(1.06, 0.94))
+        sim.reset(0.0, 0.0, 0.0)
+        sim.set_leg_speeds(20.0, 20.0)
+        for _ in range(250):  # 5 s, the first second left out (from rest)
+            sim.advance(20)
+            (x, y, _), quat = sim.pose()
+            track.append((sim.time, x, y, math.atan2(2 * (quat[3] * quat[2] + quat[0] * quat[1]),
+                                                     1 - 2 * (quat[1] ** 2 + quat[2] ** 2))))  # fmt: skip
+    poses = np.array(track[50:])
+    commands = np.column_stack([poses[:, 0], np.full(len(poses), 20.0), np.full(len(poses), 20.0)])
+    assert poses[-1, 3] - poses[0, 3] < -0.2  # (the faster left side turns it right)
+    assert estimate_mismatch(poses, commands, curve, top) == pytest.approx(0.06, abs=0.02)

@@ -18,6 +18,9 @@ Each rollout's robot is drawn from the scene's uncertainty (friction, body mass,
 speeds: experiments.draw, as choose's rollouts; robot_draws), round the scene's robot, so a
 scene naming a fitted robot file looks ahead with the fit. Driven one at a time, a rollout ends
 at its first failure; in lockstep (MuJoCo) the safety checks read its frames afterwards.
+LookAheadRunner also estimates the robot's motor mismatch from its last few seconds (how it
+turned against how it was told to: estimate_mismatch) and its rollouts drive with it, so a
+robot whose motors differ from the model's is simulated drifting as it does.
 What it does not model yet: the pose's latency (the pose is taken as now).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from
@@ -28,6 +31,7 @@ np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop 
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import logging
@@ -78,6 +82,10 @@ class LookAheadConfig:
     MuJoCo a look-ahead's rollouts step together in lockstep (sim/_lockstep.py): 3 to 4 times
     as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead in
     an engine other than the scene's is less faithful to it (docs: the engines' fidelity)."""
+    mismatch_window: float = s(3.0, non_negative("s"))
+    """Seconds of the robot's latest poses and commands its motors' mismatch is estimated from
+    (estimate_mismatch): each look-ahead's rollouts then drive with it, on top of their draws
+    (a robot that drifts is simulated drifting). 0: not estimated."""
     robot_draws: bool = s(True, boolean())
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
@@ -102,6 +110,9 @@ class LookAhead:
     """Where each failed rollout ended (x, y [m]) and why (a stop reason or an outcome)."""
     wall_time: float
     """Wall time of the look-ahead [s]."""
+    mismatch: float | None = None
+    """The motors' mismatch d its rollouts drove with (left x (1 + d), right x (1 - d)), as
+    estimated from the robot's last seconds; None: not estimated."""
 
     @property
     def p_hold(self) -> float:
@@ -118,6 +129,7 @@ class LookAhead:
             "p_hold": self.p_hold,
             "failures": [list(f) for f in self.failures],
             "wall_time": self.wall_time,
+            "mismatch": self.mismatch,
         }
 
 
@@ -143,14 +155,54 @@ def remaining_path(
     return rest, kept
 
 
-def _drawn_worlds(world: World, ahead: World, cfg: LookAheadConfig, pose, *, seed: int, phase):
+MIN_WALK = 0.1
+"""The least distance the robot must have walked in the window for a mismatch estimate [m]."""
+
+
+def estimate_mismatch(
+    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
+) -> float | None:
+    """The motors' mismatch d (left x (1 + d), right x (1 - d)) that explains how the robot
+    turned while it was told to: poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and
+    the commands sent meanwhile ((M, 3): t [s], left, right [rad/s]; walking ones, both sides
+    forward) over one window. Its mean curvature (the heading's change over the distance
+    walked) is the turn the robot's actual speed ratio drives on `curve` (a TurningCurve: the
+    robot's calibrated one); the commands' mean log ratio is the turn it was asked for; the
+    difference is ln((1 - d) / (1 + d)). None when it walked under MIN_WALK or was not told to
+    walk. Small turns, where the curve is near linear in the log ratio, estimate best (the
+    tracking driver's: it holds a drifting robot on its path by a steady counter-turn)."""
+    poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
+    if len(poses) < 2 or not len(commands):
+        return None
+    walking = (commands[:, 1] > 0) & (commands[:, 2] > 0)
+    if not walking.any():
+        return None
+    walked = float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
+    if walked < MIN_WALK:
+        return None
+    turned = float(np.sum(np.remainder(np.diff(poses[:, 3]) + math.pi, 2 * math.pi) - math.pi))
+    kappa = turned / walked  # [1/m], positive to the left (the right side faster)
+    actual = math.copysign(math.log(curve.ratio_for(abs(kappa), max_ratio)), kappa)
+    asked = float(np.mean(np.log(commands[walking, 2] / commands[walking, 1])))
+    return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5))
+
+
+def _drawn_worlds(
+    world: World, ahead: World, cfg: LookAheadConfig, pose, *, seed: int, phase, mismatch: float
+):
     """A look-ahead's cfg.draws simulations of `ahead` (world under the look-ahead's engine and
     horizon), each fresh (a rollout is its seed's alone), reset at pose (x, y, yaw) moved by
     the pose's noise drawn from (seed, k), the legs at phase, its robot drawn from the scene's
-    uncertainty (cfg.robot_draws). A generator: the caller closes each."""
+    uncertainty (cfg.robot_draws) with its motors' speeds moved by mismatch (left x (1 + d),
+    right x (1 - d)). A generator: the caller closes each."""
     from roachplan.experiments import draw
 
     x0, y0, yaw0 = pose
+    # The estimate is the robot's whole mismatch; perturb's gains multiply the robot's own (a
+    # fitted robot file's), so its own is divided out.
+    own_l, own_r = world.robot.motor_gain
+    own = (own_l - own_r) / (own_l + own_r) if mismatch else 0.0
+    moved = ((1 + mismatch) / (1 + own), (1 - mismatch) / (1 - own))
     for k in range(cfg.draws):
         rng = np.random.default_rng((seed, k))
         dx, dy = rng.normal(0.0, cfg.position_sd, 2)
@@ -158,12 +210,15 @@ def _drawn_worlds(world: World, ahead: World, cfg: LookAheadConfig, pose, *, see
         start = (x0 + float(dx), y0 + float(dy), yaw0 + dyaw)
         sim = ahead.simulation()
         try:
+            friction, mass, gain = ahead.scene.sim.friction, 1.0, (1.0, 1.0)
             if cfg.robot_draws:
                 w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
+                friction, mass, gain = friction * w.friction_scale, w.mass_scale, w.motor_gain
+            if cfg.robot_draws or mismatch:
                 sim.perturb(
-                    friction=ahead.scene.sim.friction * w.friction_scale,
-                    mass_scale=w.mass_scale,
-                    motor_gain=w.motor_gain,
+                    friction=friction,
+                    mass_scale=mass,
+                    motor_gain=(gain[0] * moved[0], gain[1] * moved[1]),
                 )
             surface = float(world.heightfield.sample(np.array(start[:2])))
             sim.reset(*start, surface=surface, phase=phase)
@@ -184,10 +239,11 @@ def look_ahead(
     safety_map: SafetyMap,
     seed: int,
     phase: tuple[float, float] = (0.0, 0.0),
+    mismatch: float | None = None,
 ) -> LookAhead:
     """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
     seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
-    safety_map."""
+    safety_map; the motors' mismatch (estimate_mismatch; None: none) applied to each."""
     from roachplan.scenes import with_engine
     from roachplan.sim import drive_lockstep, drive_path
 
@@ -210,7 +266,9 @@ def look_ahead(
     with contextlib.ExitStack() as stack:
         sims = [
             stack.enter_context(sim)
-            for sim in _drawn_worlds(world, ahead, cfg, (x0, y0, yaw0), seed=seed, phase=phase)
+            for sim in _drawn_worlds(
+                world, ahead, cfg, (x0, y0, yaw0), seed=seed, phase=phase, mismatch=mismatch or 0.0
+            )
         ]
         if ahead.scene.sim.engine == "mujoco" and len(sims) > 1:
             # In lockstep; the safety checks then read each trajectory's frames (the frames
@@ -258,6 +316,7 @@ def look_ahead(
         holds=holds,
         failures=tuple(failures),
         wall_time=time.perf_counter() - t0,
+        mismatch=mismatch,
     )
 
 
@@ -305,6 +364,11 @@ class LookAheadRunner:
         """The motors' phase [rad] at the last command's time (self._speeds since then)."""
         self._speeds: tuple[float, float, float] | None = None
         """(t [s, monotonic], left, right [rad/s]) of the last command."""
+        self._poses: collections.deque = collections.deque()
+        """(t [s, monotonic], x, y [m], yaw [rad]) of the poses within cfg.mismatch_window."""
+        self._commands: collections.deque = collections.deque()
+        """(t [s, monotonic], left, right [rad/s]) of the commands within it (stop: 0, 0)."""
+        self._curve = (world.scene.driver.turning, world.scene.driver.max_ratio)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._host = Host(world, name="roachplan look-ahead")
@@ -315,14 +379,26 @@ class LookAheadRunner:
         phase, the integral of the commands sent (the robot's motor gain applied, clipped to
         its motors' limit; a stop frame stands still)."""
         kind = getattr(event, "kind", None)
+        window = self._args[2].mismatch_window
         if kind == "pose":
             x, y, _ = event.position
+            t = event.sample.t_receive
             with self._lock:
                 self._pose = (float(x), float(y), yaw_of(event.quat))
+                if window > 0:
+                    self._poses.append((t, *self._pose))
+                    while self._poses and self._poses[0][0] < t - window:
+                        self._poses.popleft()
         elif kind == "command":
             f = event.frame
             wl, wr = (0.0, 0.0) if f.stop else (f.left * self._gain[0], f.right * self._gain[1])
             with self._lock:
+                if window > 0:
+                    self._commands.append(
+                        (event.t, 0.0, 0.0) if f.stop else (event.t, f.left, f.right)
+                    )
+                    while self._commands and self._commands[0][0] < event.t - window:
+                        self._commands.popleft()
                 self._phase = self._phase_at(event.t)
                 self._speeds = (
                     event.t,
@@ -356,15 +432,25 @@ class LookAheadRunner:
         while not self._stop.wait(self.period if n else 0.0):
             with self._lock:
                 pose, phase = self._pose, self._phase_at(time.monotonic())
+                poses, commands = np.array(self._poses), np.array(self._commands)
             if pose is None:
                 continue
             path, spins, cfg, safety, smap = self._args
+            mismatch = (
+                estimate_mismatch(poses, commands, *self._curve) if cfg.mismatch_window else None
+            )
             seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
             t = time.monotonic()
             child = Child(
                 _look_in,
                 (path, spins, pose, cfg),
-                {"safety": safety, "safety_map": smap, "seed": seed, "phase": phase},
+                {
+                    "safety": safety,
+                    "safety_map": smap,
+                    "seed": seed,
+                    "phase": phase,
+                    "mismatch": mismatch,
+                },
                 start=self._host,
                 task="look-ahead",
             )
