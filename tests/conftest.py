@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import json
+import math
 import os
 import socket
 import subprocess
@@ -28,6 +30,46 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
 settings.load_profile("fuzz" if os.environ.get("ROACHPLAN_FUZZ") else "test")
+
+# The test files in order of their last measured time, longest first: `make test`'s workers
+# take whole files (--dist loadfile) in collection order, so a long file taken last leaves the
+# other worker idle at the end. tests/file_durations.json holds each file's seconds (setup,
+# call and teardown summed); ROACHPLAN_RECORD_DURATIONS=1 writes it anew from a run. A file it
+# does not know yet goes first (its time unknown).
+FILE_DURATIONS = Path(__file__).with_name("file_durations.json")
+_measured: dict[str, float] = {}
+
+
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    try:
+        seconds = json.loads(FILE_DURATIONS.read_text())
+    except (OSError, ValueError):
+        return
+    files = list(dict.fromkeys(_file_of(item.nodeid) for item in items))
+    rank = {f: k for k, f in enumerate(sorted(files, key=lambda f: -seconds.get(f, math.inf)))}
+    items.sort(key=lambda item: rank[_file_of(item.nodeid)])  # (stable: a file keeps its order)
+
+
+def pytest_runtest_logreport(report) -> None:
+    _measured[_file_of(report.nodeid)] = _measured.get(_file_of(report.nodeid), 0.0) + float(
+        report.duration
+    )
+
+
+def pytest_sessionfinish(session) -> None:
+    if not os.environ.get("ROACHPLAN_RECORD_DURATIONS") or hasattr(session.config, "workerinput"):
+        return  # (the controller writes, once, what every worker reported)
+    try:
+        seconds = json.loads(FILE_DURATIONS.read_text())
+    except (OSError, ValueError):
+        seconds = {}
+    seconds.update({f: round(s, 1) for f, s in _measured.items()})
+    FILE_DURATIONS.write_text(json.dumps(dict(sorted(seconds.items())), indent=1) + "\n")
+
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"

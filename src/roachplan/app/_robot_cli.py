@@ -366,7 +366,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if len(logs) == 1 and compared:  # (one log: its comparison's fields at the top)
             print(json.dumps({**compared[0], "look_ahead": _json_safe(ahead)}))
         else:
-            runs = [{"log": str(log.path), **c} for log, c in zip(logs, compared, strict=True)]
+            each = compared or [{}] * len(logs)  # (--look-ahead-only: no comparison)
+            runs = [{"log": str(log.path), **c} for log, c in zip(logs, each, strict=True)]
             print(json.dumps({"runs": runs, "logs": len(logs), "look_ahead": _json_safe(ahead)}))
         return 0
     if ahead is None:
