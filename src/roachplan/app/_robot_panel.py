@@ -135,8 +135,7 @@ class RobotPanel:
     def form(self) -> RobotForm:
         """The settings as typed, checked by the robot's validators; RobotError naming the box
         and what it accepts."""
-        from roachplan import SettingError
-        from roachplan._settings import setting_problem
+        from roachplan import SettingError, setting_problem
         from roachplan.robot import FrameTransform, NatNetSettings, RobotError, RobotSettings
         from roachplan.robot._checks import parse_address
 
@@ -313,6 +312,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
     except Exception:
         source.close()
         raise
+    watcher = None
     try:
         sample = wait_first_pose(source, 5.0)
         transform = form.transform or measure_transform(
@@ -345,7 +345,6 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         # a thread waiting for it waits up to the switch interval (5 ms by default, a quarter
         # of a control period); 1 ms keeps its periods on time while the page is drawn.
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.001))
-        watcher = None
         if form.look_ahead:
             from roachplan.robot import LookAheadConfig, RobotSettings, watch_ahead
 
@@ -364,6 +363,8 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
             )
         loop.start()  # (held: stop frames until Go)
     except BaseException:
+        if watcher is not None:
+            watcher.close()
         link.close()
         source.close()
         raise
