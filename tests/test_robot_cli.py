@@ -337,7 +337,11 @@ def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tm
         )  # fmt: skip
         out, err = proc.communicate(timeout=240)
         state = control("state")
+        seqs = [c[1] for c in control("commands")["commands"]]
     assert proc.returncode == 1, err  # (held, and held again after the one re-plan)
+    # One command link for both legs: the frames' numbers run on (a robot drops a frame
+    # numbered at or below the last it took, so a leg starting again from 0 would stand still).
+    assert len(seqs) > 20 and all(b > a for a, b in zip(seqs, seqs[1:], strict=False)), seqs
     summary = json.loads(out)
     assert summary["reason"] == "lookahead" and "guard 1" in summary["detail"]
     assert len(summary["held"]) == 1 and "re-planning from where the robot stands" in err

@@ -8,6 +8,7 @@ in one line naming the flag.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
@@ -202,7 +203,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
     robot_settings(args, None)  # (every flag refused before the scene loads)
     import numpy as np
 
-    from roachplan.robot import distance_to_path, drive_robot
+    from roachplan.robot import distance_to_path, drive_robot, open_link, open_pose_source
     from roachplan.scenes import build_world, load_scene
 
     from ._scene_cli import scene_inputs
@@ -241,34 +242,48 @@ def cmd_robot(args: argparse.Namespace) -> int:
         )
         return True if args.go else _ask_go(loop)
 
-    run = drive_robot(world, settings, ready=ready)
-    held = []  # the legs the guard ended: re-planned from where the robot stood
-    while run.result.reason == "lookahead" and len(held) < args.replans:
-        held.append(run)
-        print(
-            f"roachplan: held by the look-ahead: {run.result.detail}; re-planning from where "
-            f"the robot stands (re-plan {len(held)} of at most {args.replans})",
-            file=sys.stderr,
-            flush=True,
-        )
-        log = settings.log
-        if log is not None:  # (each leg its own log, beside the first: RUN-2.mcap, ...)
-            log = check_output_file(
-                log.with_name(f"{out.stem}-{len(held) + 1}{out.suffix}"),
-                suffixes=(".mcap",),
-                inputs=scene_inputs(scene),
-                replaceable=_run_log_written,
-                kind="a robot run log roachplan wrote",
-                force=args.force,
+    # One pose source and one command link for every leg: the commands' sequence numbers run
+    # on across a re-plan. (A robot takes a frame only if it is numbered after the last it
+    # took: a new link's frames, from 0 again, were dropped and the re-planned leg stood still.)
+    with contextlib.ExitStack() as stack:
+        source = open_pose_source(settings.source, **settings.source_settings)
+        stack.callback(source.close)
+        link = open_link(settings.link, **settings.link_settings)
+        stack.callback(link.close)
+        run = drive_robot(world, settings, ready=ready, source=source, link=link)
+        held = []  # the legs the guard ended: re-planned from where the robot stood
+        while run.result.reason == "lookahead" and len(held) < args.replans:
+            held.append(run)
+            print(
+                f"roachplan: held by the look-ahead: {run.result.detail}; re-planning from where "
+                f"the robot stands (re-plan {len(held)} of at most {args.replans})",
+                file=sys.stderr,
+                flush=True,
             )
-        settings = dataclasses.replace(settings, transform=run.transform, log=log)
-        # Steer clear of where the rollouts that held it failed (the guard's look-ahead: the
-        # last one made); ready() says how far the new path keeps from them.
-        avoid[:] = [(x, y) for x, y, _ in run.lookaheads[-1].failures] if run.lookaheads else []
-        run = drive_robot(world, settings, ready=ready, avoid=avoid)
+            log = settings.log
+            if log is not None:  # (each leg its own log, beside the first: RUN-2.mcap, ...)
+                log = check_output_file(
+                    log.with_name(f"{out.stem}-{len(held) + 1}{out.suffix}"),
+                    suffixes=(".mcap",),
+                    inputs=scene_inputs(scene),
+                    replaceable=_run_log_written,
+                    kind="a robot run log roachplan wrote",
+                    force=args.force,
+                )
+            settings = dataclasses.replace(settings, transform=run.transform, log=log)
+            # Steer clear of where the rollouts that held it failed (the guard's look-ahead: the
+            # last one made); ready() says how far the new path keeps from them.
+            avoid[:] = [(x, y) for x, y, _ in run.lookaheads[-1].failures] if run.lookaheads else []
+            run = drive_robot(world, settings, ready=ready, avoid=avoid, source=source, link=link)
+    return _report(args, scene.name, run, held)
+
+
+def _report(args: argparse.Namespace, scene_name: str, run, held: list) -> int:
+    """Print what a robot command did (its last leg `run`, and the legs the guard ended
+    before it: `held`), as JSON with --json; its exit status."""
     r = run.result
     summary = {
-        "scene": scene.name,
+        "scene": scene_name,
         "reason": r.reason,
         "detail": r.detail,
         "success": r.success,
