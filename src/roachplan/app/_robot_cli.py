@@ -201,9 +201,8 @@ def _ask_go(loop) -> bool:
 
 def cmd_robot(args: argparse.Namespace) -> int:
     robot_settings(args, None)  # (every flag refused before the scene loads)
-    import numpy as np
 
-    from roachplan.robot import distance_to_path, drive_robot, open_link, open_pose_source
+    from roachplan.robot import clearance, drive_robot, open_link, open_pose_source
     from roachplan.scenes import build_world, load_scene
 
     from ._scene_cli import scene_inputs
@@ -230,10 +229,13 @@ def cmd_robot(args: argparse.Namespace) -> int:
         length = float(sum(math.dist(a[:2], b[:2]) for a, b in zip(path, path[1:], strict=False)))
         x, y, yaw = _here(loop)
         clear = ""
-        if avoid:
-            xy = np.asarray(path, dtype=float)[:, :2]
-            keeps = min(distance_to_path(p, xy) for p in avoid)
-            clear = f"; it keeps {keeps:.2f} m from the {len(avoid)} places its rollouts failed"
+        if avoid:  # (what the leg's /plan record says: robot.clearance)
+            keeps = clearance(path, avoid)
+            clear = (
+                f"; the {len(avoid)} places its rollouts failed are all next to the robot"
+                if math.isinf(keeps)
+                else f"; it keeps {keeps:.2f} m from the {len(avoid)} places its rollouts failed"
+            )
         print(
             f"roachplan: the robot stands at ({x:.3f}, {y:.3f}) m, {math.degrees(yaw):.0f} deg; "
             f"planned {len(path)} waypoints, {length:.2f} m to the goal{clear}",

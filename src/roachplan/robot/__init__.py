@@ -73,6 +73,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotRun": "._run",
         "drive_robot": "._run",
         "plan_clear_of": "._run",
+        "clearance": "._run",
         "watch_ahead": "._run",
         "AVOID_RADIUS": "._run",
         "predict": "._run",
@@ -170,6 +171,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import read_run as read_run
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import RobotRun as RobotRun
+    from ._run import clearance as clearance
     from ._run import drive_robot as drive_robot
     from ._run import plan_clear_of as plan_clear_of
     from ._run import predict as predict

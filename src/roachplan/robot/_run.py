@@ -68,6 +68,15 @@ AVOID_TRIES = 4
 """Plans (seeds) a re-plan tries for one that keeps clear of them."""
 
 
+def clearance(path_xy, avoid: Sequence[tuple[float, float]], radius: float = AVOID_RADIUS) -> float:
+    """How far a path ((N, 2) [m]) keeps from the points of avoid ((x, y) [m]) that lie
+    `radius` [m] or more from its start (no path from there can keep clear of nearer ones):
+    the least distance [m]; inf with none."""
+    xy = np.asarray(path_xy, dtype=float)[:, :2]
+    points = [p for p in avoid if math.dist(p[:2], xy[0]) >= radius]
+    return min((distance_to_path(p, xy) for p in points), default=math.inf)
+
+
 def plan_clear_of(
     world: World,
     start: tuple[float, float, float],
@@ -92,8 +101,7 @@ def plan_clear_of(
         if not planned.found:
             best = best or (planned, math.inf)
             continue
-        xy = np.asarray(planned.path_xyz, dtype=float)[:, :2]
-        clear = min((distance_to_path(p, xy) for p in points), default=math.inf)
+        clear = clearance(planned.path_xyz, points, radius)
         if best is None or not best[0].found or clear > best[1]:
             best = (planned, clear)
         if clear >= radius:
@@ -164,10 +172,11 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         )
         p, q = transform.apply(sample.position, sample.quat)
         here = (p[0], p[1], yaw_of(q))
-        clearance = None
+        kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
-            plan, clearance = plan_clear_of(world, here, seed, avoid)
+            plan, clear = plan_clear_of(world, here, seed, avoid)
+            kept = None if math.isinf(clear) else clear
             if not plan.found:
                 raise RobotError(
                     f"no plan from where the robot stands ({here[0]:.3f}, {here[1]:.3f}, "
@@ -192,7 +201,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     # (a re-plan's: where the look-ahead's rollouts failed, and how far its
                     # path keeps from them [m]; null: none to keep clear of)
                     "avoid": [list(p[:2]) for p in avoid],
-                    "clearance": None if clearance in (None, math.inf) else clearance,
+                    "clearance": kept,
                 },
             )
         loop = RobotLoop(
@@ -259,9 +268,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             prediction=prediction,
             lookaheads=tuple(watcher.results) if watcher is not None else (),
             plan_seed=plan.seed,
-            clearance=None
-            if not avoid or clearance is None or clearance == math.inf
-            else clearance,
+            clearance=kept,
         )
     finally:
         if recorder is not None:

@@ -41,7 +41,8 @@ import functools
 import hashlib
 import logging
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -200,25 +201,42 @@ def _cached_cover(
     from roachplan.planning import grid_cover
 
     xy = np.ascontiguousarray(vertices[:, :2])
-    digest = hashlib.blake2b(xy.tobytes(), digest_size=16)
-    digest.update(np.ascontiguousarray(faces).tobytes())
-    key = (digest.hexdigest(), vertices.shape, faces.shape, resolution, max_points)
-    if key not in _COVERS:
-        while len(_COVERS) >= _COVERS_KEPT:
-            _COVERS.pop(next(iter(_COVERS)))
+    key = (_content(xy, faces), vertices.shape, faces.shape, resolution, max_points)
+
+    def cover() -> GridCover:
         corners = xy[faces].reshape(-1, 2)
         lo, hi = corners.min(axis=0), corners.max(axis=0)
         width, depth = hi - lo
-        while (width / resolution + 1) * (depth / resolution + 1) > max_points:
-            resolution *= 1.25
-        _COVERS[key] = grid_cover(
+        r = resolution
+        while (width / r + 1) * (depth / r + 1) > max_points:
+            r *= 1.25
+        return grid_cover(
             vertices,
             faces,
             xy_min=(float(lo[0]), float(lo[1])),
             xy_max=(float(hi[0]), float(hi[1])),
-            resolution=resolution,
+            resolution=r,
         )
-    return _COVERS[key]
+
+    return _kept(_COVERS, _COVERS_KEPT, key, cover)
+
+
+def _content(*arrays: np.ndarray) -> str:
+    """A digest of the arrays' bytes: a cache key of their content."""
+    digest = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        digest.update(np.ascontiguousarray(a).tobytes())
+    return digest.hexdigest()
+
+
+def _kept(cache: dict, kept: int, key, make: Callable[[], Any]) -> Any:
+    """cache[key], made by make() if it is not there, the oldest entries dropped so that at
+    most `kept` stay."""
+    if key not in cache:
+        while len(cache) >= kept:
+            cache.pop(next(iter(cache)))
+        cache[key] = make()
+    return cache[key]
 
 
 _FIELDS: dict[tuple, HeightField | None] = {}
@@ -231,14 +249,8 @@ def _cached_field(
     """terrain_field, kept for the last _FIELDS_KEPT terrains by their content: a drive makes a
     fresh simulation of the same world each time, and the rasterising takes most of building
     one (0.2-0.7 s on double_bridge at 5 mm; compiling the model about 20 ms)."""
-    digest = hashlib.blake2b(np.ascontiguousarray(vertices).tobytes(), digest_size=16)
-    digest.update(np.ascontiguousarray(faces).tobytes())
-    key = (digest.hexdigest(), vertices.shape, faces.shape, ground_height)
-    if key not in _FIELDS:
-        while len(_FIELDS) >= _FIELDS_KEPT:
-            _FIELDS.pop(next(iter(_FIELDS)))
-        _FIELDS[key] = terrain_field(vertices, faces, ground_height)
-    return _FIELDS[key]
+    key = (_content(vertices, faces), vertices.shape, faces.shape, ground_height)
+    return _kept(_FIELDS, _FIELDS_KEPT, key, lambda: terrain_field(vertices, faces, ground_height))
 
 
 def field_elevation(heights: np.ndarray, ground_height: float | None) -> tuple[np.ndarray, float]:

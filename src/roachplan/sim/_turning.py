@@ -84,7 +84,7 @@ class TurningCurve:
                 hi, node = mids[node], 2 * node + 1
         ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
         exp, log = math.exp, math.log
-        for _ in range(_HALVINGS - _TREE_DEPTH):  # (_at_log_ratio, inline)
+        for _ in range(_HALVINGS - _TREE_DEPTH):  # (curvature(exp(mid)), inline)
             mid = 0.5 * (lo + hi)
             x = log(exp(mid))
             if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
@@ -92,14 +92,6 @@ class TurningCurve:
             else:
                 hi = mid
         return math.exp(0.5 * (lo + hi))
-
-    @staticmethod
-    def _at_log_ratio(x: float, ks: float, rate: float, lock: float, pole: float) -> float:
-        """curvature(exp(x)) written out, the pole's log `pole` taken once, inf at and past
-        it: the same operations in the same order as `curvature`, so the same bits."""
-        if not x < pole:
-            return math.inf
-        return ks * (1.0 - math.exp(-rate * x)) + lock * x / (pole - x)
 
     def min_turning_radius(self, max_ratio: float, headroom: float = PLAN_HEADROOM) -> float:
         """Radius of the tightest arc a plan may ask for [m]: 1 / (headroom * curvature at the
@@ -120,16 +112,13 @@ def _bisection_tree(curve: TurningCurve, max_ratio: float) -> tuple[float, list,
     ratio_for's first _TREE_DEPTH halvings of [0, ln max_ratio], as a heap: node i's lower
     half is node 2i+1, its upper 2i+2. Made by the very arithmetic ratio_for does, so a walk
     down it takes the same turns and reaches the same bits."""
-    pole = math.log(curve.lock_ratio)
     mids, below = [0.0] * (2**_TREE_DEPTH - 1), [0.0] * (2**_TREE_DEPTH - 1)
     bounds = [(0.0, math.log(max_ratio))]
     for node in range(len(mids)):
         lo, hi = bounds[node]
         mid = 0.5 * (lo + hi)
         mids[node] = mid
-        below[node] = TurningCurve._at_log_ratio(
-            math.log(math.exp(mid)), curve.kappa_sat, curve.rate, curve.lock, pole
-        )
+        below[node] = curve.curvature(math.exp(mid))  # (inf at and past the pole)
         bounds += [(lo, mid), (mid, hi)]
     return curve.curvature(max_ratio), mids, below
 
