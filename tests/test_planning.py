@@ -234,13 +234,31 @@ def test_plan_cli_json_single_and_many():
         assert entry["route"] == ("left_bridge" if side < 0 else "right_bridge")
 
 
+def test_plans_started_together_are_each_the_plan_it_is_alone(world):
+    """Several planning children at once (choose's two legs of a via plan, plan_many's next
+    attempt beside this one) each give the path the same seed gives planned alone, and
+    plan_many's plans are its seeds' single plans, in order."""
+    from roachplan.experiments._trial import start_plan
+
+    seeds = (3, 4, 5)
+    children = [start_plan(world, seed=s) for s in seeds]
+    together = [c.result() for c in children]
+    alone = [plan(world, seed=s) for s in seeds]
+    for s, a, b in zip(seeds, together, alone, strict=True):
+        assert a.found and a.seed == s and np.array_equal(a.path_xyz, b.path_xyz), s
+    many = plan_many(world, 3, seed=3, min_separation=0.0)
+    assert [lp.plan.seed for lp in many] == list(seeds)
+    for lp, b in zip(many, alone, strict=True):
+        assert np.array_equal(lp.plan.path_xyz, b.path_xyz)
+
+
 def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(world, monkeypatch):
     """Forking a process with other threads is unsafe (Ray workers, the web server): there, a
     plan runs in a child of the clean fork server, and gives the very path a fork gives."""
     import functools
     import threading
 
-    from roachplan.planning import plan_path
+    from roachplan.planning import _ompl, plan_path
     from roachplan.processes import _child
 
     sc = world.scene
@@ -267,7 +285,7 @@ def test_a_threaded_process_plans_through_the_fork_server_with_the_same_result(w
             if self.how == "forkserver":
                 used.append(1)
 
-    monkeypatch.setattr(_child, "Child", Recorded)
+    monkeypatch.setattr(_ompl, "Child", Recorded)  # (the planner's children start there)
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()

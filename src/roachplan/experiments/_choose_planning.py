@@ -15,7 +15,7 @@ from roachplan.planning import PlanResult
 
 from ._choose_candidate import Candidate
 from ._choose_config import ChooseConfig
-from ._trial import MIN_ATTEMPT_TIME, _resample, plan, plan_many
+from ._trial import MIN_ATTEMPT_TIME, _resample, plan_many, start_plan
 
 
 def plan_candidates(world, cfg: ChooseConfig, *, budget: float | None = None) -> list[Candidate]:
@@ -96,13 +96,21 @@ def _via_pose(world, region) -> tuple[float, float, float] | None:
 
 def _plan_via(world, via, *, seed: int, deadline: float | None = None) -> PlanResult | None:
     """start -> via -> goal as one path (each leg planned with this seed, within what is left
-    of the planning budget at `deadline`, time.monotonic()), or None."""
+    of the planning budget at `deadline`, time.monotonic()), or None. The two legs plan at
+    once, in two children: each is the plan it is alone (a plan stops on its iteration budget),
+    and the pair takes the time of the longer (choose's workers wait for the candidates)."""
     sc = world.scene
-    first = plan(world, seed=seed, start=sc.start, goal=via, planner=_within(sc.planner, deadline))
-    if not first.found:
-        return None
-    second = plan(world, seed=seed, start=via, goal=sc.goal, planner=_within(sc.planner, deadline))
-    if not second.found:
+    legs = []
+    try:
+        for a, b in ((sc.start, via), (via, sc.goal)):
+            legs.append(
+                start_plan(world, seed=seed, start=a, goal=b, planner=_within(sc.planner, deadline))
+            )
+        first, second = (leg.result() for leg in legs)
+    finally:
+        for leg in legs:  # (on an error, or Ctrl-C, while one still plans)
+            leg.cancel()
+    if not (first.found and second.found):
         return None
     return dataclass_replace(
         first,

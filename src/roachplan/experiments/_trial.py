@@ -11,7 +11,9 @@ from typing import Literal
 
 import numpy as np
 
-from roachplan.planning import PlannerConfig, PlanResult, plan_path
+from roachplan.planning import PlannerConfig, PlanResult
+from roachplan.planning import start_plan as planning_start_plan
+from roachplan.processes import Child
 from roachplan.scenes import World
 from roachplan.sim import DriveResult, Frame, Simulation, drive_path, reference_energy_per_metre
 
@@ -94,7 +96,20 @@ def plan(
     planner: PlannerConfig | None = None,
 ) -> PlanResult:
     """Plan from start to goal (default: the scene's) over the world's terrain."""
-    return plan_path(
+    return start_plan(world, seed=seed, start=start, goal=goal, planner=planner).result()
+
+
+def start_plan(
+    world: World,
+    *,
+    seed: int,
+    start: tuple[float, float, float] | None = None,
+    goal: tuple[float, float, float] | None = None,
+    planner: PlannerConfig | None = None,
+) -> Child[PlanResult]:
+    """plan()'s planning child, started and not waited for (planning.start_plan): its result()
+    is what plan() returns; plans started together plan on as many cores."""
+    return planning_start_plan(
         world.heightfield,
         world.footprint,
         start or world.start,
@@ -142,26 +157,40 @@ def plan_many(
     attempts = max_attempts if max_attempts is not None else 3 * count + 10
     cfg = planner or world.scene.planner
     deadline = None if budget is None else time.monotonic() + budget
-    for k in range(attempts):
-        if len(out) == count:
-            break
-        if deadline is not None:
-            left = deadline - time.monotonic()
-            if left < MIN_ATTEMPT_TIME:
+    # While more than one plan is wanted, attempt k + 1 plans beside attempt k, in a second
+    # child: each is the plan it is alone (a plan stops on its iteration budget), taken in
+    # order; one not needed is cancelled.
+    children: dict[int, Child[PlanResult]] = {}
+    try:
+        for k in range(attempts):
+            if len(out) == count:
                 break
-            cfg = dataclasses.replace(cfg, time_limit=min(cfg.time_limit, left))
-        planned = plan(world, seed=seed + k, start=start, goal=goal, planner=cfg)
-        shape = _resample(planned.path_xyz[:, :2], 50) if planned.found else None
-        if shape is None or any(
-            np.mean(np.linalg.norm(shape - s, axis=1)) < min_separation for s in shapes
-        ):
+            if deadline is not None:
+                left = deadline - time.monotonic()
+                if left < MIN_ATTEMPT_TIME:
+                    break
+                cfg = dataclasses.replace(cfg, time_limit=min(cfg.time_limit, left))
+            ahead = 2 if count - len(out) > 1 else 1
+            for j in range(k, min(k + ahead, attempts)):
+                if j not in children:
+                    children[j] = start_plan(
+                        world, seed=seed + j, start=start, goal=goal, planner=cfg
+                    )
+            planned = children.pop(k).result()
+            shape = _resample(planned.path_xyz[:, :2], 50) if planned.found else None
+            if shape is None or any(
+                np.mean(np.linalg.norm(shape - s, axis=1)) < min_separation for s in shapes
+            ):
+                if on_attempt is not None:
+                    on_attempt(seed + k, None)
+                continue
+            shapes.append(shape)
+            out.append(LabelledPlan(route=world.route(planned.path_xyz[:, :2]), plan=planned))
             if on_attempt is not None:
-                on_attempt(seed + k, None)
-            continue
-        shapes.append(shape)
-        out.append(LabelledPlan(route=world.route(planned.path_xyz[:, :2]), plan=planned))
-        if on_attempt is not None:
-            on_attempt(seed + k, out[-1])
+                on_attempt(seed + k, out[-1])
+    finally:
+        for child in children.values():
+            child.cancel()
     return out
 
 

@@ -22,6 +22,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "PlanningError": "._names",
         "PlanResult": "._ompl",
         "plan_path": "._ompl",
+        "start_plan": "._ompl",
         "waypoints_on_surface": "._ompl",
         "StandableMap": "._regions",
         "homology_signature": "._regions",
@@ -62,6 +63,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._names import PlanningError as PlanningError
     from ._ompl import PlanResult as PlanResult
     from ._ompl import plan_path as plan_path
+    from ._ompl import start_plan as start_plan
     from ._ompl import waypoints_on_surface as waypoints_on_surface
     from ._regions import StandableMap as StandableMap
     from ._regions import homology_signature as homology_signature

@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from roachplan.processes import call
+from roachplan.processes import Child
 
 from ._config import PlannerConfig
 from ._drivable import DrivablePath, drivable_path, spin_states
@@ -305,9 +305,30 @@ def plan_path(
     these bounds from start (computed when not given; pass it to save ~50 ms per plan).
     Raises PlanningError when the start or goal is itself invalid (naming the failed condition
     and leg); returns found=False when the planner gives up. Runs in a child process
-    (roachplan.processes.call; isolation: how it starts), so the same seed gives the same plan
+    (roachplan.processes; isolation: how it starts), so the same seed gives the same plan
     whatever ran in this process before.
     """
+    return start_plan(
+        hf, fp, start, goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions, isolation=isolation
+    ).result()
+
+
+def start_plan(
+    hf: HeightField,
+    fp: Footprint,
+    start: tuple[float, float, float],
+    goal: tuple[float, float, float],
+    *,
+    bounds: tuple[tuple[float, float], tuple[float, float]],
+    cfg: PlannerConfig,
+    seed: int,
+    regions: StandableMap | None = None,
+    isolation: Method = "auto",
+) -> Child[PlanResult]:
+    """plan_path's child process, started and not waited for: its result() is what plan_path
+    returns (PlanningError for an invalid start or goal is raised here, before any child).
+    Plans started together run on as many cores, each the same plan as alone: a plan stops on
+    its iteration budget, not the clock, and each child is a fresh fork of this process."""
     vcfg = cfg.validity
     (xa, ya), (xb, yb) = bounds
     for label, pose in (("start", start), ("goal", goal)):
@@ -325,7 +346,7 @@ def plan_path(
     request: dict[str, Any] = dict(
         start=start, goal=goal, bounds=bounds, cfg=cfg, seed=seed, regions=regions
     )
-    return call(
+    return Child(
         _plan_here, (hf, fp), request, start=isolation, preload=(__name__,), task="planning"
     )
 
