@@ -189,6 +189,36 @@ def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
     assert np.array_equal(same.path_xyz, planned.path_xyz)
 
 
+def test_a_re_plan_starts_from_the_nearest_pose_the_planner_takes(bridge):
+    """plan_start: a robot held with a foot over a bridge's edge (a pose the planner refuses:
+    "a foot has no ground under it") is re-planned from the nearest pose it takes, within
+    START_REACH, and a plan from there is found; a pose it takes is kept as it is; a robot far
+    from any such pose is refused in words that say what is wrong where it stands."""
+    from roachplan.planning import FOOT, check_states
+    from roachplan.robot import START_REACH, RobotError, plan_start
+
+    world, planned = bridge
+    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
+    xy = planned.path_xyz[len(planned.path_xyz) // 2, :2]  # on a bridge: walk off its side
+    steps = np.arange(0.0, 0.3, 0.002)
+    line = np.column_stack([xy[0] + steps, np.full_like(steps, xy[1]), np.full_like(steps, 1.5)])
+    checked = check_states(hf, fp, validity, line)
+    edge = int(np.argmax(~checked.valid))  # the first pose off the bridge
+    assert not checked.valid[edge] and checked.code[edge] == FOOT
+    here = tuple(line[edge].tolist())
+    start, moved = plan_start(world, here)
+    assert 0 < moved <= START_REACH and math.dist(start[:2], here[:2]) == pytest.approx(moved)
+    assert check_states(hf, fp, validity, np.array([start])).valid[0]
+    from roachplan.experiments import plan
+
+    assert plan(world, seed=0, start=start).found
+    kept, none = plan_start(world, world.start)
+    assert kept == world.start and none == 0.0
+    (xa, ya), _ = world.bounds
+    with pytest.raises(RobotError, match=r"the planner refuses it \(outside the area\)"):
+        plan_start(world, (xa - 1.0, ya - 1.0, 0.0))
+
+
 def test_a_look_ahead_is_drawn_as_the_stretch_it_covered_in_its_risk_colour():
     """replay's (and the page's) drawing of a look-ahead: from the path's point nearest its
     start, horizon x RISK_SPEED along the path, green when every rollout held, red when none

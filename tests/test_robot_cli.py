@@ -345,6 +345,7 @@ def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tm
     summary = json.loads(out)
     assert summary["reason"] == "lookahead" and "guard 1" in summary["detail"]
     assert len(summary["held"]) == 1 and "re-planning from where the robot stands" in err
+    assert summary["replan_error"] is None  # (the re-plans ran out: none failed)
     assert state["speeds"] == [0.0, 0.0]
     from roachplan.robot import read_run
 

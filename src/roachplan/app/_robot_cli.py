@@ -202,7 +202,8 @@ def _ask_go(loop) -> bool:
 def cmd_robot(args: argparse.Namespace) -> int:
     robot_settings(args, None)  # (every flag refused before the scene loads)
 
-    from roachplan.robot import clearance, drive_robot, open_link, open_pose_source
+    from roachplan.planning import PlanningError
+    from roachplan.robot import RobotError, clearance, drive_robot, open_link, open_pose_source
     from roachplan.scenes import build_world, load_scene
 
     from ._scene_cli import scene_inputs
@@ -254,6 +255,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
         stack.callback(link.close)
         run = drive_robot(world, settings, ready=ready, source=source, link=link)
         held = []  # the legs the guard ended: re-planned from where the robot stood
+        replan_error = None  # (why the re-plan after the last hold failed)
         while run.result.reason == "lookahead" and len(held) < args.replans:
             held.append(run)
             print(
@@ -276,18 +278,34 @@ def cmd_robot(args: argparse.Namespace) -> int:
             # Steer clear of where the rollouts that held it failed (the guard's look-ahead: the
             # last one made); ready() says how far the new path keeps from them.
             avoid[:] = [(x, y) for x, y, _ in run.lookaheads[-1].failures] if run.lookaheads else []
-            run = drive_robot(world, settings, ready=ready, avoid=avoid, source=source, link=link)
-    return _report(args, scene.name, run, held)
+            try:
+                run = drive_robot(
+                    world, settings, ready=ready, avoid=avoid, source=source, link=link
+                )
+            except (RobotError, PlanningError) as exc:  # (no plan from where it stands)
+                held.pop()  # (the held leg is the run's last: `run`)
+                replan_error = str(exc)
+                print(
+                    f"roachplan: the re-plan failed: {exc}; the robot stays held",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                break
+    return _report(args, scene.name, run, held, replan_error)
 
 
-def _report(args: argparse.Namespace, scene_name: str, run, held: list) -> int:
-    """Print what a robot command did (its last leg `run`, and the legs the guard ended
-    before it: `held`), as JSON with --json; its exit status."""
+def _report(
+    args: argparse.Namespace, scene_name: str, run, held: list, replan_error: str | None = None
+) -> int:
+    """Print what a robot command did (its last leg `run`, the legs the guard ended before it:
+    `held`, and why re-planning after the last hold failed: replan_error), as JSON with
+    --json; its exit status."""
     r = run.result
     summary = {
         "scene": scene_name,
         "reason": r.reason,
         "detail": r.detail,
+        "replan_error": replan_error,
         "success": r.success,
         "drive_time": None if r.t_go is None else r.t_stop - r.t_go,
         "start": r.start,
@@ -319,6 +337,8 @@ def _report(args: argparse.Namespace, scene_name: str, run, held: list) -> int:
         for h in held:
             print(f"held by the look-ahead, re-planned: {h.result.detail} (wrote {h.log})")
         print(f"{r.reason}{drove}: {r.detail}\n{late}")
+        if replan_error is not None:
+            print(f"not re-planned: {replan_error}")
         if run.prediction is not None:
             p = run.prediction
             print(

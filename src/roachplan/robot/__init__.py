@@ -73,6 +73,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "RobotRun": "._run",
         "drive_robot": "._run",
         "plan_clear_of": "._run",
+        "plan_start": "._run",
+        "START_REACH": "._run",
         "clearance": "._run",
         "watch_ahead": "._run",
         "AVOID_RADIUS": "._run",
@@ -174,6 +176,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import clearance as clearance
     from ._run import drive_robot as drive_robot
     from ._run import plan_clear_of as plan_clear_of
+    from ._run import START_REACH as START_REACH
+    from ._run import plan_start as plan_start
     from ._run import predict as predict
     from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig

@@ -5,6 +5,7 @@ the robot's actual start (predict)."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import signal
 import threading
@@ -29,6 +30,8 @@ from ._transform import FrameTransform, measure_transform, yaw_of
 if TYPE_CHECKING:
     from roachplan.planning import PlanResult
     from roachplan.scenes import World
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -75,6 +78,50 @@ def clearance(path_xy, avoid: Sequence[tuple[float, float]], radius: float = AVO
     xy = np.asarray(path_xy, dtype=float)[:, :2]
     points = [p for p in avoid if math.dist(p[:2], xy[0]) >= radius]
     return min((distance_to_path(p, xy) for p in points), default=math.inf)
+
+
+START_REACH = 0.05
+"""How far a plan's start may lie from where the robot stands [m] when the planner refuses that
+pose: a robot the guard held with a foot over a bridge's edge ("a foot has no ground under
+it") is re-planned from the nearest pose the planner takes within this (its body's half
+length), and the driver walks it the rest."""
+_START_TURNS = np.radians([0.0, 10.0, -10.0, 20.0, -20.0])
+"""Headings a moved start may turn by, in the order tried at each distance [rad]."""
+
+
+def plan_start(
+    world: World, here: tuple[float, float, float], reach: float = START_REACH
+) -> tuple[tuple[float, float, float], float]:
+    """(the pose nearest `here` (x, y [m], yaw [rad], world frame) that the planner takes as a
+    start, how far it lies from here [m]): here itself when the planner takes it; else the
+    first valid pose of rings every 5 mm out to `reach` (24 directions each), the heading
+    kept or turned by up to 20 deg, the nearest ring first and the least turn. RobotError,
+    saying what is wrong where the robot stands, when none within reach is valid."""
+    from roachplan.planning import check_states, describe_state
+
+    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
+    (xa, ya), (xb, yb) = world.bounds
+    x, y, yaw = here
+    inside = xa <= x <= xb and ya <= y <= yb
+    if inside and check_states(hf, fp, validity, np.array([here], dtype=float)).valid[0]:
+        return here, 0.0
+    angles = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
+    for r in np.arange(0.005, reach + 1e-9, 0.005):
+        for turn in _START_TURNS:
+            poses = np.column_stack(
+                [x + r * np.cos(angles), y + r * np.sin(angles), np.full(24, yaw + turn)]
+            )
+            ok = check_states(hf, fp, validity, poses).valid
+            ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb)
+            ok &= (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
+            if ok.any():
+                px, py, pyaw = poses[int(np.argmax(ok))].tolist()
+                return (px, py, pyaw), float(r)
+    why = describe_state(hf, fp, validity, np.array(here)) if inside else "outside the area"
+    raise RobotError(
+        f"no plan from where the robot stands ({x:.3f}, {y:.3f}, {math.degrees(yaw):.0f} deg): "
+        f"the planner refuses it ({why}), and every pose within {reach * 100:g} cm as well"
+    )
 
 
 def plan_clear_of(
@@ -173,8 +220,18 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         p, q = transform.apply(sample.position, sample.quat)
         here = (p[0], p[1], yaw_of(q))
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
+        moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
+            here, moved = plan_start(world, here)
+            if moved > 0:
+                _log.warning(
+                    "the planner refuses the robot's pose as a start: planning from "
+                    "(%.3f, %.3f), %.1f cm from it",
+                    here[0],
+                    here[1],
+                    moved * 100,
+                )
             plan, clear = plan_clear_of(world, here, seed, avoid)
             kept = None if math.isinf(clear) else clear
             if not plan.found:
@@ -197,6 +254,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     "planner": plan.planner,
                     "seed": plan.seed,
                     "start": list(here),
+                    # (how far that start lies from where the robot stood [m]: plan_start)
+                    "start_moved": moved,
                     "goal": list(scene.goal),
                     # (a re-plan's: where the look-ahead's rollouts failed, and how far its
                     # path keeps from them [m]; null: none to keep clear of)
