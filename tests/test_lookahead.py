@@ -241,6 +241,21 @@ def test_a_look_ahead_is_drawn_as_the_stretch_it_covered_in_its_risk_colour():
     assert yellow[0] > 150 and yellow[1] > 150
 
 
+def test_the_run_s_window_estimates_are_pooled_by_the_distance_walked_in_each():
+    """pooled_mismatch: a motor's mismatch holds for the run, so each look-ahead drives with
+    the mean of every window's estimate so far, weighted by how far the robot walked in it
+    (a window that barely walked says little); none estimated: None."""
+    from roachplan.robot import pooled_mismatch
+
+    assert pooled_mismatch([]) is None
+    assert pooled_mismatch([(0.1, 0.5)]) == pytest.approx(0.1)
+    assert pooled_mismatch([(0.10, 0.6), (0.16, 0.2), (0.06, 0.2)]) == pytest.approx(0.104)
+    rng = np.random.default_rng(0)  # (windows scattered round 0.12: the pool is nearer it)
+    windows = [(0.12 + rng.normal(0, 0.03), 0.5) for _ in range(6)]
+    pooled = pooled_mismatch(windows)
+    assert pooled is not None and abs(pooled - 0.12) < 0.03 / math.sqrt(6) * 3
+
+
 def test_the_motors_mismatch_is_estimated_from_how_the_robot_turned_against_its_commands():
     """estimate_mismatch: on an arc the calibrated curve gives for the actual speed ratio, it
     recovers d exactly; the simulated roach told to walk straight with its motors at 1.06 and

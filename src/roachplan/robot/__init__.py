@@ -86,6 +86,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "observed_hold": "._lookahead",
         "look_ahead": "._lookahead",
         "estimate_mismatch": "._lookahead",
+        "pooled_mismatch": "._lookahead",
         "remaining_path": "._lookahead",
         "Comparison": "._compare",
         "FitConfig": "._compare",
@@ -139,6 +140,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._lookahead import LookAheadConfig as LookAheadConfig
     from ._lookahead import LookAheadRunner as LookAheadRunner
     from ._lookahead import estimate_mismatch as estimate_mismatch
+    from ._lookahead import pooled_mismatch as pooled_mismatch
     from ._lookahead import look_ahead as look_ahead
     from ._lookahead import look_ahead_reliability as look_ahead_reliability
     from ._lookahead import observed_hold as observed_hold

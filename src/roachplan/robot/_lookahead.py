@@ -19,8 +19,10 @@ speeds: experiments.draw, as choose's rollouts; robot_draws), round the scene's 
 scene naming a fitted robot file looks ahead with the fit. Driven one at a time, a rollout ends
 at its first failure; in lockstep (MuJoCo) the safety checks read its frames afterwards.
 LookAheadRunner also estimates the robot's motor mismatch from its last few seconds (how it
-turned against how it was told to: estimate_mismatch) and its rollouts drive with it, so a
-robot whose motors differ from the model's is simulated drifting as it does.
+turned against how it was told to: estimate_mismatch), pools each such window's estimate with
+the run's before it (pooled_mismatch: a motor's mismatch holds for the run), and its rollouts
+drive with that, so a robot whose motors differ from the model's is simulated drifting as it
+does.
 What it does not model yet: the pose's latency (the pose is taken as now).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from
@@ -83,9 +85,10 @@ class LookAheadConfig:
     as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead in
     an engine other than the scene's is less faithful to it (docs: the engines' fidelity)."""
     mismatch_window: float = s(3.0, non_negative("s"))
-    """Seconds of the robot's latest poses and commands its motors' mismatch is estimated from
-    (estimate_mismatch): each look-ahead's rollouts then drive with it, on top of their draws
-    (a robot that drifts is simulated drifting). 0: not estimated."""
+    """Seconds of the robot's latest poses and commands each look-ahead estimates its motors'
+    mismatch from (estimate_mismatch), pooled with the windows before it (pooled_mismatch):
+    its rollouts then drive with it, on top of their draws (a robot that drifts is simulated
+    drifting). 0: not estimated."""
     robot_draws: bool = s(True, boolean())
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
@@ -177,7 +180,7 @@ def estimate_mismatch(
     walking = (commands[:, 1] > 0) & (commands[:, 2] > 0)
     if not walking.any():
         return None
-    walked = float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
+    walked = walked_distance(poses)
     if walked < MIN_WALK:
         return None
     turned = float(np.sum(np.remainder(np.diff(poses[:, 3]) + math.pi, 2 * math.pi) - math.pi))
@@ -185,6 +188,26 @@ def estimate_mismatch(
     actual = math.copysign(math.log(curve.ratio_for(abs(kappa), max_ratio)), kappa)
     asked = float(np.mean(np.log(commands[walking, 2] / commands[walking, 1])))
     return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5))
+
+
+def walked_distance(poses: np.ndarray) -> float:
+    """Distance the body centre walked over poses ((K, 4): t [s], x, y [m], yaw [rad]) [m]."""
+    poses = np.asarray(poses, dtype=float)
+    if len(poses) < 2:
+        return 0.0
+    return float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
+
+
+def pooled_mismatch(estimates) -> float | None:
+    """The motors' mismatch from every window estimated so far: estimates ((d, walked [m])
+    each, a window's estimate_mismatch and the distance walked in it), their mean weighted by
+    the distance; None without any. A motor's mismatch holds for the whole run, and one 3 s
+    window's estimate scatters (0.06-0.15 for a twin's 0.12 on the rough bridge): the pool's
+    scatter falls with the windows it holds."""
+    weights = sum(w for _, w in estimates)
+    if not estimates or weights <= 0:
+        return None
+    return float(sum(d * w for d, w in estimates) / weights)
 
 
 def _drawn_worlds(
@@ -369,6 +392,8 @@ class LookAheadRunner:
         self._commands: collections.deque = collections.deque()
         """(t [s, monotonic], left, right [rad/s]) of the commands within it (stop: 0, 0)."""
         self._curve = (world.scene.driver.turning, world.scene.driver.max_ratio)
+        self._estimates: list[tuple[float, float]] = []
+        """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch)."""
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._host = Host(world, name="roachplan look-ahead")
@@ -436,9 +461,11 @@ class LookAheadRunner:
             if pose is None:
                 continue
             path, spins, cfg, safety, smap = self._args
-            mismatch = (
-                estimate_mismatch(poses, commands, *self._curve) if cfg.mismatch_window else None
-            )
+            if cfg.mismatch_window:  # (this window's estimate, pooled with the run's before it)
+                window = estimate_mismatch(poses, commands, *self._curve)
+                if window is not None:
+                    self._estimates.append((window, walked_distance(poses)))
+            mismatch = pooled_mismatch(self._estimates)
             seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
             t = time.monotonic()
             child = Child(
