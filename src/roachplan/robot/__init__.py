@@ -140,10 +140,10 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._lookahead import LookAheadConfig as LookAheadConfig
     from ._lookahead import LookAheadRunner as LookAheadRunner
     from ._lookahead import estimate_mismatch as estimate_mismatch
-    from ._lookahead import pooled_mismatch as pooled_mismatch
     from ._lookahead import look_ahead as look_ahead
     from ._lookahead import look_ahead_reliability as look_ahead_reliability
     from ._lookahead import observed_hold as observed_hold
+    from ._lookahead import pooled_mismatch as pooled_mismatch
     from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent
@@ -174,11 +174,11 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import RunRecorder as RunRecorder
     from ._record import read_run as read_run
     from ._run import AVOID_RADIUS as AVOID_RADIUS
+    from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
     from ._run import drive_robot as drive_robot
     from ._run import plan_clear_of as plan_clear_of
-    from ._run import START_REACH as START_REACH
     from ._run import plan_start as plan_start
     from ._run import predict as predict
     from ._run import watch_ahead as watch_ahead
