@@ -247,7 +247,9 @@ def _compare_fit_replay(log, tmp_path) -> None:
     assert r.returncode == 0, r.stderr
     c = json.loads(r.stdout)
     assert c["robot_outcome"] == "signal" and len(c["windows"]["t"]) >= 2
-    assert c["open_loop"]["end_m"] < 1.0 and c["closed_loop"]["end_m"] >= 0
+    # An open-loop replay of a few seconds scatters (0.22-1.08 m over 5 runs of this test on
+    # a 2-core VM, the robot walking under 1 m): a replay in a wrong frame would end metres off.
+    assert c["open_loop"]["end_m"] < 1.5 and c["closed_loop"]["end_m"] >= 0
     # Its look-aheads scored against what happened: those the run outlived held.
     assert c["look_ahead"] is not None and c["look_ahead"]["scored"] >= 1
     r = roachplan("compare", str(log), "--latency", "0.04")
