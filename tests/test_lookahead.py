@@ -208,7 +208,10 @@ def test_a_re_plan_starts_from_the_nearest_pose_the_planner_takes(bridge):
     here = tuple(line[edge].tolist())
     start, moved = plan_start(world, here)
     assert 0 < moved <= START_REACH and math.dist(start[:2], here[:2]) == pytest.approx(moved)
-    assert check_states(hf, fp, validity, np.array([start])).valid[0]
+    moved_to = check_states(hf, fp, validity, np.array([start]))
+    assert moved_to.valid[0]  # ... on the bridge it stood on, not the floor below its edge:
+    ground = float(hf.sample(np.array(here[:2])))
+    assert abs(float(moved_to.z_surface[0]) - ground) <= validity.body_band
     from roachplan.experiments import plan
 
     assert plan(world, seed=0, start=start).found

@@ -203,6 +203,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
     robot_settings(args, None)  # (every flag refused before the scene loads)
 
     from roachplan.planning import PlanningError
+    from roachplan.processes import ChildError
     from roachplan.robot import RobotError, clearance, drive_robot, open_link, open_pose_source
     from roachplan.scenes import build_world, load_scene
 
@@ -282,7 +283,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
                 run = drive_robot(
                     world, settings, ready=ready, avoid=avoid, source=source, link=link
                 )
-            except (RobotError, PlanningError) as exc:  # (no plan from where it stands)
+            except (RobotError, PlanningError, ChildError) as exc:  # (no plan from there)
                 held.pop()  # (the held leg is the run's last: `run`)
                 replan_error = str(exc)
                 print(

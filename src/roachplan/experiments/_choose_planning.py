@@ -97,8 +97,10 @@ def _via_pose(world, region) -> tuple[float, float, float] | None:
 def _plan_via(world, via, *, seed: int, deadline: float | None = None) -> PlanResult | None:
     """start -> via -> goal as one path (each leg planned with this seed, within what is left
     of the planning budget at `deadline`, time.monotonic()), or None. The two legs plan at
-    once, in two children: each is the plan it is alone (a plan stops on its iteration budget),
-    and the pair takes the time of the longer (choose's workers wait for the candidates)."""
+    once, in two children, so the pair takes about the wall time of the longer (choose's
+    workers wait for the candidates); each is the plan it is alone (a plan stops on its
+    iteration budget), unless one hits its time limit, which two on a busy core reach sooner.
+    Its plan_time is the sum of the legs'."""
     sc = world.scene
     legs = []
     try:
@@ -106,11 +108,14 @@ def _plan_via(world, via, *, seed: int, deadline: float | None = None) -> PlanRe
             legs.append(
                 start_plan(world, seed=seed, start=a, goal=b, planner=_within(sc.planner, deadline))
             )
-        first, second = (leg.result() for leg in legs)
+        first = legs[0].result()
+        if not first.found:
+            return None  # (the second leg is cancelled below)
+        second = legs[1].result()
     finally:
-        for leg in legs:  # (on an error, or Ctrl-C, while one still plans)
+        for leg in legs:  # (the second when the first found none; on an error, or Ctrl-C)
             leg.cancel()
-    if not (first.found and second.found):
+    if not second.found:
         return None
     return dataclass_replace(
         first,

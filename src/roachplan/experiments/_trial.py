@@ -108,7 +108,8 @@ def start_plan(
     planner: PlannerConfig | None = None,
 ) -> Child[PlanResult]:
     """plan()'s planning child, started and not waited for (planning.start_plan): its result()
-    is what plan() returns; plans started together plan on as many cores."""
+    is what plan() returns; plans started together plan on as many cores, each the plan it is
+    alone unless it hits its time limit."""
     return planning_start_plan(
         world.heightfield,
         world.footprint,
@@ -158,8 +159,9 @@ def plan_many(
     cfg = planner or world.scene.planner
     deadline = None if budget is None else time.monotonic() + budget
     # While more than one plan is wanted, attempt k + 1 plans beside attempt k, in a second
-    # child: each is the plan it is alone (a plan stops on its iteration budget), taken in
-    # order; one not needed is cancelled.
+    # child: each is the plan it is alone (a plan stops on its iteration budget, unless it hits
+    # its time limit), taken in order; one not needed (or left when the budget is spent) is
+    # cancelled.
     children: dict[int, Child[PlanResult]] = {}
     try:
         for k in range(attempts):

@@ -328,7 +328,9 @@ def start_plan(
     """plan_path's child process, started and not waited for: its result() is what plan_path
     returns (PlanningError for an invalid start or goal is raised here, before any child).
     Plans started together run on as many cores, each the same plan as alone: a plan stops on
-    its iteration budget, not the clock, and each child is a fresh fork of this process."""
+    its iteration budget, and each child is a fresh fork of this process; unless it hits its
+    time limit (cfg.time_limit: such plans are not reproducible), which plans sharing a busy
+    core reach sooner."""
     vcfg = cfg.validity
     (xa, ya), (xb, yb) = bounds
     for label, pose in (("start", start), ("goal", goal)):

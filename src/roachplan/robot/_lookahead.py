@@ -20,8 +20,8 @@ scene naming a fitted robot file looks ahead with the fit. Driven one at a time,
 at its first failure; in lockstep (MuJoCo) the safety checks read its frames afterwards.
 LookAheadRunner also estimates the robot's motor mismatch from its last few seconds (how it
 turned against how it was told to: estimate_mismatch), pools each such window's estimate with
-the run's before it (pooled_mismatch: a motor's mismatch holds for the run), and its rollouts
-drive with that, so a robot whose motors differ from the model's is simulated drifting as it
+the leg's before it (pooled_mismatch: a motor's mismatch holds for the leg; a re-planned leg's
+runner starts afresh), and its rollouts drive with that, so a robot whose motors differ from the model's is simulated drifting as it
 does.
 What it does not model yet: the pose's latency (the pose is taken as now).
 
@@ -86,7 +86,7 @@ class LookAheadConfig:
     an engine other than the scene's is less faithful to it (docs: the engines' fidelity)."""
     mismatch_window: float = s(3.0, non_negative("s"))
     """Seconds of the robot's latest poses and commands each look-ahead estimates its motors'
-    mismatch from (estimate_mismatch), pooled with the windows before it (pooled_mismatch):
+    mismatch from (estimate_mismatch), pooled with the leg's windows before it (pooled_mismatch):
     its rollouts then drive with it, on top of their draws (a robot that drifts is simulated
     drifting). 0: not estimated."""
     robot_draws: bool = s(True, boolean())
@@ -201,9 +201,10 @@ def walked_distance(poses: np.ndarray) -> float:
 def pooled_mismatch(estimates) -> float | None:
     """The motors' mismatch from every window estimated so far: estimates ((d, walked [m])
     each, a window's estimate_mismatch and the distance walked in it), their mean weighted by
-    the distance; None without any. A motor's mismatch holds for the whole run, and one 3 s
-    window's estimate scatters (0.06-0.15 for a twin's 0.12 on the rough bridge): the pool's
-    scatter falls with the windows it holds."""
+    the distance; None without any. A motor's mismatch holds for the whole leg, and one 3 s
+    window's estimate scatters (0.06-0.15 for a twin's 0.12 on the rough bridge): the pool is
+    steadier than any one window. (Windows overlap when look-aheads come faster than the
+    window, so a stretch walked counts in several: a running mean, not independent samples.)"""
     weights = sum(w for _, w in estimates)
     if not estimates or weights <= 0:
         return None
@@ -461,7 +462,7 @@ class LookAheadRunner:
             if pose is None:
                 continue
             path, spins, cfg, safety, smap = self._args
-            if cfg.mismatch_window:  # (this window's estimate, pooled with the run's before it)
+            if cfg.mismatch_window:  # (this window's estimate, pooled with the leg's before it)
                 window = estimate_mismatch(poses, commands, *self._curve)
                 if window is not None:
                     self._estimates.append((window, walked_distance(poses)))

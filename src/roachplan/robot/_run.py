@@ -95,8 +95,10 @@ def plan_start(
     """(the pose nearest `here` (x, y [m], yaw [rad], world frame) that the planner takes as a
     start, how far it lies from here [m]): here itself when the planner takes it; else the
     first valid pose of rings every 5 mm out to `reach` (24 directions each), the heading
-    kept or turned by up to 20 deg, the nearest ring first and the least turn. RobotError,
-    saying what is wrong where the robot stands, when none within reach is valid."""
+    kept or turned by up to 20 deg, the nearest ring first and the least turn, on the surface
+    the robot stands on (its support plane within the planner's body_band of the ground under
+    the robot: not the floor below a bridge it is on). RobotError, saying what is wrong where
+    the robot stands, when none within reach is valid."""
     from roachplan.planning import check_states, describe_state
 
     hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
@@ -105,13 +107,17 @@ def plan_start(
     inside = xa <= x <= xb and ya <= y <= yb
     if inside and check_states(hf, fp, validity, np.array([here], dtype=float)).valid[0]:
         return here, 0.0
+    ground = float(hf.sample(np.array([x, y]))) if inside else math.nan
     angles = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
     for r in np.arange(0.005, reach + 1e-9, 0.005):
         for turn in _START_TURNS:
             poses = np.column_stack(
                 [x + r * np.cos(angles), y + r * np.sin(angles), np.full(24, yaw + turn)]
             )
-            ok = check_states(hf, fp, validity, poses).valid
+            checked = check_states(hf, fp, validity, poses)
+            ok = checked.valid.copy()
+            if math.isfinite(ground):  # (the same surface: not a floor 5 cm below the edge)
+                ok &= np.abs(checked.z_surface - ground) <= validity.body_band
             ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb)
             ok &= (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
             if ok.any():
@@ -218,12 +224,13 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             sample.position, sample.quat, scene.start, start_height(world, scene.start)
         )
         p, q = transform.apply(sample.position, sample.quat)
-        here = (p[0], p[1], yaw_of(q))
+        stands = (p[0], p[1], yaw_of(q))  # (where the robot stands: world frame)
+        here = stands  # (the plan's start: where it stands, or the nearest pose planned from)
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
-            here, moved = plan_start(world, here)
+            here, moved = plan_start(world, stands)
             if moved > 0:
                 _log.warning(
                     "the planner refuses the robot's pose as a start: planning from "
@@ -236,8 +243,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             kept = None if math.isinf(clear) else clear
             if not plan.found:
                 raise RobotError(
-                    f"no plan from where the robot stands ({here[0]:.3f}, {here[1]:.3f}, "
-                    f"{math.degrees(here[2]):.0f} deg): {plan.message}"
+                    f"no plan from where the robot stands ({stands[0]:.3f}, {stands[1]:.3f}, "
+                    f"{math.degrees(stands[2]):.0f} deg): {plan.message}"
                 )
         path, spins = np.asarray(plan.path_xyz, dtype=float), tuple(plan.spins)
         if settings.log is not None:
@@ -256,6 +263,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     "start": list(here),
                     # (how far that start lies from where the robot stood [m]: plan_start)
                     "start_moved": moved,
+                    "robot_pose": list(stands),
                     "goal": list(scene.goal),
                     # (a re-plan's: where the look-ahead's rollouts failed, and how far its
                     # path keeps from them [m]; null: none to keep clear of)
