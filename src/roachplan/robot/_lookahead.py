@@ -174,28 +174,29 @@ def estimate_mismatch(
     difference is ln((1 - d) / (1 + d)). None when it walked under MIN_WALK or was not told to
     walk. Small turns, where the curve is near linear in the log ratio, estimate best (the
     tracking driver's: it holds a drifting robot on its path by a steady counter-turn)."""
+    estimate = _window_mismatch(poses, commands, curve, max_ratio)
+    return None if estimate is None else estimate[0]
+
+
+def _window_mismatch(
+    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
+) -> tuple[float, float] | None:
+    """(estimate_mismatch's d, the distance the body centre walked over the window [m]), or
+    None where estimate_mismatch is None: the pair pooled_mismatch weighs."""
     poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
     if len(poses) < 2 or not len(commands):
         return None
     walking = (commands[:, 1] > 0) & (commands[:, 2] > 0)
     if not walking.any():
         return None
-    walked = walked_distance(poses)
+    walked = float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
     if walked < MIN_WALK:
         return None
     turned = float(np.sum(np.remainder(np.diff(poses[:, 3]) + math.pi, 2 * math.pi) - math.pi))
     kappa = turned / walked  # [1/m], positive to the left (the right side faster)
     actual = math.copysign(math.log(curve.ratio_for(abs(kappa), max_ratio)), kappa)
     asked = float(np.mean(np.log(commands[walking, 2] / commands[walking, 1])))
-    return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5))
-
-
-def walked_distance(poses: np.ndarray) -> float:
-    """Distance the body centre walked over poses ((K, 4): t [s], x, y [m], yaw [rad]) [m]."""
-    poses = np.asarray(poses, dtype=float)
-    if len(poses) < 2:
-        return 0.0
-    return float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
+    return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5)), walked
 
 
 def pooled_mismatch(estimates) -> float | None:
@@ -463,9 +464,9 @@ class LookAheadRunner:
                 continue
             path, spins, cfg, safety, smap = self._args
             if cfg.mismatch_window:  # (this window's estimate, pooled with the leg's before it)
-                window = estimate_mismatch(poses, commands, *self._curve)
+                window = _window_mismatch(poses, commands, *self._curve)
                 if window is not None:
-                    self._estimates.append((window, walked_distance(poses)))
+                    self._estimates.append(window)
             mismatch = pooled_mismatch(self._estimates)
             seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
             t = time.monotonic()

@@ -108,21 +108,26 @@ def plan_start(
     if inside and check_states(hf, fp, validity, np.array([here], dtype=float)).valid[0]:
         return here, 0.0
     ground = float(hf.sample(np.array([x, y]))) if inside else math.nan
-    angles = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
-    for r in np.arange(0.005, reach + 1e-9, 0.005):
-        for turn in _START_TURNS:
-            poses = np.column_stack(
-                [x + r * np.cos(angles), y + r * np.sin(angles), np.full(24, yaw + turn)]
-            )
-            checked = check_states(hf, fp, validity, poses)
-            ok = checked.valid.copy()
-            if math.isfinite(ground):  # (the same surface: not a floor 5 cm below the edge)
-                ok &= np.abs(checked.z_surface - ground) <= validity.body_band
-            ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb)
-            ok &= (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
-            if ok.any():
-                px, py, pyaw = poses[int(np.argmax(ok))].tolist()
-                return (px, py, pyaw), float(r)
+    # Every candidate in the order tried (ring, then turn, then direction), checked at once.
+    r, turn, angle = (
+        a.ravel()
+        for a in np.meshgrid(
+            np.arange(0.005, reach + 1e-9, 0.005),
+            _START_TURNS,
+            np.linspace(0.0, 2 * math.pi, 24, endpoint=False),
+            indexing="ij",
+        )
+    )
+    poses = np.column_stack([x + r * np.cos(angle), y + r * np.sin(angle), yaw + turn])
+    checked = check_states(hf, fp, validity, poses)
+    ok = checked.valid.copy()
+    if math.isfinite(ground):  # (the same surface: not a floor 5 cm below the edge)
+        ok &= np.abs(checked.z_surface - ground) <= validity.body_band
+    ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb) & (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
+    if ok.any():
+        first = int(np.argmax(ok))
+        px, py, pyaw = poses[first].tolist()
+        return (px, py, pyaw), float(r[first])
     why = describe_state(hf, fp, validity, np.array(here)) if inside else "outside the area"
     raise RobotError(
         f"no plan from where the robot stands ({x:.3f}, {y:.3f}, {math.degrees(yaw):.0f} deg): "
