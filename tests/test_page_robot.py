@@ -67,11 +67,15 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
                 type_into(page, "Source address", f"127.0.0.1:{ready['natnet_port']}")
                 type_into(page, "Sink address", f"127.0.0.1:{ready['command_port']}")
                 tick(page, "Look ahead")
+                # (the page, the browser, the look-ahead and the twin share 2 cores here: a
+                # stream 200 ms late, the default's stop, is this machine's, not the page's)
+                type_into(page, "Max pose age [ms]", "600")
                 page.get_by_role("button", name="Route from robot").click()
                 page.get_by_text(re.compile(r"The robot is held: press")).first.wait_for(
                     timeout=120_000
                 )
                 assert app.core.robot is not None and app.core.robot.loop.running
+                assert app.core.robot.loop.cfg.safety.max_pose_age == 0.6  # (the box's, in s)
                 held = control("commands")["commands"]
                 assert held and all(c[4] for c in held)  # nothing moves before Go
                 page.screenshot(path=artifacts / "robot-01-held.png")

@@ -59,12 +59,17 @@ class RobotForm:
     """Look ahead of the robot while it drives (robot.watch_ahead)."""
     guard: float | None = None
     """Hold the robot when a look-ahead's chance falls under this [0, 1] (None: never)."""
+    max_pose_age: float = 0.2
+    """The loop stops the robot when its newest pose is older than this [s]
+    (SafetyConfig.max_pose_age)."""
 
 
 class RobotPanel:
     """The Robot folder's controls."""
 
     def __init__(self, gui, put) -> None:
+        from roachplan.robot import SafetyConfig
+
         with gui.add_folder("Robot"):
             self.source = gui.add_dropdown(
                 "Pose source",
@@ -110,6 +115,15 @@ class RobotPanel:
                 hint="With Look ahead: hold the robot when the chance falls under this (0: "
                 "never); Route from robot then re-plans from where it stands",
             )
+            self.max_pose_age = gui.add_number(
+                "Max pose age [ms]",
+                round(SafetyConfig().max_pose_age * 1000),
+                min=1,
+                max=10_000,
+                step=10,
+                hint="Stop the robot when the newest pose is older than this: the tracker lost "
+                "it or the stream stopped (raise it for a slow or bursty stream)",
+            )
             self.plan_button = gui.add_button(
                 "Route from robot", hint="Plan from where the robot stands; it is held until Go"
             )
@@ -136,7 +150,13 @@ class RobotPanel:
         """The settings as typed, checked by the robot's validators; RobotError naming the box
         and what it accepts."""
         from roachplan import SettingError, setting_problem
-        from roachplan.robot import FrameTransform, NatNetSettings, RobotError, RobotSettings
+        from roachplan.robot import (
+            FrameTransform,
+            NatNetSettings,
+            RobotError,
+            RobotSettings,
+            SafetyConfig,
+        )
         from roachplan.robot._checks import parse_address
 
         def address(box, name: str) -> tuple[str, int]:
@@ -185,6 +205,12 @@ class RobotPanel:
         why = setting_problem(RobotSettings, "guard", guard)
         if why is not None:
             raise RobotError(f"Guard {self.guard.value!r}: {why}")
+        max_pose_age = float(self.max_pose_age.value) / 1000
+        why = setting_problem(SafetyConfig, "max_pose_age", max_pose_age)
+        if why is not None:
+            raise RobotError(
+                f"Max pose age [ms] {self.max_pose_age.value!r} ({max_pose_age:g} s): {why}"
+            )
         return RobotForm(
             source=source,
             source_settings=source_settings,
@@ -193,6 +219,7 @@ class RobotPanel:
             transform=transform,
             look_ahead=bool(self.look_ahead.value),
             guard=guard if guard > 0 else None,
+            max_pose_age=max_pose_age,
         )
 
     def show_transform(self, transform: FrameTransform) -> None:
@@ -292,6 +319,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
     from roachplan.robot import (
         LoopConfig,
         RobotLoop,
+        SafetyConfig,
         SafetyMap,
         measure_transform,
         open_link,
@@ -337,7 +365,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
             safety_map=SafetyMap.from_world(app.world),
             driver=app.world.scene.driver,
             max_motor_speed=app.world.robot.max_motor_speed,
-            cfg=LoopConfig(),
+            cfg=LoopConfig(safety=SafetyConfig(max_pose_age=form.max_pose_age)),
             recorder=recorder,
             listeners=[events.put],
         )
