@@ -37,6 +37,10 @@ MOCAP = ["--latency", "0.04", "--noise", "0.002"]
 """The twin's motion capture: 40 ms late, 2 mm of noise (as bench_robot's)."""
 
 
+SETTINGS = ("unguarded", "guarded", "look-ahead only", "guarded+fit")
+"""The settings a run may be made in (main's --settings)."""
+
+
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     """The 95 % Wilson score interval of k successes in n."""
     if n == 0:
@@ -79,6 +83,7 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     guarded: "guarded", "guarded+fit"): the robot, on `scene`, against a fresh twin of
     args.scene with the hidden parameters; the command's JSON summary, with the wall time."""
     guarded = setting != "unguarded"
+    drift = ["--guard-drift", "none"] if setting == "look-ahead only" else []
     hidden = [
         "--friction", str(args.friction),
         "--motor-mismatch", str(args.motor_mismatch),
@@ -94,7 +99,7 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
         ready = json.loads(twin.stdout.readline())
         flags = [
             "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
-            "--look-ahead-engine", args.look_ahead_engine,
+            "--look-ahead-engine", args.look_ahead_engine, *drift,
         ]  # fmt: skip
         log = tmp / f"{setting}-{k}.mcap"
         t = time.monotonic()
@@ -131,6 +136,20 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     return {**json.loads(ran.stdout), "wall": wall}
 
 
+def held_by(r: dict) -> str:
+    """How the guard held a run's legs before its last, each (its reason and the radius of the
+    next plan's arcs), e.g. "drift 0.13 m, lookahead 0.19 m"; "-" when none was held."""
+    legs = r.get("held", [])
+    radii = [h.get("turning_radius") for h in legs[1:]] + [r.get("turning_radius")]
+    return (
+        ", ".join(
+            f"{h.get('reason', '?')} -> {'-' if radius is None else f'{radius:.2f} m'}"
+            for h, radius in zip(legs, radii, strict=True)
+        )
+        or "-"
+    )
+
+
 def calibration(tmp: Path, setting: str) -> dict | None:
     """The look-aheads of a setting's logs (every leg's) scored against what happened
     (robot.look_ahead_reliability), or None without any."""
@@ -161,6 +180,13 @@ def main() -> None:
         help="also guarded runs whose scene names a robot file with the twin's hidden "
         "parameters (the best a fit could give): the look-ahead then simulates that robot",
     )
+    ap.add_argument(
+        "--settings",
+        default="unguarded,guarded",
+        help="the settings run, comma-separated, of unguarded, guarded, look-ahead only "
+        "(guarded with --guard-drift none: only the look-ahead's chance holds it), guarded+fit "
+        "(as --fitted adds)",
+    )
     ap.add_argument("--friction", type=float, default=0.7, help="hidden: ground friction")
     ap.add_argument(
         "--motor-mismatch", type=float, default=0.06, help="hidden: L x (1+d), R x (1-d)"
@@ -174,13 +200,20 @@ def main() -> None:
         f"{args.look_ahead_engine}",
         flush=True,
     )
-    names = ("unguarded", "guarded", "guarded+fit") if args.fitted else ("unguarded", "guarded")
+    names = tuple(n.strip() for n in args.settings.split(","))
+    if args.fitted and "guarded+fit" not in names:
+        names = (*names, "guarded+fit")
+    unknown = set(names) - set(SETTINGS)
+    if unknown:
+        ap.error(
+            f"--settings: {', '.join(sorted(unknown))}: expected some of {', '.join(SETTINGS)}"
+        )
     results: dict[str, list[dict]] = {name: [] for name in names}
     with TemporaryDirectory() as scratch:
         tmp = args.keep or scratch
         Path(tmp).mkdir(parents=True, exist_ok=True)
         scenes = {name: args.scene for name in names}
-        if args.fitted:
+        if "guarded+fit" in names:
             scenes["guarded+fit"] = str(fitted_scene(args, Path(tmp)))
         for k in range(args.runs):  # (the settings interleaved: the machine's load falls alike)
             for name, runs in results.items():
@@ -189,6 +222,7 @@ def main() -> None:
                 late = r.get("late", 0) / max(r.get("periods", 0) or 1, 1)
                 print(
                     f"{name:11s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
+                    f"({held_by(r)}) "
                     f"drive {r.get('drive_time') or 0:5.1f} s, late {100 * late:4.1f} %, "
                     f"lowest P(hold) {r.get('lowest_p_hold')}; {r.get('detail', '')[:90]}",
                     flush=True,
@@ -220,6 +254,8 @@ def main() -> None:
             if b["scored"]
         )
         print(f"{name} look-aheads: {ahead['scored']} scored, Brier {ahead['brier']:.3f}; {bins}")
+    if "unguarded" not in results:
+        return
     unguarded = results["unguarded"]
     stopped = sum(not r.get("success") for r in unguarded) / max(len(unguarded), 1)
     print(

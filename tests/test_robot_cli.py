@@ -134,6 +134,15 @@ def wait_for(stream, text: str, timeout: float) -> str:
         (["robot", "--look-ahead-draws", "0"], "--look-ahead-draws 0: expected an integer from"),
         (["robot", "--look-ahead", "--guard", "2"], "--guard 2: expected a number from 0 to 1"),
         (["robot", "--guard", "0.5"], "--guard holds the robot on what the look-ahead says"),
+        (["robot", "--guard-drift", "0.05"], "--guard-drift is a setting of the guard; add"),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "0.2"],
+            "--guard-drift 0.2: expected a number under the loop's max_deviation (0.15 m)",
+        ),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "near"],
+            "--guard-drift near: expected a distance [m] or 'none'",
+        ),
         (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
         (
             ["robot", "--look-ahead", "--look-ahead-engine", "ode"],
@@ -323,6 +332,39 @@ def test_a_robot_commands_bad_flag_loads_nothing_heavy():
     )
     assert done.returncode == 0 and done.stdout.strip() == "[]", (done.stdout, done.stderr)
     assert len(done.stderr.strip().splitlines()) == 5
+
+
+def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_arcs_it_can_turn(
+    tmp_path,
+):
+    """--guard-drift: the guard also holds a robot that drifts that far from its path (here
+    2 cm: the twin's tracking wanders that far within seconds, while every look-ahead sees a
+    good chance: --guard 0 holds on none), before the loop's own deviation stop; the command re-plans from
+    where it stands with the scene's arcs widened by what the robot showed of its turning curve
+    (turning_shown), and the legs' logs say both."""
+    from roachplan.robot import read_run, replan_radius
+    from roachplan.scenes import load_scene
+
+    log = tmp_path / "run.mcap"
+    with twin(*MOCAP, "--friction", "0.5") as (ready, _control):
+        proc = robot(
+            ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
+            "--look-ahead", "--look-ahead-draws", "2", "--look-ahead-horizon", "1",
+            "--guard", "0", "--guard-drift", "0.02", "--replans", "1", "--json",
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=240)
+    summary = json.loads(out)
+    assert len(summary["held"]) == 1, err
+    held = summary["held"][0]
+    assert held["reason"] == "drift" and "guard drift 0.02 m" in held["detail"], held
+    assert "off its path" in held["detail"]
+    radius = load_scene("double_bridge").planner.turning_radius
+    first, second = read_run(log), read_run(tmp_path / "run-2.mcap")
+    assert first.plan["turning_radius"] == pytest.approx(radius)
+    assert second.plan["turning_radius"] == pytest.approx(replan_radius(radius, held["turning"]))
+    assert summary["turning_radius"] == pytest.approx(second.plan["turning_radius"])
+    if held["turning"] is not None and held["turning"] < 1:
+        assert second.plan["turning_radius"] > radius and "arcs of" in err
 
 
 def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tmp_path):

@@ -796,6 +796,14 @@ def _add_robot_parser(sub) -> None:
         "at once)",
     )
     p.add_argument(
+        "--guard-drift",
+        default=None,
+        metavar="M",
+        help="with --guard: also hold the robot and re-plan once it drifts M from its path, "
+        "before the loop stops it at --max-deviation (default 0.08 m; 'none': only the "
+        "look-ahead's chance holds it)",
+    )
+    p.add_argument(
         "--replans",
         type=int,
         default=2,

@@ -102,10 +102,10 @@ def _run_log_written(head: bytes) -> bool:
 
 def robot_settings(args: argparse.Namespace, log: Path | None):
     """The RobotSettings of `roachplan robot`'s flags."""
+    from roachplan import SettingError, setting_problem
     from roachplan.robot import LookAheadConfig, LoopConfig, RobotSettings, SafetyConfig
 
     if args.source == "natnet":
-        from roachplan import setting_problem
         from roachplan.robot import NatNetSettings
 
         rigid = int(args.rigid_body) if args.rigid_body.isdigit() else args.rigid_body
@@ -150,6 +150,37 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         if getattr(args, f"robot_{k}") is not None
     }
     loop = LoopConfig(rate=args.robot_rate, safety=SafetyConfig(**safety))
+    ahead = _look_ahead_flags(args)
+    try:
+        return RobotSettings(
+            source=args.source,
+            source_settings=source_settings,
+            link=args.link,
+            link_settings=link_settings,
+            transform=_transform(args.transform, "--transform"),
+            seed=args.seed,
+            loop=loop,
+            log=log,
+            predict=not args.no_predict,
+            first_pose_timeout=args.robot_first_pose_timeout,
+            look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
+            guard=args.guard,
+            **_guard_drift(args),
+            **(
+                {}
+                if args.look_ahead_period is None
+                else {"look_ahead_period": args.look_ahead_period}
+            ),
+        )
+    except SettingError as exc:
+        if exc.key == "guard_drift":  # (its one validator, cross-checked with the loop's)
+            raise refused("--guard-drift", args.guard_drift, exc.expected) from None
+        raise
+
+
+def _look_ahead_flags(args: argparse.Namespace) -> dict:
+    """LookAheadConfig's settings from the --look-ahead-* flags (those given); UsageError for
+    one of them, or --guard, without --look-ahead."""
     names = {"draws": "draws", "horizon": "horizon", "noise": "position_sd", "engine": "engine"}
     ahead = {
         field: getattr(args, f"look_ahead_{k}")
@@ -165,21 +196,23 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
         raise UsageError(f"{given[0]} is a setting of the look-ahead; add --look-ahead")
     if args.guard is not None and not args.look_ahead:
         raise UsageError("--guard holds the robot on what the look-ahead says; add --look-ahead")
-    return RobotSettings(
-        source=args.source,
-        source_settings=source_settings,
-        link=args.link,
-        link_settings=link_settings,
-        transform=_transform(args.transform, "--transform"),
-        seed=args.seed,
-        loop=loop,
-        log=log,
-        predict=not args.no_predict,
-        first_pose_timeout=args.robot_first_pose_timeout,
-        look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
-        guard=args.guard,
-        **({} if args.look_ahead_period is None else {"look_ahead_period": args.look_ahead_period}),
-    )
+    return ahead
+
+
+def _guard_drift(args: argparse.Namespace) -> dict:
+    """RobotSettings' guard_drift from --guard-drift (a distance [m] or 'none'), as a keyword;
+    none when the flag is absent (the setting's default)."""
+    if args.guard_drift is None:
+        return {}
+    if args.guard is None:
+        raise UsageError("--guard-drift is a setting of the guard; add --guard P")
+    text = args.guard_drift.strip().lower()
+    try:
+        return {"guard_drift": None if text == "none" else float(text)}
+    except ValueError:
+        raise refused(
+            "--guard-drift", args.guard_drift, "expected a distance [m] or 'none'"
+        ) from None
 
 
 def _ask_go(loop) -> bool:
@@ -204,7 +237,14 @@ def cmd_robot(args: argparse.Namespace) -> int:
 
     from roachplan.planning import PlanningError
     from roachplan.processes import ChildError
-    from roachplan.robot import RobotError, clearance, drive_robot, open_link, open_pose_source
+    from roachplan.robot import (
+        GUARD_HOLDS,
+        RobotError,
+        clearance,
+        drive_robot,
+        open_link,
+        open_pose_source,
+    )
     from roachplan.scenes import build_world, load_scene
 
     from ._scene_cli import scene_inputs
@@ -257,31 +297,32 @@ def cmd_robot(args: argparse.Namespace) -> int:
         run = drive_robot(world, settings, ready=ready, source=source, link=link)
         held = []  # the legs the guard ended: re-planned from where the robot stood
         replan_error = None  # (why the re-plan after the last hold failed)
-        while run.result.reason == "lookahead" and len(held) < args.replans:
+        shown = []  # (the share of its turning curve the robot turned at, each leg judged)
+        while run.result.reason in GUARD_HOLDS and len(held) < args.replans:
             held.append(run)
+            if run.turning is not None:
+                shown.append(run.turning)
+            radius, wider = _replan_arcs(world.scene.planner.turning_radius, shown)
             print(
-                f"roachplan: held by the look-ahead: {run.result.detail}; re-planning from where "
-                f"the robot stands (re-plan {len(held)} of at most {args.replans})",
+                f"roachplan: held by the guard: {run.result.detail}; re-planning from where "
+                f"the robot stands (re-plan {len(held)} of at most {args.replans}){wider}",
                 file=sys.stderr,
                 flush=True,
             )
-            log = settings.log
-            if log is not None:  # (each leg its own log, beside the first: RUN-2.mcap, ...)
-                log = check_output_file(
-                    log.with_name(f"{out.stem}-{len(held) + 1}{out.suffix}"),
-                    suffixes=(".mcap",),
-                    inputs=scene_inputs(scene),
-                    replaceable=_run_log_written,
-                    kind="a robot run log roachplan wrote",
-                    force=args.force,
-                )
+            log = _leg_log(args, scene, out, len(held) + 1) if settings.log is not None else None
             settings = dataclasses.replace(settings, transform=run.transform, log=log)
             # Steer clear of where the rollouts that held it failed (the guard's look-ahead: the
             # last one made); ready() says how far the new path keeps from them.
             avoid[:] = [(x, y) for x, y, _ in run.lookaheads[-1].failures] if run.lookaheads else []
             try:
                 run = drive_robot(
-                    world, settings, ready=ready, avoid=avoid, source=source, link=link
+                    world,
+                    settings,
+                    ready=ready,
+                    avoid=avoid,
+                    source=source,
+                    link=link,
+                    turning_radius=radius,
                 )
             except (RobotError, PlanningError, ChildError) as exc:  # (no plan from there)
                 held.pop()  # (the held leg is the run's last: `run`)
@@ -293,6 +334,34 @@ def cmd_robot(args: argparse.Namespace) -> int:
                 )
                 break
     return _report(args, scene.name, run, held, replan_error)
+
+
+def _replan_arcs(radius: float | None, shown: list[float]) -> tuple[float | None, str]:
+    """(the radius of a re-plan's arcs [m], what to tell of it): arcs the robot showed it can
+    turn, the scene's `radius` (None: a planner without arcs) over the least share of its
+    curve it turned at on any leg so far (`shown`; one that drifted wide widens every
+    re-plan after it)."""
+    from roachplan.robot import replan_radius
+
+    if radius is None or not shown:
+        return radius, ""
+    wider = replan_radius(radius, min(shown))
+    return wider, f"; arcs of {wider:.2f} m: it turned at {min(shown):.2f} of its curve"
+
+
+def _leg_log(args: argparse.Namespace, scene, out: Path, leg: int) -> Path:
+    """The log of a re-planned leg (leg >= 2), beside the first: RUN-2.mcap, ...; checked as
+    the first was (never an input, nor a file roachplan did not write unless --force)."""
+    from ._scene_cli import scene_inputs
+
+    return check_output_file(
+        out.with_name(f"{out.stem}-{leg}{out.suffix}"),
+        suffixes=(".mcap",),
+        inputs=scene_inputs(scene),
+        replaceable=_run_log_written,
+        kind="a robot run log roachplan wrote",
+        force=args.force,
+    )
 
 
 def _report(
@@ -321,12 +390,17 @@ def _report(
             {
                 "detail": h.result.detail,
                 "log": None if h.log is None else str(h.log),
+                "reason": h.result.reason,
                 "failures": [list(f) for f in h.lookaheads[-1].failures] if h.lookaheads else [],
+                "turning": h.turning,
+                "turning_radius": h.turning_radius,
             }
             for h in held
         ],
         "plan_seed": run.plan_seed,
         "clearance": run.clearance,
+        "turning": run.turning,
+        "turning_radius": run.turning_radius,
         "lookaheads": len(run.lookaheads),
         "lowest_p_hold": min((a.p_hold for a in run.lookaheads), default=None),
     }
@@ -336,7 +410,7 @@ def _report(
         drove = "" if summary["drive_time"] is None else f" after {summary['drive_time']:.2f} s"
         late = f"{r.late} of {r.periods} control periods late" if r.periods else "never drove"
         for h in held:
-            print(f"held by the look-ahead, re-planned: {h.result.detail} (wrote {h.log})")
+            print(f"held by the guard, re-planned: {h.result.detail} (wrote {h.log})")
         print(f"{r.reason}{drove}: {r.detail}\n{late}")
         if replan_error is not None:
             print(f"not re-planned: {replan_error}")

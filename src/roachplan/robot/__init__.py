@@ -74,6 +74,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "drive_robot": "._run",
         "plan_clear_of": "._run",
         "plan_start": "._run",
+        "replan_radius": "._run",
+        "GUARD_HOLDS": "._run",
+        "MIN_TURNING_SHOWN": "._run",
         "START_REACH": "._run",
         "clearance": "._run",
         "watch_ahead": "._run",
@@ -85,8 +88,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "look_ahead_reliability": "._lookahead",
         "observed_hold": "._lookahead",
         "look_ahead": "._lookahead",
-        "estimate_mismatch": "._lookahead",
-        "pooled_mismatch": "._lookahead",
+        "estimate_mismatch": "._estimate",
+        "pooled_mismatch": "._estimate",
+        "turning_shown": "._estimate",
         "remaining_path": "._lookahead",
         "Comparison": "._compare",
         "FitConfig": "._compare",
@@ -121,6 +125,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._config import LoopConfig as LoopConfig
     from ._config import RobotSettings as RobotSettings
     from ._errors import RobotError as RobotError
+    from ._estimate import estimate_mismatch as estimate_mismatch
+    from ._estimate import pooled_mismatch as pooled_mismatch
+    from ._estimate import turning_shown as turning_shown
     from ._frames import FRAME_SIZE as FRAME_SIZE
     from ._frames import CommandFrame as CommandFrame
     from ._frames import FrameReader as FrameReader
@@ -139,11 +146,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._lookahead import LookAhead as LookAhead
     from ._lookahead import LookAheadConfig as LookAheadConfig
     from ._lookahead import LookAheadRunner as LookAheadRunner
-    from ._lookahead import estimate_mismatch as estimate_mismatch
     from ._lookahead import look_ahead as look_ahead
     from ._lookahead import look_ahead_reliability as look_ahead_reliability
     from ._lookahead import observed_hold as observed_hold
-    from ._lookahead import pooled_mismatch as pooled_mismatch
     from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent
@@ -174,6 +179,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import RunRecorder as RunRecorder
     from ._record import read_run as read_run
     from ._run import AVOID_RADIUS as AVOID_RADIUS
+    from ._run import GUARD_HOLDS as GUARD_HOLDS
+    from ._run import MIN_TURNING_SHOWN as MIN_TURNING_SHOWN
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
@@ -181,6 +188,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import plan_clear_of as plan_clear_of
     from ._run import plan_start as plan_start
     from ._run import predict as predict
+    from ._run import replan_radius as replan_radius
     from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig
     from ._safety import SafetyMap as SafetyMap

@@ -58,6 +58,7 @@ from roachplan._settings import (
 from roachplan._settings import setting as s
 from roachplan.sim import ENGINES
 
+from ._estimate import pooled_mismatch, turning_shown, window_mismatch
 from ._safety import SafetyConfig, SafetyMap, check_pose
 from ._transform import yaw_of
 
@@ -156,60 +157,6 @@ def remaining_path(
     # waypoint i > k is row i - k of rest; a spin at waypoint k or before is behind the robot
     kept = tuple((int(i) - k, float(h)) for i, h in spins if i > k)
     return rest, kept
-
-
-MIN_WALK = 0.1
-"""The least distance the robot must have walked in the window for a mismatch estimate [m]."""
-
-
-def estimate_mismatch(
-    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
-) -> float | None:
-    """The motors' mismatch d (left x (1 + d), right x (1 - d)) that explains how the robot
-    turned while it was told to: poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and
-    the commands sent meanwhile ((M, 3): t [s], left, right [rad/s]; walking ones, both sides
-    forward) over one window. Its mean curvature (the heading's change over the distance
-    walked) is the turn the robot's actual speed ratio drives on `curve` (a TurningCurve: the
-    robot's calibrated one); the commands' mean log ratio is the turn it was asked for; the
-    difference is ln((1 - d) / (1 + d)). None when it walked under MIN_WALK or was not told to
-    walk. Small turns, where the curve is near linear in the log ratio, estimate best (the
-    tracking driver's: it holds a drifting robot on its path by a steady counter-turn)."""
-    estimate = _window_mismatch(poses, commands, curve, max_ratio)
-    return None if estimate is None else estimate[0]
-
-
-def _window_mismatch(
-    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
-) -> tuple[float, float] | None:
-    """(estimate_mismatch's d, the distance the body centre walked over the window [m]), or
-    None where estimate_mismatch is None: the pair pooled_mismatch weighs."""
-    poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
-    if len(poses) < 2 or not len(commands):
-        return None
-    walking = (commands[:, 1] > 0) & (commands[:, 2] > 0)
-    if not walking.any():
-        return None
-    walked = float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
-    if walked < MIN_WALK:
-        return None
-    turned = float(np.sum(np.remainder(np.diff(poses[:, 3]) + math.pi, 2 * math.pi) - math.pi))
-    kappa = turned / walked  # [1/m], positive to the left (the right side faster)
-    actual = math.copysign(math.log(curve.ratio_for(abs(kappa), max_ratio)), kappa)
-    asked = float(np.mean(np.log(commands[walking, 2] / commands[walking, 1])))
-    return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5)), walked
-
-
-def pooled_mismatch(estimates) -> float | None:
-    """The motors' mismatch from every window estimated so far: estimates ((d, walked [m])
-    each, a window's estimate_mismatch and the distance walked in it), their mean weighted by
-    the distance; None without any. A motor's mismatch holds for the whole leg, and one 3 s
-    window's estimate scatters (0.06-0.15 for a twin's 0.12 on the rough bridge): the pool is
-    steadier than any one window. (Windows overlap when look-aheads come faster than the
-    window, so a stretch walked counts in several: a running mean, not independent samples.)"""
-    weights = sum(w for _, w in estimates)
-    if not estimates or weights <= 0:
-        return None
-    return float(sum(d * w for d, w in estimates) / weights)
 
 
 def _drawn_worlds(
@@ -393,6 +340,8 @@ class LookAheadRunner:
         """(t [s, monotonic], x, y [m], yaw [rad]) of the poses within cfg.mismatch_window."""
         self._commands: collections.deque = collections.deque()
         """(t [s, monotonic], left, right [rad/s]) of the commands within it (stop: 0, 0)."""
+        self._leg: tuple[list, list] = ([], [])
+        """Every pose and command of the leg, as in _poses and _commands (turning)."""
         self._curve = (world.scene.driver.turning, world.scene.driver.max_ratio)
         self._estimates: list[tuple[float, float]] = []
         """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch)."""
@@ -412,6 +361,7 @@ class LookAheadRunner:
             t = event.sample.t_receive
             with self._lock:
                 self._pose = (float(x), float(y), yaw_of(event.quat))
+                self._leg[0].append((t, *self._pose))
                 if window > 0:
                     self._poses.append((t, *self._pose))
                     while self._poses and self._poses[0][0] < t - window:
@@ -419,11 +369,11 @@ class LookAheadRunner:
         elif kind == "command":
             f = event.frame
             wl, wr = (0.0, 0.0) if f.stop else (f.left * self._gain[0], f.right * self._gain[1])
+            sent = (event.t, 0.0, 0.0) if f.stop else (event.t, f.left, f.right)
             with self._lock:
+                self._leg[1].append(sent)
                 if window > 0:
-                    self._commands.append(
-                        (event.t, 0.0, 0.0) if f.stop else (event.t, f.left, f.right)
-                    )
+                    self._commands.append(sent)
                     while self._commands and self._commands[0][0] < event.t - window:
                         self._commands.popleft()
                 self._phase = self._phase_at(event.t)
@@ -442,8 +392,20 @@ class LookAheadRunner:
         two_pi = 2 * math.pi
         return ((self._phase[0] + wl * dt) % two_pi, (self._phase[1] + wr * dt) % two_pi)
 
+    def turning(self) -> float | None:
+        """The share of its turning curve the robot turned at on this leg so far, when told to
+        turn hard (robot/_estimate.py turning_shown); None: it was not told to turn hard."""
+        with self._lock:
+            poses, commands = np.array(self._leg[0]), np.array(self._leg[1])
+        return turning_shown(poses, commands, *self._curve)
+
     def start(self) -> None:
         self._thread.start()
+
+    @property
+    def started(self) -> bool:
+        """start() was called: the robot was given Go."""
+        return self._thread.ident is not None
 
     def close(self) -> None:
         """Stop looking ahead (a look-ahead under way is cancelled) and end the host."""
@@ -464,7 +426,7 @@ class LookAheadRunner:
                 continue
             path, spins, cfg, safety, smap = self._args
             if cfg.mismatch_window:  # (this window's estimate, pooled with the leg's before it)
-                window = _window_mismatch(poses, commands, *self._curve)
+                window = window_mismatch(poses, commands, *self._curve)
                 if window is not None:
                     self._estimates.append(window)
             mismatch = pooled_mismatch(self._estimates)

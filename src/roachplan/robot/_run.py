@@ -50,6 +50,12 @@ class RobotRun:
     """The seed of the plan it drove (None: a plan given)."""
     clearance: float | None = None
     """How far its path kept from the points it was to avoid [m] (None: none given)."""
+    turning: float | None = None
+    """The share of its turning curve the robot turned at on this leg when told to turn hard
+    (robot/_estimate.py turning_shown; None: not looked ahead, or never told to turn hard)."""
+    turning_radius: float | None = None
+    """The radius of the arcs its plan was made with [m] (None: a plan given, or the planner
+    makes no arcs)."""
 
 
 def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
@@ -168,6 +174,24 @@ def plan_clear_of(
     return best
 
 
+GUARD_HOLDS = ("lookahead", "drift")
+"""How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
+re-plans from where it stands."""
+MIN_TURNING_SHOWN = 0.25
+"""replan_radius widens a plan's arcs at most 1 / this times [-]."""
+
+
+def replan_radius(radius: float, turning: float | None) -> float:
+    """The radius of a re-plan's arcs [m]: the scene's `radius` [m] over the share of its
+    turning curve the robot showed (turning_shown: a robot that turned at 0.6 of the curve is
+    planned arcs 1 / 0.6 as wide, so they ask it for the curvature it made), at most
+    1 / MIN_TURNING_SHOWN times; radius itself when it turned as the curve says (or more), or
+    was never judged (None)."""
+    if turning is None or turning >= 1.0:
+        return radius
+    return radius / max(turning, MIN_TURNING_SHOWN)
+
+
 def start_height(world: World, xy) -> float:
     """Height of the robot's body centre standing at xy [m] (the planner's surface there plus
     the robot's standing height) [m]."""
@@ -205,6 +229,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     on_loop: Callable[[RobotLoop], None] | None = None,
     ready: Callable[[RobotLoop], bool] | None = None,
     avoid: Sequence[tuple[float, float]] = (),
+    turning_radius: float | None = None,
 ) -> RobotRun:
     """Plan from where the robot stands (or take `plan`), Go, drive until the goal or a stop,
     and record it. source/link: already open ones (default: opened from the settings and
@@ -214,7 +239,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     then ends as "cancel"); None: go at once. Ctrl-C and SIGTERM stop the robot, while it
     waits for Go too (when called from the main thread). avoid: points (x, y) [m] the plan
     keeps clear of (plan_clear_of: where a look-ahead's rollouts failed, re-planning after the
-    guard held the robot)."""
+    guard held the robot). turning_radius: the radius of the plan's arcs [m] (replan_radius: a
+    re-plan's, widened to what the robot showed it turns); None: the scene's."""
     own_source = source is None
     own_link = link is None
     source = source or open_pose_source(settings.source, **settings.source_settings)
@@ -232,6 +258,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         stands = (p[0], p[1], yaw_of(q))  # (where the robot stands: world frame)
         here = stands  # (the plan's start: where it stands, or the nearest pose planned from)
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
+        radius = None  # (the radius of the plan's arcs [m]; None: a plan given, or no arcs)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
@@ -244,7 +271,11 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     here[1],
                     moved * 100,
                 )
-            plan, clear = plan_clear_of(world, here, seed, avoid)
+            planner = scene.planner
+            if turning_radius is not None and planner.turning_radius is not None:
+                planner = dataclasses.replace(planner, turning_radius=turning_radius)
+            plan, clear = plan_clear_of(world.with_planner(planner), here, seed, avoid)
+            radius = planner.turning_radius
             kept = None if math.isinf(clear) else clear
             if not plan.found:
                 raise RobotError(
@@ -274,6 +305,9 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     # path keeps from them [m]; null: none to keep clear of)
                     "avoid": [list(p[:2]) for p in avoid],
                     "clearance": kept,
+                    # (the radius its arcs were planned with [m]: a re-plan's may be wider than
+                    # the scene's, from how the robot turned; null: a plan given, or no arcs)
+                    "turning_radius": radius,
                 },
             )
         loop = RobotLoop(
@@ -297,6 +331,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 loop,
                 cfg=settings.look_ahead or LookAheadConfig(),
                 guard=settings.guard,
+                drift=settings.guard_drift,
                 period=settings.look_ahead_period,
                 seed=scene.seed if settings.seed is None else settings.seed,
                 safety=settings.loop.safety,
@@ -341,6 +376,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             lookaheads=tuple(watcher.results) if watcher is not None else (),
             plan_seed=plan.seed,
             clearance=kept,
+            turning=watcher.turning() if watcher is not None else None,
+            turning_radius=radius,
         )
     finally:
         if recorder is not None:
@@ -364,12 +401,15 @@ def watch_ahead(
     safety,
     recorder: RunRecorder | None,
     also: Callable[[float, LookAhead], None] | None = None,
+    drift: float | None = None,
 ) -> LookAheadRunner:
     """A LookAheadRunner beside `loop` (its listener added; the caller starts it at Go and
     closes it), each result recorded on /lookahead (recorder: None, none) and given to also(t,
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
-    "lookahead", the chance and the rollouts' ends in its detail. The command line's robot
-    (drive_robot) and the page's Robot folder both look ahead through it."""
+    "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
+    robot drives further than `drift` [m] from the path (None: never), held as "drift". The
+    command line's robot (drive_robot) and the page's Robot folder both look ahead through
+    it."""
 
     def record(t: float, ahead: LookAhead) -> None:
         if recorder is not None:
@@ -398,6 +438,22 @@ def watch_ahead(
         on_result=record,
     )
     loop.listeners.append(runner.listen)
+    if guard is not None and drift is not None:
+        path_xy = np.asarray(path, dtype=float)[:, :2]
+
+        def drifted(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
+            if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
+                return
+            x, y = float(event.position[0]), float(event.position[1])
+            off = distance_to_path((x, y), path_xy)
+            if off > drift:
+                loop.stop(
+                    "drift",
+                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
+                    f"drift {drift:g} m, before the loop's stop at {safety.max_deviation:g} m)",
+                )
+
+        loop.listeners.append(drifted)
     return runner
 
 

@@ -27,6 +27,7 @@ StopReason = Literal[
     "off_standable",
     "deviation",
     "lookahead",
+    "drift",
     "stop",
     "cancel",
     "signal",
@@ -38,7 +39,8 @@ within the driver's time_limit; no_pose: no pose at Go; pose_stale: the newest p
 max_pose_age; outside_area: the robot's centre outside the planning area by more than
 area_margin; off_standable: further than standable_margin from any place the robot can stand;
 deviation: further than max_deviation from the path; lookahead: the look-ahead's chance of
-going on without a stop or a fall fell under RobotSettings.guard; stop / cancel: the user's Stop or
+going on without a stop or a fall fell under RobotSettings.guard; drift: with the guard on,
+further than RobotSettings.guard_drift from the path (held before the deviation stop); stop / cancel: the user's Stop or
 Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a link down)."""
 
 

@@ -16,6 +16,7 @@ from roachplan.planning import (
     VALID,
     Footprint,
     HeightField,
+    PlannerConfig,
     PlanningError,
     StandableMap,
     check_states,
@@ -183,6 +184,19 @@ class World:
         world.__dict__.update(
             {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
         )
+        return world
+
+    def with_planner(self, planner: PlannerConfig) -> World:
+        """This world planned with other planner settings (a re-plan's wider arcs): what it has
+        computed kept (sim_terrain; regions too when the validity settings they are made by
+        are the same)."""
+        world = dataclasses.replace(self, scene=dataclasses.replace(self.scene, planner=planner))
+        kept = (
+            ("regions", "sim_terrain")
+            if planner.validity == self.scene.planner.validity
+            else ("sim_terrain",)
+        )
+        world.__dict__.update({k: v for k, v in self.__dict__.items() if k in kept})
         return world
 
     def with_scene(self, scene: Scene) -> World:

@@ -1,0 +1,126 @@
+"""What the robot's own poses and commands say about it (issue 32): how its motors differ from
+the model's, and how tightly it turns against the turning curve the plans were made for.
+
+Pure functions of recorded arrays: poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and
+the commands sent meanwhile ((M, 3): t [s], left, right [rad/s]; a stop frame 0, 0). The
+look-ahead drives its rollouts with the mismatch (robot/_lookahead.py); a re-plan after the
+guard held the robot asks for arcs the robot showed it can turn (turning_shown).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+MIN_WALK = 0.1
+"""The least distance the robot must have walked in the window for a mismatch estimate [m]."""
+
+
+def estimate_mismatch(
+    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
+) -> float | None:
+    """The motors' mismatch d (left x (1 + d), right x (1 - d)) that explains how the robot
+    turned while it was told to: poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and
+    the commands sent meanwhile ((M, 3): t [s], left, right [rad/s]; walking ones, both sides
+    forward) over one window. Its mean curvature (the heading's change over the distance
+    walked) is the turn the robot's actual speed ratio drives on `curve` (a TurningCurve: the
+    robot's calibrated one); the commands' mean log ratio is the turn it was asked for; the
+    difference is ln((1 - d) / (1 + d)). None when it walked under MIN_WALK or was not told to
+    walk. Small turns, where the curve is near linear in the log ratio, estimate best (the
+    tracking driver's: it holds a drifting robot on its path by a steady counter-turn)."""
+    estimate = window_mismatch(poses, commands, curve, max_ratio)
+    return None if estimate is None else estimate[0]
+
+
+def window_mismatch(
+    poses: np.ndarray, commands: np.ndarray, curve, max_ratio: float
+) -> tuple[float, float] | None:
+    """(estimate_mismatch's d, the distance the body centre walked over the window [m]), or
+    None where estimate_mismatch is None: the pair pooled_mismatch weighs."""
+    poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
+    if len(poses) < 2 or not len(commands):
+        return None
+    walking = (commands[:, 1] > 0) & (commands[:, 2] > 0)
+    if not walking.any():
+        return None
+    walked = float(np.sum(np.linalg.norm(np.diff(poses[:, 1:3], axis=0), axis=1)))
+    if walked < MIN_WALK:
+        return None
+    turned = float(np.sum(np.remainder(np.diff(poses[:, 3]) + math.pi, 2 * math.pi) - math.pi))
+    kappa = turned / walked  # [1/m], positive to the left (the right side faster)
+    actual = math.copysign(math.log(curve.ratio_for(abs(kappa), max_ratio)), kappa)
+    asked = float(np.mean(np.log(commands[walking, 2] / commands[walking, 1])))
+    return float(np.clip(-math.tanh((actual - asked) / 2), -0.5, 0.5)), walked
+
+
+def pooled_mismatch(estimates) -> float | None:
+    """The motors' mismatch from every window estimated so far: estimates ((d, walked [m])
+    each, a window's estimate_mismatch and the distance walked in it), their mean weighted by
+    the distance; None without any. A motor's mismatch holds for the whole leg, and one 3 s
+    window's estimate scatters (0.06-0.15 for a twin's 0.12 on the rough bridge): the pool is
+    steadier than any one window. (Windows overlap when look-aheads come faster than the
+    window, so a stretch walked counts in several: a running mean, not independent samples.)"""
+    weights = sum(w for _, w in estimates)
+    if not estimates or weights <= 0:
+        return None
+    return float(sum(d * w for d, w in estimates) / weights)
+
+
+HARD_TURN_RATIO = 1.5
+"""A window of commands asks for a hard turn when the curvature the turning curve gives its
+speed ratios averages at least that of this ratio [-] (where the curve leaves its straight
+start: below it a turn is the driver's small correction, which turning_shown does not judge)."""
+TURN_WINDOW = 0.5
+"""turning_shown's windows [s]: short enough that one holds a single turn of the path."""
+MIN_TURN_WALK = 0.05
+"""The least distance walked in hard-turn windows one way for turning_shown to judge that way
+[m]."""
+
+
+def turning_shown(
+    poses: np.ndarray,
+    commands: np.ndarray,
+    curve,
+    max_ratio: float,
+    *,
+    window: float = TURN_WINDOW,
+) -> float | None:
+    """The share of its turning curve the robot turned at while it was told to turn hard: its
+    poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and the commands sent meanwhile
+    ((M, 3): t [s], left, right [rad/s]) cut into windows of `window` seconds; in each window
+    whose walking commands (both sides forward) ask, on average, for at least the curvature of
+    HARD_TURN_RATIO on `curve` (a TurningCurve, ratios capped at max_ratio), the curvature it
+    turned (its heading's change over the distance walked, signed the way it was told) against
+    the curvature asked, weighted by the distance walked. Each way (left, right) is judged
+    apart, when it holds at least MIN_TURN_WALK of such windows, and the lesser share is
+    returned: a robot whose motors differ turns less one way, and a plan's arcs go both ways.
+    1: it turns as the plans assume; under 1: it turns wider (a slippery floor, a weak motor).
+    None: it was never told to turn hard over enough distance."""
+    poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
+    if len(poses) < 2 or not len(commands):
+        return None
+    hard = curve.curvature(HARD_TURN_RATIO)
+    shown, asked, walked_way = {1: 0.0, -1: 0.0}, {1: 0.0, -1: 0.0}, {1: 0.0, -1: 0.0}
+    t0, t_end = float(poses[0, 0]), float(poses[-1, 0])
+    for a in np.arange(t0, t_end, window):
+        p = poses[(poses[:, 0] >= a) & (poses[:, 0] <= a + window)]
+        c = commands[(commands[:, 0] >= a) & (commands[:, 0] < a + window)]
+        c = c[(c[:, 1] > 0) & (c[:, 2] > 0)]
+        if len(p) < 2 or not len(c):
+            continue
+        ratio = np.minimum(np.maximum(c[:, 2] / c[:, 1], c[:, 1] / c[:, 2]), max_ratio)
+        kappas = [curve.curvature(float(r)) for r in ratio]
+        expected = float(np.mean(np.sign(c[:, 2] - c[:, 1]) * kappas))  # (+: to the left)
+        if not math.isfinite(expected) or abs(expected) < hard:
+            continue
+        walked = float(np.sum(np.linalg.norm(np.diff(p[:, 1:3], axis=0), axis=1)))
+        if walked <= 0:
+            continue
+        turned = float(np.sum(np.remainder(np.diff(p[:, 3]) + math.pi, 2 * math.pi) - math.pi))
+        way = 1 if expected > 0 else -1
+        shown[way] += way * turned  # (= curvature turned x distance walked)
+        asked[way] += abs(expected) * walked
+        walked_way[way] += walked
+    shares = [shown[w] / asked[w] for w in (1, -1) if walked_way[w] >= MIN_TURN_WALK]
+    return min(shares) if shares else None
