@@ -140,6 +140,8 @@ def held_by(r: dict) -> str:
     """How the guard held a run's legs before its last, each (its reason and the radius of the
     next plan's arcs), e.g. "drift 0.13 m, lookahead 0.19 m"; "-" when none was held."""
     legs = r.get("held", [])
+    if not legs:
+        return "-"
     radii = [h.get("turning_radius") for h in legs[1:]] + [r.get("turning_radius")]
     return (
         ", ".join(
