@@ -374,3 +374,46 @@ def test_the_simulated_roach_on_a_slippery_floor_shows_less_of_its_turning_curve
     assert replan_radius(radius, slippery) == pytest.approx(radius / slippery)
     assert replan_radius(radius, 1.1) == radius and replan_radius(radius, None) == radius
     assert replan_radius(radius, 0.01) == pytest.approx(radius * 4)  # (MIN_TURNING_SHOWN)
+
+
+def test_trimmed_commands_make_mismatched_motors_run_as_the_driver_asked():
+    """trim_commands: a robot whose motors run at left x 1.12, right x 0.88 is sent left / 1.12,
+    right / 0.88, so its motors run at what the driver asked; where that would pass the motors'
+    top speed both sides are scaled down together (the ratio, which steers, kept); a turn on
+    the spot the same; no mismatch, no change."""
+    from roachplan.robot import trim_commands
+
+    d, top = 0.12, 60.0
+    left, right = trim_commands(20.0, 40.0, d, top)
+    assert (left * (1 + d), right * (1 - d)) == pytest.approx((20.0, 40.0))
+    left, right = trim_commands(20.0, 60.0, d, top)  # (60 / 0.88 would pass the top speed)
+    assert max(abs(left), abs(right)) == pytest.approx(top)
+    assert (right * (1 - d)) / (left * (1 + d)) == pytest.approx(3.0)
+    left, right = trim_commands(-30.0, 30.0, d, top)
+    assert (left * (1 + d), right * (1 - d)) == pytest.approx((-30.0, 30.0))
+    assert trim_commands(20.0, 24.0, 0.0, top) == (20.0, 24.0)
+
+
+def test_the_mismatch_is_estimated_on_the_stretches_the_driver_asked_to_walk_straight():
+    """straight_mismatches: a robot whose motors run at left x 1.12, right x 0.88 walks
+    straight when it is sent left / 1.12, right / 0.88 (the loop's trim of 0.12): each whole
+    1 s stretch so walked estimates 0.12; a stretch where the driver asked for a hard turn is
+    left out (there a floor that turns the robot less reads as a mismatch), and so is the
+    part-second left at the end."""
+    from roachplan.robot import straight_mismatches
+    from roachplan.sim import DriverConfig
+
+    driver = DriverConfig()
+    curve, top = driver.turning, driver.max_ratio
+    d = 0.12
+    straight = _arc(0.0, 0.2, 3.5)
+    t = np.arange(0.0, 3.5, 0.02)
+    sent = np.column_stack([t, np.full(len(t), 20 / (1 + d)), np.full(len(t), 20 / (1 - d))])
+    commands = np.column_stack([sent, np.full(len(t), d)])
+    pieces = straight_mismatches(straight, commands, curve, top)
+    assert len(pieces) == 3  # (0-1, 1-2, 2-3 s; 3-3.5 s is not whole)
+    for estimate, walked in pieces:
+        assert estimate == pytest.approx(d, abs=0.005) and walked == pytest.approx(0.2, abs=0.01)
+    # Told to turn hard (ratio 2.5 as the driver asked) while it turned less: left out.
+    turn = np.column_stack([t, np.full(len(t), 20.0), np.full(len(t), 50.0), np.zeros(len(t))])
+    assert straight_mismatches(_arc(2.0, 0.2, 3.5), turn, curve, top) == []

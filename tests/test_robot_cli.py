@@ -136,13 +136,14 @@ def wait_for(stream, text: str, timeout: float) -> str:
         (["robot", "--guard", "0.5"], "--guard holds the robot on what the look-ahead says"),
         (["robot", "--guard-drift", "0.05"], "--guard-drift is a setting of the guard; add"),
         (
-            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "0.2"],
-            "--guard-drift 0.2: expected a number under the loop's max_deviation (0.15 m)",
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "1.2"],
+            "--guard-drift 1.2: expected a number above 0 and at most 1",
         ),
         (
             ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "near"],
-            "--guard-drift near: expected a distance [m] or 'none'",
+            "--guard-drift near: expected a share of --max-deviation or 'none'",
         ),
+        (["robot", "--no-trim"], "--no-trim: only the look-ahead trims the commands; add"),
         (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
         (
             ["robot", "--look-ahead", "--look-ahead-engine", "ode"],
@@ -337,8 +338,8 @@ def test_a_robot_commands_bad_flag_loads_nothing_heavy():
 def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_arcs_it_can_turn(
     tmp_path,
 ):
-    """--guard-drift: the guard also holds a robot that drifts that far from its path (here
-    2 cm: the twin's tracking wanders that far within seconds, while every look-ahead sees a
+    """--guard-drift: the guard also holds a robot that drifts that share of max_deviation from
+    its path (here 0.15: 2 cm, which the twin's tracking wanders within seconds, while every look-ahead sees a
     good chance: --guard 0 holds on none), before the loop's own deviation stop; the command re-plans from
     where it stands with the scene's arcs widened by what the robot showed of its turning curve
     (turning_shown), and the legs' logs say both."""
@@ -350,13 +351,13 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_arcs_it_ca
         proc = robot(
             ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
             "--look-ahead", "--look-ahead-draws", "2", "--look-ahead-horizon", "1",
-            "--guard", "0", "--guard-drift", "0.02", "--replans", "1", "--json",
+            "--guard", "0", "--guard-drift", "0.15", "--replans", "1", "--json",
         )  # fmt: skip
         out, err = proc.communicate(timeout=240)
     summary = json.loads(out)
     assert len(summary["held"]) == 1, err
     held = summary["held"][0]
-    assert held["reason"] == "drift" and "guard drift 0.02 m" in held["detail"], held
+    assert held["reason"] == "drift" and "guard drift 0.0225 m" in held["detail"], held
     assert "off its path" in held["detail"]
     radius = load_scene("double_bridge").planner.turning_radius
     first, second = read_run(log), read_run(tmp_path / "run-2.mcap")

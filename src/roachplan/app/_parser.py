@@ -796,11 +796,17 @@ def _add_robot_parser(sub) -> None:
         "at once)",
     )
     p.add_argument(
+        "--no-trim",
+        action="store_true",
+        help="with --look-ahead: send the driver's commands as they are (by default the motors' "
+        "mismatch the look-ahead estimates from the robot's walk is divided out of them)",
+    )
+    p.add_argument(
         "--guard-drift",
         default=None,
-        metavar="M",
-        help="with --guard: also hold the robot and re-plan once it drifts M from its path, "
-        "before the loop stops it at --max-deviation (default 0.08 m; 'none': only the "
+        metavar="F",
+        help="with --guard: also hold the robot and re-plan once it is F times --max-deviation "
+        "off its path, before the loop stops it there (default 0.5; 'none': only the "
         "look-ahead's chance holds it)",
     )
     p.add_argument(

@@ -165,6 +165,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             first_pose_timeout=args.robot_first_pose_timeout,
             look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
             guard=args.guard,
+            trim=not args.no_trim,
             **_guard_drift(args),
             **(
                 {}
@@ -173,7 +174,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             ),
         )
     except SettingError as exc:
-        if exc.key == "guard_drift":  # (its one validator, cross-checked with the loop's)
+        if exc.key == "guard_drift":  # (its one validator)
             raise refused("--guard-drift", args.guard_drift, exc.expected) from None
         raise
 
@@ -196,12 +197,14 @@ def _look_ahead_flags(args: argparse.Namespace) -> dict:
         raise UsageError(f"{given[0]} is a setting of the look-ahead; add --look-ahead")
     if args.guard is not None and not args.look_ahead:
         raise UsageError("--guard holds the robot on what the look-ahead says; add --look-ahead")
+    if args.no_trim and not args.look_ahead:
+        raise UsageError("--no-trim: only the look-ahead trims the commands; add --look-ahead")
     return ahead
 
 
 def _guard_drift(args: argparse.Namespace) -> dict:
-    """RobotSettings' guard_drift from --guard-drift (a distance [m] or 'none'), as a keyword;
-    none when the flag is absent (the setting's default)."""
+    """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none'), as
+    a keyword; none when the flag is absent (the setting's default)."""
     if args.guard_drift is None:
         return {}
     if args.guard is None:
@@ -211,7 +214,7 @@ def _guard_drift(args: argparse.Namespace) -> dict:
         return {"guard_drift": None if text == "none" else float(text)}
     except ValueError:
         raise refused(
-            "--guard-drift", args.guard_drift, "expected a distance [m] or 'none'"
+            "--guard-drift", args.guard_drift, "expected a share of --max-deviation or 'none'"
         ) from None
 
 
@@ -302,7 +305,9 @@ def cmd_robot(args: argparse.Namespace) -> int:
             held.append(run)
             if run.turning is not None:
                 shown.append(run.turning)
-            radius, wider = _replan_arcs(world.scene.planner.turning_radius, shown)
+            _drifts = sum(h.result.reason == "drift" for h in held)  # PILOT: x2 per drift
+            radius = world.scene.planner.turning_radius
+            radius, wider = (None, "") if radius is None else (radius * min(2**_drifts, 4), "")
             print(
                 f"roachplan: held by the guard: {run.result.detail}; re-planning from where "
                 f"the robot stands (re-plan {len(held)} of at most {args.replans}){wider}",
@@ -323,6 +328,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
                     source=source,
                     link=link,
                     turning_radius=radius,
+                    estimates=run.estimates,
                 )
             except (RobotError, PlanningError, ChildError) as exc:  # (no plan from there)
                 held.pop()  # (the held leg is the run's last: `run`)
@@ -394,6 +400,7 @@ def _report(
                 "failures": [list(f) for f in h.lookaheads[-1].failures] if h.lookaheads else [],
                 "turning": h.turning,
                 "turning_radius": h.turning_radius,
+                "trim": h.trim,
             }
             for h in held
         ],
@@ -401,6 +408,7 @@ def _report(
         "clearance": run.clearance,
         "turning": run.turning,
         "turning_radius": run.turning_radius,
+        "trim": run.trim,
         "lookaheads": len(run.lookaheads),
         "lowest_p_hold": min((a.p_hold for a in run.lookaheads), default=None),
     }

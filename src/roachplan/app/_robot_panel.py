@@ -376,6 +376,8 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         if form.look_ahead:
             from roachplan.robot import LookAheadConfig, RobotSettings, watch_ahead
 
+            defaults = RobotSettings()  # (the command line's, where the page has no box)
+
             watcher = watch_ahead(
                 app.world,
                 path,
@@ -383,7 +385,11 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 loop,
                 cfg=LookAheadConfig(),
                 guard=form.guard,
-                period=RobotSettings().look_ahead_period,
+                drift=None
+                if defaults.guard_drift is None
+                else defaults.guard_drift * loop.cfg.safety.max_deviation,
+                trim=defaults.trim,
+                period=defaults.look_ahead_period,
                 seed=plan.seed,
                 safety=loop.cfg.safety,
                 recorder=recorder,

@@ -91,6 +91,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "estimate_mismatch": "._estimate",
         "pooled_mismatch": "._estimate",
         "turning_shown": "._estimate",
+        "trim_commands": "._estimate",
+        "straight_mismatches": "._estimate",
         "remaining_path": "._lookahead",
         "Comparison": "._compare",
         "FitConfig": "._compare",
@@ -127,6 +129,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._errors import RobotError as RobotError
     from ._estimate import estimate_mismatch as estimate_mismatch
     from ._estimate import pooled_mismatch as pooled_mismatch
+    from ._estimate import straight_mismatches as straight_mismatches
+    from ._estimate import trim_commands as trim_commands
     from ._estimate import turning_shown as turning_shown
     from ._frames import FRAME_SIZE as FRAME_SIZE
     from ._frames import CommandFrame as CommandFrame

@@ -8,8 +8,8 @@ from pathlib import Path
 from typing import Any
 
 from roachplan._settings import (
-    SettingError,
     between,
+    boolean,
     check_settings,
     optional,
     positive,
@@ -67,24 +67,22 @@ class RobotSettings:
     """Hold the robot (stop frames; the run ends as "lookahead") when a look-ahead's chance
     of going on without a stop or a fall is below this [-]; None: never. With it, the run
     looks ahead (look_ahead, or LookAheadConfig's defaults when that is None)."""
-    guard_drift: float | None = s(0.08, optional(positive("m", 10.0)))
-    """With the guard on: also hold the robot (the run ends as "drift") when it is further than
-    this from its path [m], before the loop's own stop at max_deviation, so that it is
-    re-planned from where it stands rather than stopped. A look-ahead's chance comes a second
-    or more after the pose it started from (robot.md: the guard's failures), too late for a
-    turn the robot cannot make; the drift is seen in the period it happens. None: only the
+    guard_drift: float | None = s(0.5, optional(positive("-", 1.0)))
+    """With the guard on: also hold the robot (the run ends as "drift") once it is this share of
+    the loop's max_deviation from its path (0.5: 7.5 cm of the default 15 cm), before the
+    loop's own stop there, so that it is re-planned from where it stands rather than stopped.
+    A look-ahead's chance comes a second or more after the pose it started from, too late for
+    a turn the robot cannot make; the drift is seen in the period it happens. None: only the
     look-ahead's chance holds it."""
+    trim: bool = s(True, boolean())
+    """With the look-ahead: divide the motors' mismatch it estimates from the robot's own walk
+    (pooled_mismatch) out of the commands sent, from each look-ahead on (RobotLoop.trim): a
+    robot whose left motor runs 12 % fast and right 12 % slow is sent left / 1.12, right / 0.88,
+    and turns both ways as the driver asks (within its motors' top speed). A re-planned leg
+    starts with the last leg's estimate. False: the commands go as the driver gives them."""
     look_ahead_period: float = s(1.0, positive("s", 60.0))
     """How often to start a look-ahead [s] (the next starts when the last has ended, at the
     earliest this long after it began)."""
 
     def __post_init__(self) -> None:
         check_settings(self)
-        limit = self.loop.safety.max_deviation
-        if self.guard_drift is not None and self.guard_drift >= limit:
-            raise SettingError(
-                "guard_drift",
-                self.guard_drift,
-                f"expected a number under the loop's max_deviation ({limit:g} m), which stops the "
-                "robot first [m]",
-            )

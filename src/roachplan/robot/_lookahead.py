@@ -58,7 +58,7 @@ from roachplan._settings import (
 from roachplan._settings import setting as s
 from roachplan.sim import ENGINES
 
-from ._estimate import pooled_mismatch, turning_shown, window_mismatch
+from ._estimate import MISMATCH_PIECE, pooled_mismatch, straight_mismatches, turning_shown
 from ._safety import SafetyConfig, SafetyMap, check_pose
 from ._transform import yaw_of
 
@@ -86,10 +86,12 @@ class LookAheadConfig:
     as fast on the rough double bridge, so its chance is newer when it comes; a look-ahead in
     an engine other than the scene's is less faithful to it (docs: the engines' fidelity)."""
     mismatch_window: float = s(3.0, non_negative("s"))
-    """Seconds of the robot's latest poses and commands each look-ahead estimates its motors'
-    mismatch from (estimate_mismatch), pooled with the leg's windows before it (pooled_mismatch):
-    its rollouts then drive with it, on top of their draws (a robot that drifts is simulated
-    drifting). 0: not estimated."""
+    """Seconds of the robot's latest poses and commands kept to estimate its motors' mismatch
+    from: each look-ahead estimates it on the 1 s stretches of them that the robot was told to
+    walk near straight and no look-ahead before it estimated on (straight_mismatches), pooled
+    with the estimates before (pooled_mismatch, the legs' before too); its rollouts then drive
+    with it, on top of their draws (a robot that drifts is simulated drifting), and with the
+    loop's trim (RobotSettings.trim). 0: not estimated."""
     robot_draws: bool = s(True, boolean())
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
@@ -117,6 +119,9 @@ class LookAhead:
     mismatch: float | None = None
     """The motors' mismatch d its rollouts drove with (left x (1 + d), right x (1 - d)), as
     estimated from the robot's last seconds; None: not estimated."""
+    trim: float = 0.0
+    """The mismatch the robot loop divided out of its commands meanwhile (RobotLoop.trim), and
+    its rollouts' driver with it."""
 
     @property
     def p_hold(self) -> float:
@@ -134,6 +139,7 @@ class LookAhead:
             "failures": [list(f) for f in self.failures],
             "wall_time": self.wall_time,
             "mismatch": self.mismatch,
+            "trim": self.trim,
         }
 
 
@@ -160,13 +166,23 @@ def remaining_path(
 
 
 def _drawn_worlds(
-    world: World, ahead: World, cfg: LookAheadConfig, pose, *, seed: int, phase, mismatch: float
+    world: World,
+    ahead: World,
+    cfg: LookAheadConfig,
+    pose,
+    *,
+    seed: int,
+    phase,
+    mismatch: float,
+    trim: float = 0.0,
 ):
     """A look-ahead's cfg.draws simulations of `ahead` (world under the look-ahead's engine and
     horizon), each fresh (a rollout is its seed's alone), reset at pose (x, y, yaw) moved by
     the pose's noise drawn from (seed, k), the legs at phase, its robot drawn from the scene's
     uncertainty (cfg.robot_draws) with its motors' speeds moved by mismatch (left x (1 + d),
-    right x (1 - d)). A generator: the caller closes each."""
+    right x (1 - d)) and back by the loop's trim (left / (1 + trim), right / (1 - trim): the
+    driver's speeds are divided so before they are sent). A generator: the caller closes
+    each."""
     from roachplan.experiments import draw
 
     x0, y0, yaw0 = pose
@@ -174,7 +190,7 @@ def _drawn_worlds(
     # fitted robot file's), so its own is divided out.
     own_l, own_r = world.robot.motor_gain
     own = (own_l - own_r) / (own_l + own_r) if mismatch else 0.0
-    moved = ((1 + mismatch) / (1 + own), (1 - mismatch) / (1 - own))
+    moved = ((1 + mismatch) / (1 + own) / (1 + trim), (1 - mismatch) / (1 - own) / (1 - trim))
     for k in range(cfg.draws):
         rng = np.random.default_rng((seed, k))
         dx, dy = rng.normal(0.0, cfg.position_sd, 2)
@@ -186,7 +202,7 @@ def _drawn_worlds(
             if cfg.robot_draws:
                 w = draw(world.scene.uncertainty, int(rng.integers(2**63)))
                 friction, mass, gain = friction * w.friction_scale, w.mass_scale, w.motor_gain
-            if cfg.robot_draws or mismatch:
+            if cfg.robot_draws or mismatch or trim:
                 sim.perturb(
                     friction=friction,
                     mass_scale=mass,
@@ -212,10 +228,13 @@ def look_ahead(
     seed: int,
     phase: tuple[float, float] = (0.0, 0.0),
     mismatch: float | None = None,
+    trim: float = 0.0,
 ) -> LookAhead:
     """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
     seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
-    safety_map; the motors' mismatch (estimate_mismatch; None: none) applied to each."""
+    safety_map; the motors' mismatch (estimate_mismatch; None: none) applied to each, and the
+    trim the robot loop divides out of its commands (RobotLoop.trim: what the robot is sent
+    differs from what the driver asks by as much)."""
     from roachplan.scenes import with_engine
     from roachplan.sim import drive_lockstep, drive_path
 
@@ -239,7 +258,14 @@ def look_ahead(
         sims = [
             stack.enter_context(sim)
             for sim in _drawn_worlds(
-                world, ahead, cfg, (x0, y0, yaw0), seed=seed, phase=phase, mismatch=mismatch or 0.0
+                world,
+                ahead,
+                cfg,
+                (x0, y0, yaw0),
+                seed=seed,
+                phase=phase,
+                mismatch=mismatch or 0.0,
+                trim=trim,
             )
         ]
         if ahead.scene.sim.engine == "mujoco" and len(sims) > 1:
@@ -289,6 +315,7 @@ def look_ahead(
         failures=tuple(failures),
         wall_time=time.perf_counter() - t0,
         mismatch=mismatch,
+        trim=trim,
     )
 
 
@@ -307,7 +334,10 @@ class LookAheadRunner:
     and looks ahead from it in a fork of a process holding the world (processes.Host: the
     simulation runs in its own process, so the 50 Hz loop keeps its rate and the GIL). Each
     result goes to on_result(t [s, monotonic], LookAhead). Look-ahead n is seeded
-    (seed, n)."""
+    (seed, n). Before each, the motors' mismatch is estimated from the robot's last window and
+    pooled with the windows before (estimates: those of the legs before this one); on_trim
+    (None: none) is given the pool, for the loop to divide out of its commands
+    (RobotLoop.trim), and the look-ahead then simulates the robot so trimmed."""
 
     def __init__(
         self,
@@ -321,6 +351,8 @@ class LookAheadRunner:
         period: float,
         seed: int,
         on_result: Callable[[float, LookAhead], None],
+        estimates: tuple[tuple[float, float], ...] = (),
+        on_trim: Callable[[float], None] | None = None,
     ) -> None:
         from roachplan.processes import Host
 
@@ -339,12 +371,19 @@ class LookAheadRunner:
         self._poses: collections.deque = collections.deque()
         """(t [s, monotonic], x, y [m], yaw [rad]) of the poses within cfg.mismatch_window."""
         self._commands: collections.deque = collections.deque()
-        """(t [s, monotonic], left, right [rad/s]) of the commands within it (stop: 0, 0)."""
+        """(t [s, monotonic], left, right [rad/s], trim) of the commands within it, as sent
+        (stop: 0, 0), with the loop's trim they were sent under."""
         self._leg: tuple[list, list] = ([], [])
         """Every pose and command of the leg, as in _poses and _commands (turning)."""
         self._curve = (world.scene.driver.turning, world.scene.driver.max_ratio)
-        self._estimates: list[tuple[float, float]] = []
-        """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch)."""
+        self._estimates: list[tuple[float, float]] = list(estimates)
+        """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch), from the
+        legs before this one (estimates) on: a motor's mismatch holds for the robot."""
+        self._until = -math.inf
+        """The estimated stretches end here [s, monotonic]: the next start after it."""
+        self.on_trim = on_trim
+        self.trim = 0.0
+        """The trim last given to on_trim (the loop's, which the look-ahead then drives with)."""
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._host = Host(world, name="roachplan look-ahead")
@@ -369,7 +408,9 @@ class LookAheadRunner:
         elif kind == "command":
             f = event.frame
             wl, wr = (0.0, 0.0) if f.stop else (f.left * self._gain[0], f.right * self._gain[1])
-            sent = (event.t, 0.0, 0.0) if f.stop else (event.t, f.left, f.right)
+            sent = (
+                (event.t, 0.0, 0.0, self.trim) if f.stop else (event.t, f.left, f.right, self.trim)
+            )
             with self._lock:
                 self._leg[1].append(sent)
                 if window > 0:
@@ -392,12 +433,18 @@ class LookAheadRunner:
         two_pi = 2 * math.pi
         return ((self._phase[0] + wl * dt) % two_pi, (self._phase[1] + wr * dt) % two_pi)
 
+    @property
+    def estimates(self) -> tuple[tuple[float, float], ...]:
+        """(mismatch, walked [m]) of every window estimated so far, the legs' before this one's
+        first (a re-planned leg's runner starts from them)."""
+        return tuple(self._estimates)
+
     def turning(self) -> float | None:
         """The share of its turning curve the robot turned at on this leg so far, when told to
         turn hard (robot/_estimate.py turning_shown); None: it was not told to turn hard."""
         with self._lock:
             poses, commands = np.array(self._leg[0]), np.array(self._leg[1])
-        return turning_shown(poses, commands, *self._curve)
+        return turning_shown(poses, commands[:, :3] if len(commands) else commands, *self._curve)
 
     def start(self) -> None:
         self._thread.start()
@@ -425,11 +472,18 @@ class LookAheadRunner:
             if pose is None:
                 continue
             path, spins, cfg, safety, smap = self._args
-            if cfg.mismatch_window:  # (this window's estimate, pooled with the leg's before it)
-                window = window_mismatch(poses, commands, *self._curve)
-                if window is not None:
-                    self._estimates.append(window)
+            if cfg.mismatch_window and len(poses):
+                # The straight stretches of the window not estimated before, pooled with the
+                # legs' before them.
+                poses = poses[poses[:, 0] >= self._until]
+                if len(poses) >= 2:
+                    self._estimates += straight_mismatches(poses, commands, *self._curve)
+                    whole = math.floor((poses[-1, 0] - poses[0, 0]) / MISMATCH_PIECE)
+                    self._until = float(poses[0, 0]) + whole * MISMATCH_PIECE
             mismatch = pooled_mismatch(self._estimates)
+            if self.on_trim is not None and mismatch is not None:
+                self.trim = mismatch  # (what the loop divides out from now on)
+                self.on_trim(mismatch)
             seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
             t = time.monotonic()
             child = Child(
@@ -441,6 +495,7 @@ class LookAheadRunner:
                     "seed": seed,
                     "phase": phase,
                     "mismatch": mismatch,
+                    "trim": self.trim,
                 },
                 start=self._host,
                 task="look-ahead",

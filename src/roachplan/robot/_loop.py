@@ -26,6 +26,7 @@ import numpy as np
 from roachplan.sim import DriverConfig, make_follower, omega_limit
 
 from ._config import LoopConfig
+from ._estimate import trim_commands
 from ._frames import CommandFrame
 from ._links import CommandLink
 from ._pose import PoseSample, PoseSource
@@ -148,6 +149,7 @@ class RobotLoop:
         recorder: Recorder | None = None,
         listeners: Sequence[Callable[[LoopEvent], None]] = (),
         clock: Callable[[], float] = time.monotonic,
+        trim: float = 0.0,
     ) -> None:
         self.path = np.asarray(path_xyz, dtype=float)
         self.spins = tuple(spins)
@@ -156,6 +158,11 @@ class RobotLoop:
         self.source, self.link, self.transform = source, link, transform
         self.safety_map, self.driver, self.cfg = safety_map, driver, cfg
         self.omega_max = omega_limit(max_motor_speed, driver)
+        self.max_motor_speed = max_motor_speed
+        self.trim = trim
+        """The motors' mismatch d divided out of every walking command sent (trim_commands:
+        left / (1 + d), right / (1 - d)); 0: none. Any thread may set it (the look-ahead's
+        estimate, robot.watch_ahead); the loop reads it once a period."""
         self.recorder = recorder
         self.listeners = list(listeners)
         self.clock = clock
@@ -307,6 +314,10 @@ class RobotLoop:
                         )
                     if stop is None:
                         left, right = follower.speeds(pos, quat, self.omega_max)
+                        if self.trim:
+                            left, right = trim_commands(
+                                left, right, self.trim, self.max_motor_speed
+                            )
                         self._send(tick, left, right, False)
                         commands += 1
             if not driving or stop is not None:

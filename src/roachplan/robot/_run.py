@@ -19,6 +19,7 @@ import numpy as np
 
 from ._config import RobotSettings
 from ._errors import RobotError
+from ._estimate import pooled_mismatch
 from ._links import CommandLink, open_link
 from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner
 from ._loop import LoopEvent, RobotLoop, RunResult
@@ -56,6 +57,12 @@ class RobotRun:
     turning_radius: float | None = None
     """The radius of the arcs its plan was made with [m] (None: a plan given, or the planner
     makes no arcs)."""
+    estimates: tuple[tuple[float, float], ...] = ()
+    """(mismatch, walked [m]) of each window the look-ahead estimated the motors' mismatch
+    from, this leg's and the legs' before it (pooled_mismatch; a re-planned leg goes on
+    from them)."""
+    trim: float = 0.0
+    """The mismatch the loop divided out of its commands at the end (RobotLoop.trim)."""
 
 
 def wait_first_pose(source: PoseSource, timeout: float) -> PoseSample:
@@ -230,6 +237,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     ready: Callable[[RobotLoop], bool] | None = None,
     avoid: Sequence[tuple[float, float]] = (),
     turning_radius: float | None = None,
+    estimates: Sequence[tuple[float, float]] = (),
 ) -> RobotRun:
     """Plan from where the robot stands (or take `plan`), Go, drive until the goal or a stop,
     and record it. source/link: already open ones (default: opened from the settings and
@@ -240,7 +248,9 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     waits for Go too (when called from the main thread). avoid: points (x, y) [m] the plan
     keeps clear of (plan_clear_of: where a look-ahead's rollouts failed, re-planning after the
     guard held the robot). turning_radius: the radius of the plan's arcs [m] (replan_radius: a
-    re-plan's, widened to what the robot showed it turns); None: the scene's."""
+    re-plan's, widened to what the robot showed it turns); None: the scene's. estimates: the
+    motors' mismatch estimated on the legs before (RobotRun.estimates): with the look-ahead and
+    settings.trim, the loop starts with their pool divided out of its commands."""
     own_source = source is None
     own_link = link is None
     source = source or open_pose_source(settings.source, **settings.source_settings)
@@ -323,7 +333,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             recorder=recorder,
             listeners=listeners,
         )
-        if settings.look_ahead is not None or settings.guard is not None:
+        looks = settings.look_ahead is not None or settings.guard is not None
+        if looks and settings.trim:
+            loop.trim = pooled_mismatch(estimates) or 0.0
+        if looks:
             watcher = watch_ahead(
                 world,
                 path,
@@ -331,7 +344,11 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 loop,
                 cfg=settings.look_ahead or LookAheadConfig(),
                 guard=settings.guard,
-                drift=settings.guard_drift,
+                drift=None
+                if settings.guard_drift is None
+                else settings.guard_drift * settings.loop.safety.max_deviation,
+                trim=settings.trim,
+                estimates=tuple(estimates),
                 period=settings.look_ahead_period,
                 seed=scene.seed if settings.seed is None else settings.seed,
                 safety=settings.loop.safety,
@@ -378,6 +395,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             clearance=kept,
             turning=watcher.turning() if watcher is not None else None,
             turning_radius=radius,
+            estimates=watcher.estimates if watcher is not None else tuple(estimates),
+            trim=loop.trim,
         )
     finally:
         if recorder is not None:
@@ -402,12 +421,16 @@ def watch_ahead(
     recorder: RunRecorder | None,
     also: Callable[[float, LookAhead], None] | None = None,
     drift: float | None = None,
+    trim: bool = False,
+    estimates: tuple[tuple[float, float], ...] = (),
 ) -> LookAheadRunner:
     """A LookAheadRunner beside `loop` (its listener added; the caller starts it at Go and
     closes it), each result recorded on /lookahead (recorder: None, none) and given to also(t,
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
     "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
-    robot drives further than `drift` [m] from the path (None: never), held as "drift". The
+    robot drives further than `drift` [m] from the path (None: never), held as "drift". trim:
+    the motors' mismatch each look-ahead estimates (pooled with `estimates`, the legs'
+    before) is divided out of the loop's commands from then on (loop.trim). The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
     it."""
 
@@ -436,7 +459,10 @@ def watch_ahead(
         period=period,
         seed=seed,
         on_result=record,
+        estimates=estimates,
+        on_trim=(lambda m: setattr(loop, "trim", m)) if trim else None,
     )
+    runner.trim = loop.trim  # (a re-planned leg's, from the legs before)
     loop.listeners.append(runner.listen)
     if guard is not None and drift is not None:
         path_xy = np.asarray(path, dtype=float)[:, :2]
