@@ -226,7 +226,13 @@ def main() -> None:
                     f"{name:11s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
                     f"({held_by(r)}) "
                     f"drive {r.get('drive_time') or 0:5.1f} s, late {100 * late:4.1f} %, "
-                    f"lowest P(hold) {r.get('lowest_p_hold')}; {r.get('detail', '')[:90]}",
+                    f"lowest P(hold) {r.get('lowest_p_hold')}, trim {r.get('trim')}; "
+                    f"{r.get('detail', '')[:90]}"
+                    + (
+                        f"; not re-planned: {r['replan_error'][:90]}"
+                        if r.get("replan_error")
+                        else ""
+                    ),
                     flush=True,
                 )
         reliability = {name: calibration(Path(tmp), name) for name in names if name != "unguarded"}
