@@ -19,10 +19,12 @@ speeds: experiments.draw, as choose's rollouts; robot_draws), round the scene's 
 scene naming a fitted robot file looks ahead with the fit. Driven one at a time, a rollout ends
 at its first failure; in lockstep (MuJoCo) the safety checks read its frames afterwards.
 LookAheadRunner also estimates the robot's motor mismatch from its last few seconds (how it
-turned against how it was told to: estimate_mismatch), pools each such window's estimate with
-the leg's before it (pooled_mismatch: a motor's mismatch holds for the leg; a re-planned leg's
-runner starts afresh), and its rollouts drive with that, so a robot whose motors differ from the model's is simulated drifting as it
-does.
+turned against how it was told to, on the stretches it was told to walk near straight:
+straight_mismatches), pools each estimate with those before it (pooled_mismatch: a motor's
+mismatch holds for the robot; a re-planned leg goes on from the legs before), and its
+rollouts drive with that, so a robot whose motors differ from the model's is simulated
+drifting as it does; with the loop's trim (RobotSettings.trim) the loop divides the pool out
+of its commands, and the rollouts are driven so trimmed.
 What it does not model yet: the pose's latency (the pose is taken as now).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from

@@ -81,7 +81,8 @@ AVOID_RADIUS = 0.05
 """How far a re-plan keeps its path from where the look-ahead's rollouts failed [m]: the
 body's half length, about the spread of its feet."""
 AVOID_TRIES = 4
-"""Plans (seeds) a re-plan tries for one that keeps clear of them."""
+"""Plans (seeds) a plan from the robot tries: for one that keeps clear of the points to avoid, or
+for one at all."""
 
 
 def clearance(path_xy, avoid: Sequence[tuple[float, float]], radius: float = AVOID_RADIUS) -> float:
@@ -162,12 +163,14 @@ def plan_clear_of(
     and its clearance (the least distance of its path to those points [m]; inf with none):
     the plans of seeds seed, seed + 1, ... up to `tries`, the first that keeps clear, else
     the one that keeps clearest (of those found). Points within radius of start are not
-    avoided (no path from there can be). No points to avoid: the plan of seed."""
+    avoided (no path from there can be). No points to avoid: the first of those seeds whose
+    planner finds a path (from a pose at a bridge's edge, the sampling planner's iteration
+    budget ran out once for a seed whose path the next seed would have found)."""
     from roachplan.experiments import plan as plan_trial
 
     points = [p for p in avoid if math.dist(p[:2], start[:2]) >= radius]
     best: tuple[PlanResult, float] | None = None
-    for k in range(tries if points else 1):
+    for k in range(tries):
         planned = plan_trial(world, seed=seed + k, start=start)
         if not planned.found:
             best = best or (planned, math.inf)
@@ -285,6 +288,9 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             if turning_radius is not None and planner.turning_radius is not None:
                 planner = dataclasses.replace(planner, turning_radius=turning_radius)
             plan, clear = plan_clear_of(world.with_planner(planner), here, seed, avoid)
+            if not plan.found and planner != scene.planner:  # (wider arcs: none; the scene's)
+                plan, clear = plan_clear_of(world, here, seed, avoid)
+                planner = scene.planner
             radius = planner.turning_radius
             kept = None if math.isinf(clear) else clear
             if not plan.found:
