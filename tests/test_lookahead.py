@@ -311,69 +311,14 @@ def _arc(kappa: float, speed: float, seconds: float, t0: float = 0.0, start=(0.0
     return np.column_stack([t0 + t, x, y, yaw])
 
 
-def test_the_turning_the_robot_showed_is_its_share_of_the_curve_the_weaker_way():
-    """turning_shown: a robot told to turn left at ratio 2.5 that turns at 0.6 of the curve's
-    curvature there, and right as the curve says, shows 0.6 (the lesser way); told only to
-    correct its course (ratio 1.2), it is not judged; a walk too short is not either."""
-    from roachplan.robot import turning_shown
-    from roachplan.sim import DriverConfig
+def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_up_to_a_limit():
+    """replan_radius: the scene's radius, doubled for each drift hold so far, at most
+    MAX_WIDENING times."""
+    from roachplan.robot import MAX_WIDENING, replan_radius
 
-    driver = DriverConfig()
-    curve, top = driver.turning, driver.max_ratio
-    kappa = curve.curvature(2.5)
-    left = _arc(0.6 * kappa, 0.2, 2.0)
-    right = _arc(-kappa, 0.2, 2.0, t0=2.0, start=tuple(left[-1, 1:]))
-    poses = np.vstack([left, right])
-    t = np.arange(0.0, 4.0, 0.02)
-    commands = np.column_stack(
-        [t, np.where(t < 2, 20.0, 50.0), np.where(t < 2, 50.0, 20.0)]
-    )  # (left turn: the right side fast; then right)
-    assert turning_shown(poses[: len(left)], commands, curve, top) == pytest.approx(0.6, abs=0.02)
-    assert turning_shown(poses, commands, curve, top) == pytest.approx(0.6, abs=0.02)
-    assert turning_shown(poses[len(left) :], commands, curve, top) == pytest.approx(1.0, abs=0.02)
-    gentle = np.column_stack([t, np.full(len(t), 20.0), np.full(len(t), 24.0)])
-    assert turning_shown(poses, gentle, curve, top) is None
-    assert turning_shown(poses[:20], commands, curve, top) is None  # (4 cm walked)
-    stopped = np.column_stack([t, np.zeros(len(t)), np.zeros(len(t))])
-    assert turning_shown(poses, stopped, curve, top) is None
-
-
-def test_the_simulated_roach_on_a_slippery_floor_shows_less_of_its_turning_curve():
-    """turning_shown on the simulated roach told to turn at ratio 2.5 on an open floor: about
-    all of its calibrated curve at the friction it was calibrated at, clearly less where the
-    floor is slippery (it turns wider: what the guard's re-plan widens its arcs for)."""
-    from roachplan.robot import replan_radius, turning_shown
-    from roachplan.sim import DriverConfig, RobotConfig, SimConfig, open_floor
-
-    driver = DriverConfig()
-    curve, top = driver.turning, driver.max_ratio
-    shares = []
-    for friction in (SimConfig().friction, 0.45):
-        track = []
-        with open_floor(RobotConfig(), SimConfig()) as sim:
-            sim.perturb(friction=friction, mass_scale=1.0, motor_gain=(1.0, 1.0))
-            sim.reset(0.0, 0.0, 0.0)
-            sim.set_leg_speeds(driver.omega0, 2.5 * driver.omega0)
-            for _ in range(200):  # 4 s, the first second left out (from rest)
-                sim.advance(20)
-                (x, y, _), quat = sim.pose()
-                track.append((sim.time, x, y, math.atan2(2 * (quat[3] * quat[2] + quat[0] * quat[1]),
-                                                         1 - 2 * (quat[1] ** 2 + quat[2] ** 2))))  # fmt: skip
-        poses = np.array(track[50:])
-        n = len(poses)
-        commands = np.column_stack(
-            [poses[:, 0], np.full(n, driver.omega0), np.full(n, 2.5 * driver.omega0)]
-        )
-        shares.append(turning_shown(poses, commands, curve, top))
-    calibrated, slippery = shares
-    print(f"turning shown: {calibrated:.2f} at the calibrated friction, {slippery:.2f} at 0.45")
-    assert calibrated is not None and slippery is not None
-    assert 0.8 < calibrated < 1.25
-    assert slippery < 0.85 * calibrated
-    radius = 0.13
-    assert replan_radius(radius, slippery) == pytest.approx(radius / slippery)
-    assert replan_radius(radius, 1.1) == radius and replan_radius(radius, None) == radius
-    assert replan_radius(radius, 0.01) == pytest.approx(radius * 4)  # (MIN_TURNING_SHOWN)
+    assert replan_radius(0.13, 0) == 0.13
+    assert replan_radius(0.13, 1) == pytest.approx(0.26)
+    assert replan_radius(0.13, 5) == pytest.approx(0.13 * MAX_WIDENING)
 
 
 def test_trimmed_commands_make_mismatched_motors_run_as_the_driver_asked():

@@ -300,14 +300,9 @@ def cmd_robot(args: argparse.Namespace) -> int:
         run = drive_robot(world, settings, ready=ready, source=source, link=link)
         held = []  # the legs the guard ended: re-planned from where the robot stood
         replan_error = None  # (why the re-plan after the last hold failed)
-        shown = []  # (the share of its turning curve the robot turned at, each leg judged)
         while run.result.reason in GUARD_HOLDS and len(held) < args.replans:
             held.append(run)
-            if run.turning is not None:
-                shown.append(run.turning)
-            _drifts = sum(h.result.reason == "drift" for h in held)  # PILOT: x2 per drift
-            radius = world.scene.planner.turning_radius
-            radius, wider = (None, "") if radius is None else (radius * min(2**_drifts, 4), "")
+            radius, wider = _replan_arcs(world.scene.planner.turning_radius, held)
             print(
                 f"roachplan: held by the guard: {run.result.detail}; re-planning from where "
                 f"the robot stands (re-plan {len(held)} of at most {args.replans}){wider}",
@@ -342,17 +337,17 @@ def cmd_robot(args: argparse.Namespace) -> int:
     return _report(args, scene.name, run, held, replan_error)
 
 
-def _replan_arcs(radius: float | None, shown: list[float]) -> tuple[float | None, str]:
-    """(the radius of a re-plan's arcs [m], what to tell of it): arcs the robot showed it can
-    turn, the scene's `radius` (None: a planner without arcs) over the least share of its
-    curve it turned at on any leg so far (`shown`; one that drifted wide widens every
-    re-plan after it)."""
+def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:
+    """(the radius of a re-plan's arcs [m], what to tell of it): the scene's `radius` (None: a
+    planner without arcs) widened for each leg the guard held for drifting off its path
+    (replan_radius)."""
     from roachplan.robot import replan_radius
 
-    if radius is None or not shown:
+    drifts = sum(h.result.reason == "drift" for h in held)
+    if radius is None or not drifts:
         return radius, ""
-    wider = replan_radius(radius, min(shown))
-    return wider, f"; arcs of {wider:.2f} m: it turned at {min(shown):.2f} of its curve"
+    wider = replan_radius(radius, drifts)
+    return wider, f"; arcs of {wider:.2f} m: it drifted off arcs of {radius:.2f} m or wider"
 
 
 def _leg_log(args: argparse.Namespace, scene, out: Path, leg: int) -> Path:
@@ -398,7 +393,6 @@ def _report(
                 "log": None if h.log is None else str(h.log),
                 "reason": h.result.reason,
                 "failures": [list(f) for f in h.lookaheads[-1].failures] if h.lookaheads else [],
-                "turning": h.turning,
                 "turning_radius": h.turning_radius,
                 "trim": h.trim,
             }
@@ -406,7 +400,6 @@ def _report(
         ],
         "plan_seed": run.plan_seed,
         "clearance": run.clearance,
-        "turning": run.turning,
         "turning_radius": run.turning_radius,
         "trim": run.trim,
         "lookaheads": len(run.lookaheads),

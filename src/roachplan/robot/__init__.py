@@ -76,7 +76,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "plan_start": "._run",
         "replan_radius": "._run",
         "GUARD_HOLDS": "._run",
-        "MIN_TURNING_SHOWN": "._run",
+        "MAX_WIDENING": "._run",
         "START_REACH": "._run",
         "clearance": "._run",
         "watch_ahead": "._run",
@@ -90,7 +90,6 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "look_ahead": "._lookahead",
         "estimate_mismatch": "._estimate",
         "pooled_mismatch": "._estimate",
-        "turning_shown": "._estimate",
         "trim_commands": "._estimate",
         "straight_mismatches": "._estimate",
         "remaining_path": "._lookahead",
@@ -131,7 +130,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._estimate import pooled_mismatch as pooled_mismatch
     from ._estimate import straight_mismatches as straight_mismatches
     from ._estimate import trim_commands as trim_commands
-    from ._estimate import turning_shown as turning_shown
     from ._frames import FRAME_SIZE as FRAME_SIZE
     from ._frames import CommandFrame as CommandFrame
     from ._frames import FrameReader as FrameReader
@@ -184,7 +182,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import read_run as read_run
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import GUARD_HOLDS as GUARD_HOLDS
-    from ._run import MIN_TURNING_SHOWN as MIN_TURNING_SHOWN
+    from ._run import MAX_WIDENING as MAX_WIDENING
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance

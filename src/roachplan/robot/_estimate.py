@@ -1,10 +1,10 @@
 """What the robot's own poses and commands say about it (issue 32): how its motors differ from
-the model's, and how tightly it turns against the turning curve the plans were made for.
+the model's, and the commands that make such motors run as the driver asks.
 
 Pure functions of recorded arrays: poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and
 the commands sent meanwhile ((M, 3): t [s], left, right [rad/s]; a stop frame 0, 0). The
-look-ahead drives its rollouts with the mismatch (robot/_lookahead.py); a re-plan after the
-guard held the robot asks for arcs the robot showed it can turn (turning_shown).
+look-ahead drives its rollouts with the mismatch (robot/_lookahead.py), and the robot loop
+divides it out of the commands it sends (trim_commands).
 """
 
 from __future__ import annotations
@@ -120,62 +120,3 @@ def trim_commands(left: float, right: float, mismatch: float, limit: float) -> t
     if top > limit > 0:
         a, b = a * limit / top, b * limit / top
     return a, b
-
-
-HARD_TURN_RATIO = 1.5
-"""A window of commands asks for a hard turn when the curvature the turning curve gives its
-speed ratios averages at least that of this ratio [-] (where the curve leaves its straight
-start: below it a turn is the driver's small correction, which turning_shown does not judge)."""
-TURN_WINDOW = 0.5
-"""turning_shown's windows [s]: short enough that one holds a single turn of the path."""
-MIN_TURN_WALK = 0.05
-"""The least distance walked in hard-turn windows one way for turning_shown to judge that way
-[m]."""
-
-
-def turning_shown(
-    poses: np.ndarray,
-    commands: np.ndarray,
-    curve,
-    max_ratio: float,
-    *,
-    window: float = TURN_WINDOW,
-) -> float | None:
-    """The share of its turning curve the robot turned at while it was told to turn hard: its
-    poses ((K, 4): t [s], x, y [m], yaw [rad], world frame) and the commands sent meanwhile
-    ((M, 3): t [s], left, right [rad/s]) cut into windows of `window` seconds; in each window
-    whose walking commands (both sides forward) ask, on average, for at least the curvature of
-    HARD_TURN_RATIO on `curve` (a TurningCurve, ratios capped at max_ratio), the curvature it
-    turned (its heading's change over the distance walked, signed the way it was told) against
-    the curvature asked, weighted by the distance walked. Each way (left, right) is judged
-    apart, when it holds at least MIN_TURN_WALK of such windows, and the lesser share is
-    returned: a robot whose motors differ turns less one way, and a plan's arcs go both ways.
-    1: it turns as the plans assume; under 1: it turns wider (a slippery floor, a weak motor).
-    None: it was never told to turn hard over enough distance."""
-    poses, commands = np.asarray(poses, dtype=float), np.asarray(commands, dtype=float)
-    if len(poses) < 2 or not len(commands):
-        return None
-    hard = curve.curvature(HARD_TURN_RATIO)
-    shown, asked, walked_way = {1: 0.0, -1: 0.0}, {1: 0.0, -1: 0.0}, {1: 0.0, -1: 0.0}
-    t0, t_end = float(poses[0, 0]), float(poses[-1, 0])
-    for a in np.arange(t0, t_end, window):
-        p = poses[(poses[:, 0] >= a) & (poses[:, 0] <= a + window)]
-        c = commands[(commands[:, 0] >= a) & (commands[:, 0] < a + window)]
-        c = c[(c[:, 1] > 0) & (c[:, 2] > 0)]
-        if len(p) < 2 or not len(c):
-            continue
-        ratio = np.minimum(np.maximum(c[:, 2] / c[:, 1], c[:, 1] / c[:, 2]), max_ratio)
-        kappas = [curve.curvature(float(r)) for r in ratio]
-        expected = float(np.mean(np.sign(c[:, 2] - c[:, 1]) * kappas))  # (+: to the left)
-        if not math.isfinite(expected) or abs(expected) < hard:
-            continue
-        walked = float(np.sum(np.linalg.norm(np.diff(p[:, 1:3], axis=0), axis=1)))
-        if walked <= 0:
-            continue
-        turned = float(np.sum(np.remainder(np.diff(p[:, 3]) + math.pi, 2 * math.pi) - math.pi))
-        way = 1 if expected > 0 else -1
-        shown[way] += way * turned  # (= curvature turned x distance walked)
-        asked[way] += abs(expected) * walked
-        walked_way[way] += walked
-    shares = [shown[w] / asked[w] for w in (1, -1) if walked_way[w] >= MIN_TURN_WALK]
-    return min(shares) if shares else None

@@ -60,7 +60,7 @@ from roachplan._settings import (
 from roachplan._settings import setting as s
 from roachplan.sim import ENGINES
 
-from ._estimate import MISMATCH_PIECE, pooled_mismatch, straight_mismatches, turning_shown
+from ._estimate import MISMATCH_PIECE, pooled_mismatch, straight_mismatches
 from ._safety import SafetyConfig, SafetyMap, check_pose
 from ._transform import yaw_of
 
@@ -330,6 +330,11 @@ def _look_in(world: World, path_xyz, spins, pose, cfg, **settings) -> LookAhead:
     return look_ahead(world, path_xyz, spins, pose, cfg, **settings)
 
 
+SETTLE = 1.0
+"""The mismatch is not estimated on a leg's first second of walk [s]: from rest, on the rough
+bridge, the first estimates of a twin's 0.12 came out at -0.01 and 0.035."""
+
+
 class LookAheadRunner:
     """The look-ahead beside the robot loop, never in it: a thread that, every `period`
     seconds, takes the newest world-frame pose the loop has seen (`listen`, a loop listener)
@@ -375,14 +380,13 @@ class LookAheadRunner:
         self._commands: collections.deque = collections.deque()
         """(t [s, monotonic], left, right [rad/s], trim) of the commands within it, as sent
         (stop: 0, 0), with the loop's trim they were sent under."""
-        self._leg: tuple[list, list] = ([], [])
-        """Every pose and command of the leg, as in _poses and _commands (turning)."""
         self._curve = (world.scene.driver.turning, world.scene.driver.max_ratio)
         self._estimates: list[tuple[float, float]] = list(estimates)
         """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch), from the
         legs before this one (estimates) on: a motor's mismatch holds for the robot."""
         self._until = -math.inf
-        """The estimated stretches end here [s, monotonic]: the next start after it."""
+        """The estimated stretches end here [s, monotonic]: the next start after it (and
+        SETTLE after the leg's first walking command: from rest the gait is not yet steady)."""
         self.on_trim = on_trim
         self.trim = 0.0
         """The trim last given to on_trim (the loop's, which the look-ahead then drives with)."""
@@ -402,7 +406,6 @@ class LookAheadRunner:
             t = event.sample.t_receive
             with self._lock:
                 self._pose = (float(x), float(y), yaw_of(event.quat))
-                self._leg[0].append((t, *self._pose))
                 if window > 0:
                     self._poses.append((t, *self._pose))
                     while self._poses and self._poses[0][0] < t - window:
@@ -413,8 +416,9 @@ class LookAheadRunner:
             sent = (
                 (event.t, 0.0, 0.0, self.trim) if f.stop else (event.t, f.left, f.right, self.trim)
             )
+            if not f.stop and self._until == -math.inf:  # (the leg's first walking command)
+                self._until = event.t + SETTLE
             with self._lock:
-                self._leg[1].append(sent)
                 if window > 0:
                     self._commands.append(sent)
                     while self._commands and self._commands[0][0] < event.t - window:
@@ -440,13 +444,6 @@ class LookAheadRunner:
         """(mismatch, walked [m]) of every window estimated so far, the legs' before this one's
         first (a re-planned leg's runner starts from them)."""
         return tuple(self._estimates)
-
-    def turning(self) -> float | None:
-        """The share of its turning curve the robot turned at on this leg so far, when told to
-        turn hard (robot/_estimate.py turning_shown); None: it was not told to turn hard."""
-        with self._lock:
-            poses, commands = np.array(self._leg[0]), np.array(self._leg[1])
-        return turning_shown(poses, commands[:, :3] if len(commands) else commands, *self._curve)
 
     def start(self) -> None:
         self._thread.start()

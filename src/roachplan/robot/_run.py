@@ -51,9 +51,6 @@ class RobotRun:
     """The seed of the plan it drove (None: a plan given)."""
     clearance: float | None = None
     """How far its path kept from the points it was to avoid [m] (None: none given)."""
-    turning: float | None = None
-    """The share of its turning curve the robot turned at on this leg when told to turn hard
-    (robot/_estimate.py turning_shown; None: not looked ahead, or never told to turn hard)."""
     turning_radius: float | None = None
     """The radius of the arcs its plan was made with [m] (None: a plan given, or the planner
     makes no arcs)."""
@@ -187,19 +184,19 @@ def plan_clear_of(
 GUARD_HOLDS = ("lookahead", "drift")
 """How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
 re-plans from where it stands."""
-MIN_TURNING_SHOWN = 0.25
-"""replan_radius widens a plan's arcs at most 1 / this times [-]."""
+MAX_WIDENING = 4.0
+"""replan_radius widens a plan's arcs at most this many times [-]."""
 
 
-def replan_radius(radius: float, turning: float | None) -> float:
-    """The radius of a re-plan's arcs [m]: the scene's `radius` [m] over the share of its
-    turning curve the robot showed (turning_shown: a robot that turned at 0.6 of the curve is
-    planned arcs 1 / 0.6 as wide, so they ask it for the curvature it made), at most
-    1 / MIN_TURNING_SHOWN times; radius itself when it turned as the curve says (or more), or
-    was never judged (None)."""
-    if turning is None or turning >= 1.0:
-        return radius
-    return radius / max(turning, MIN_TURNING_SHOWN)
+def replan_radius(radius: float, drifts: int) -> float:
+    """The radius of a re-plan's arcs [m]: the scene's `radius` [m] doubled for each time the
+    guard held the robot for drifting off its path so far (`drifts`), at most MAX_WIDENING
+    times. A robot that drifted off arcs of one radius is asked for wider ones, and the
+    drivable planner turns it on the spot where they do not fit. (An estimate of how tightly
+    the robot turns, from its heading against its commands in hard turns, read 0.0-0.3 of the
+    turning curve on legs that reached the goal as well as on legs that drifted: the tracking
+    driver's hard turns are mostly short corrections, which say little of the tightest turn.)"""
+    return radius * min(2.0**drifts, MAX_WIDENING)
 
 
 def start_height(world: World, xy) -> float:
@@ -251,7 +248,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
     waits for Go too (when called from the main thread). avoid: points (x, y) [m] the plan
     keeps clear of (plan_clear_of: where a look-ahead's rollouts failed, re-planning after the
     guard held the robot). turning_radius: the radius of the plan's arcs [m] (replan_radius: a
-    re-plan's, widened to what the robot showed it turns); None: the scene's. estimates: the
+    re-plan's, widened after the robot drifted off its path); None: the scene's. estimates: the
     motors' mismatch estimated on the legs before (RobotRun.estimates): with the look-ahead and
     settings.trim, the loop starts with their pool divided out of its commands."""
     own_source = source is None
@@ -322,7 +319,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     "avoid": [list(p[:2]) for p in avoid],
                     "clearance": kept,
                     # (the radius its arcs were planned with [m]: a re-plan's may be wider than
-                    # the scene's, from how the robot turned; null: a plan given, or no arcs)
+                    # the scene's, after drift holds; null: a plan given, or no arcs)
                     "turning_radius": radius,
                 },
             )
@@ -399,7 +396,6 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             lookaheads=tuple(watcher.results) if watcher is not None else (),
             plan_seed=plan.seed,
             clearance=kept,
-            turning=watcher.turning() if watcher is not None else None,
             turning_radius=radius,
             estimates=watcher.estimates if watcher is not None else tuple(estimates),
             trim=loop.trim,
