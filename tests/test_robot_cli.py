@@ -360,6 +360,7 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
     assert held["reason"] == "drift" and "guard drift 0.0225 m" in held["detail"], held
     assert "off its path" in held["detail"] and "arcs of" in err
     radius = load_scene("double_bridge").planner.turning_radius
+    assert radius is not None  # (the scene's plans are drivable: arcs)
     first, second = read_run(log), read_run(tmp_path / "run-2.mcap")
     assert first.plan["turning_radius"] == pytest.approx(radius)
     assert second.plan["turning_radius"] == pytest.approx(replan_radius(radius, 1))
