@@ -56,6 +56,20 @@ def _pixels(page) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB")).astype(int)
 
 
+def _steady_pixels(page, tries: int = 6) -> np.ndarray:
+    """A shot of the page once it has stopped drawing: shots 0.5 s apart until two in a row
+    are the same (software WebGL on a loaded machine may still be drawing the terrain or moving
+    the camera a second after a seek, and a shot then differs far from the robot)."""
+    shot = _pixels(page)
+    for _ in range(tries):
+        time.sleep(0.5)
+        again = _pixels(page)
+        if not np.any(np.abs(again - shot).sum(axis=2) > 60):
+            return again
+        shot = again
+    return shot
+
+
 def _check_pixels(a: np.ndarray, b: np.ndarray, box: FloatRect) -> None:
     """Two shots of the 3D view (the numbers box `box` masked out): only the robot moved, and
     the planned path (black) and the trajectory (blue) are drawn."""
@@ -151,7 +165,7 @@ def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifa
         shots = []
         for t in ("4", "5"):
             _seek(clock, t)
-            shots.append(_pixels(page))
+            shots.append(_steady_pixels(page))
         a, b = shots
         page.screenshot(path=artifacts / "replay-trial.png")
         box = page.locator("#roachplan-replay").bounding_box()
