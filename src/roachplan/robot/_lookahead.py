@@ -385,8 +385,10 @@ class LookAheadRunner:
         """(mismatch, walked [m]) of each window estimated so far (pooled_mismatch), from the
         legs before this one (estimates) on: a motor's mismatch holds for the robot."""
         self._until = -math.inf
-        """The estimated stretches end here [s, monotonic]: the next start after it (and
+        """The estimated stretches end here [s, monotonic]: the next starts after it (and
         SETTLE after the leg's first walking command: from rest the gait is not yet steady)."""
+        self._walking: float | None = None
+        """When the leg's first walking command was sent [s, monotonic] (None: not yet)."""
         self.on_trim = on_trim
         self.trim = 0.0
         """The trim last given to on_trim (the loop's, which the look-ahead then drives with)."""
@@ -416,9 +418,9 @@ class LookAheadRunner:
             sent = (
                 (event.t, 0.0, 0.0, self.trim) if f.stop else (event.t, f.left, f.right, self.trim)
             )
-            if not f.stop and self._until == -math.inf:  # (the leg's first walking command)
-                self._until = event.t + SETTLE
             with self._lock:
+                if not f.stop and self._walking is None:  # (the leg's first walking command)
+                    self._walking = event.t
                 if window > 0:
                     self._commands.append(sent)
                     while self._commands and self._commands[0][0] < event.t - window:
@@ -468,13 +470,14 @@ class LookAheadRunner:
             with self._lock:
                 pose, phase = self._pose, self._phase_at(time.monotonic())
                 poses, commands = np.array(self._poses), np.array(self._commands)
+                walking = self._walking
             if pose is None:
                 continue
             path, spins, cfg, safety, smap = self._args
-            if cfg.mismatch_window and len(poses):
+            if cfg.mismatch_window and len(poses) and walking is not None:
                 # The straight stretches of the window not estimated before, pooled with the
                 # legs' before them.
-                poses = poses[poses[:, 0] >= self._until]
+                poses = poses[poses[:, 0] >= max(self._until, walking + SETTLE)]
                 if len(poses) >= 2:
                     self._estimates += straight_mismatches(poses, commands, *self._curve)
                     whole = math.floor((poses[-1, 0] - poses[0, 0]) / MISMATCH_PIECE)
