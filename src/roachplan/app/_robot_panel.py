@@ -385,9 +385,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 loop,
                 cfg=LookAheadConfig(),
                 guard=form.guard,
-                drift=None
-                if defaults.guard_drift is None
-                else defaults.guard_drift * loop.cfg.safety.max_deviation,
+                drift=defaults.guard_drift,
                 trim=defaults.trim,
                 period=defaults.look_ahead_period,
                 seed=plan.seed,

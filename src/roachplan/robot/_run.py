@@ -336,10 +336,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             recorder=recorder,
             listeners=listeners,
         )
-        looks = settings.look_ahead is not None or settings.guard is not None
-        if looks and settings.trim:
-            loop.trim = pooled_mismatch(estimates) or 0.0
-        if looks:
+        if settings.look_ahead is not None or settings.guard is not None:
             watcher = watch_ahead(
                 world,
                 path,
@@ -347,9 +344,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 loop,
                 cfg=settings.look_ahead or LookAheadConfig(),
                 guard=settings.guard,
-                drift=None
-                if settings.guard_drift is None
-                else settings.guard_drift * settings.loop.safety.max_deviation,
+                drift=settings.guard_drift,
                 trim=settings.trim,
                 estimates=tuple(estimates),
                 period=settings.look_ahead_period,
@@ -430,9 +425,10 @@ def watch_ahead(
     closes it), each result recorded on /lookahead (recorder: None, none) and given to also(t,
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
     "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
-    robot drives further than `drift` [m] from the path (None: never), held as "drift". trim:
-    the motors' mismatch each look-ahead estimates (pooled with `estimates`, the legs'
-    before) is divided out of the loop's commands from then on (loop.trim). The
+    robot drives further than `drift` times safety.max_deviation from the path (None: never;
+    RobotSettings.guard_drift), held as "drift". trim: the motors' mismatch each look-ahead
+    estimates (pooled with `estimates`, the legs' before) is divided out of the loop's commands
+    from then on (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
     it."""
 
@@ -464,21 +460,23 @@ def watch_ahead(
         estimates=estimates,
         on_trim=(lambda m: setattr(loop, "trim", m)) if trim else None,
     )
-    runner.trim = loop.trim  # (a re-planned leg's, from the legs before)
+    if trim:  # (a re-planned leg's, from the legs before: until its first look-ahead)
+        loop.trim = runner.trim = pooled_mismatch(estimates) or 0.0
     loop.listeners.append(runner.listen)
     if guard is not None and drift is not None:
         path_xy = np.asarray(path, dtype=float)[:, :2]
+        limit = drift * safety.max_deviation  # [m]
 
         def drifted(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
             if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
                 return
             x, y = float(event.position[0]), float(event.position[1])
             off = distance_to_path((x, y), path_xy)
-            if off > drift:
+            if off > limit:
                 loop.stop(
                     "drift",
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
-                    f"drift {drift:g} m, before the loop's stop at {safety.max_deviation:g} m)",
+                    f"drift {limit:g} m, before the loop's stop at {safety.max_deviation:g} m)",
                 )
 
         loop.listeners.append(drifted)

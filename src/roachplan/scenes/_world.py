@@ -167,46 +167,37 @@ class World:
         (scenes/_sim_terrain.py; computed once)."""
         return sim_terrain_of(self)
 
+    def _replaced(self, kept: tuple[str, ...], **changes) -> World:
+        """dataclasses.replace(self, **changes), with the cached properties named in `kept`
+        (those it has computed that the changes leave as they are) carried over."""
+        world = dataclasses.replace(self, **changes)
+        world.__dict__.update({k: v for k, v in self.__dict__.items() if k in kept})
+        return world
+
     def with_notes(self, notes: tuple[str, ...]) -> World:
         """This world with other notes; what it has computed (regions, sim_terrain) kept."""
-        world = dataclasses.replace(self, notes=notes)
-        world.__dict__.update(
-            {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
-        )
-        return world
+        return self._replaced(("regions", "sim_terrain"), notes=notes)
 
     def with_sim(self, sim: SimConfig, driver: DriverConfig) -> World:
         """This world simulated with other physics and driver settings (another engine, its
         turning curve): what it has computed (regions, sim_terrain: neither depends on them)
         kept."""
         scene = dataclasses.replace(self.scene, sim=sim, driver=driver)
-        world = dataclasses.replace(self, scene=scene)
-        world.__dict__.update(
-            {k: v for k, v in self.__dict__.items() if k in ("regions", "sim_terrain")}
-        )
-        return world
+        return self._replaced(("regions", "sim_terrain"), scene=scene)
 
     def with_planner(self, planner: PlannerConfig) -> World:
         """This world planned with other planner settings (a re-plan's wider arcs): what it has
         computed kept (sim_terrain; regions too when the validity settings they are made by
         are the same)."""
-        world = dataclasses.replace(self, scene=dataclasses.replace(self.scene, planner=planner))
-        kept = (
-            ("regions", "sim_terrain")
-            if planner.validity == self.scene.planner.validity
-            else ("sim_terrain",)
-        )
-        world.__dict__.update({k: v for k, v in self.__dict__.items() if k in kept})
-        return world
+        same = planner.validity == self.scene.planner.validity
+        scene = dataclasses.replace(self.scene, planner=planner)
+        return self._replaced(("regions", "sim_terrain") if same else ("sim_terrain",), scene=scene)
 
     def with_scene(self, scene: Scene) -> World:
         """This terrain, height field and robot with scene: the same scene with what was picked
         for it written down (start, goal, bounds as the page writes them). The simulator's
         terrain is kept (made from the same mesh and height field: a second or two)."""
-        world = dataclasses.replace(self, scene=scene)
-        if "sim_terrain" in self.__dict__:
-            world.__dict__["sim_terrain"] = self.__dict__["sim_terrain"]
-        return world
+        return self._replaced(("sim_terrain",), scene=scene)
 
     def simulation(
         self,
