@@ -6,6 +6,7 @@ commands repeated, and every bad flag is one line naming it."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -18,6 +19,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from conftest import ROACHPLAN, ROOT, roachplan
@@ -371,6 +373,60 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
     assert trims and trims[0] == 0.0
     assert second.lookaheads and second.lookaheads[0]["trim"] == pytest.approx(held["trim"])
     assert summary["trim"] == pytest.approx(trims[-1])
+
+
+def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_path(
+    tmp_path, monkeypatch, capsys
+):
+    """When the re-plan after a drift hold finds no path (PRM's iteration budget has run out
+    from a bridge's edge for every seed; here the planner is made to find none after the first
+    plan, as that cannot be brought about on demand), the robot drives on along the rest of the
+    path it drifted off, from where it stands (rejoin_path), instead of ending the run held.
+    In-process, so that the planner can be replaced; the twin is the real one."""
+    import roachplan.robot._run as run_module
+    from roachplan.app.cli import main
+    from roachplan.robot import distance_to_path, read_run
+
+    real = run_module.plan_clear_of
+    calls = []
+
+    def plan_once(world, start, seed, avoid=(), **kw):
+        planned, clear = real(world, start, seed, avoid, **kw)
+        calls.append(start)
+        if len(calls) == 1:
+            return planned, clear
+        return dataclasses.replace(planned, found=False, message="no path (made to fail)"), clear
+
+    monkeypatch.setattr(run_module, "plan_clear_of", plan_once)
+    log = tmp_path / "run.mcap"
+    with twin(*MOCAP, "--motor-mismatch", "0.12") as (ready, _control):
+        code = main(
+            [
+                "robot", "--scene", "double_bridge", "--natnet-port", str(ready["natnet_port"]),
+                "--max-pose-age", "0.6", "--robot", str(ready["command_port"]), "-o", str(log),
+                "--go", "--no-predict", "--look-ahead", "--look-ahead-draws", "2",
+                "--look-ahead-horizon", "1", "--guard", "0", "--guard-drift", "0.15",
+                "--replans", "1", "--json",
+            ]
+        )  # fmt: skip
+    out, err = capsys.readouterr()
+    summary = json.loads(out)
+    assert len(calls) >= 2 and len(summary["held"]) == 1, err
+    held = summary["held"][0]
+    assert held["reason"] == "drift" and "made to fail" in held["drove_on"], held
+    assert "driving on along the rest of the path it drifted off" in err
+    assert summary["replan_error"] is None  # (it did not stay held)
+    first, second = read_run(log), read_run(tmp_path / "run-2.mcap")
+    assert first.result is not None and second.result is not None
+    assert second.plan["planner"] == "rejoin"
+    # The second leg's path starts where the first left the robot, and goes on along the
+    # first's path: its every waypoint after the first lies on it.
+    path, old = np.asarray(second.plan["path"]), np.asarray(first.plan["path"])[:, :2]
+    assert math.dist(path[0][:2], first.result["end"][:2]) < 0.02
+    assert max(distance_to_path(p[:2], old) for p in path[1:]) < 1e-6
+    assert second.plan["turning_radius"] == first.plan["turning_radius"]
+    assert second.result["periods"] > 0  # (it drove)
+    assert code == (0 if summary["success"] else 1)
 
 
 def test_a_guard_that_fires_holds_the_robot_and_re_plans_from_where_it_stands(tmp_path):

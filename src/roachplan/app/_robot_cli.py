@@ -299,7 +299,8 @@ def cmd_robot(args: argparse.Namespace) -> int:
         stack.callback(link.close)
         run = drive_robot(world, settings, ready=ready, source=source, link=link)
         held = []  # the legs the guard ended: re-planned from where the robot stood
-        replan_error = None  # (why the re-plan after the last hold failed)
+        replan_error = None  # (why the re-plan after the last hold failed: it stays held)
+        drove_on: dict[int, str] = {}  # (held leg k's re-plan failed: why; it drove on)
         while run.result.reason in GUARD_HOLDS and len(held) < args.replans:
             held.append(run)
             radius, wider = _replan_arcs(world.scene.planner.turning_radius, held)
@@ -326,15 +327,63 @@ def cmd_robot(args: argparse.Namespace) -> int:
                     estimates=run.estimates,
                 )
             except (RobotError, PlanningError, ChildError) as exc:  # (no plan from there)
-                held.pop()  # (the held leg is the run's last: `run`)
-                replan_error = str(exc)
+                if run.result.reason != "drift" or run.result.end is None:
+                    held.pop()  # (the held leg is the run's last: `run`)
+                    replan_error = str(exc)
+                    print(
+                        f"roachplan: the re-plan failed: {exc}; the robot stays held",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                    break
+                drove_on[len(held) - 1] = str(exc)
+                # A drift hold's robot is on standable ground a few cm off a path the planner
+                # made: with no new plan, it drives on along the rest of that one, as an
+                # unguarded robot would (a look-ahead hold's robot is predicted to fail on it).
                 print(
-                    f"roachplan: the re-plan failed: {exc}; the robot stays held",
+                    f"roachplan: the re-plan failed: {exc}; driving on along the rest of the "
+                    f"path it drifted off",
                     file=sys.stderr,
                     flush=True,
                 )
-                break
-    return _report(args, scene.name, run, held, replan_error)
+                run = drive_robot(
+                    world,
+                    settings,
+                    plan=_rejoined(run),
+                    ready=ready,
+                    source=source,
+                    link=link,
+                    estimates=run.estimates,
+                )
+    return _report(args, scene.name, run, held, replan_error=replan_error, drove_on=drove_on)
+
+
+def _rejoined(run):
+    """The plan a leg the guard held for drifting drives on along when no re-plan is found:
+    the rest of its path from where the robot stands (rejoin_path), its seed and arcs."""
+    import numpy as np
+
+    from roachplan.planning import PlanResult
+    from roachplan.robot import rejoin_path
+
+    assert run.result.end is not None  # (a drift hold's: the robot's last pose)
+    path, spins = rejoin_path(run.path_xyz, run.spins, run.result.end[:2])
+    step = np.diff(path[:, :2], axis=0)
+    yaw = np.append(np.arctan2(step[:, 1], step[:, 0]), 0.0)  # (toward the next waypoint)
+    yaw[-1] = yaw[-2]
+    for k, heading in spins:  # (a spin's next waypoint repeats its place, turned)
+        yaw[k + 1] = heading
+    return PlanResult(
+        found=True,
+        planner="rejoin",
+        seed=run.plan_seed or 0,
+        states=np.column_stack([path[:, :2], yaw]),
+        path_xyz=path,
+        plan_time=0.0,
+        message="the rest of the path the robot drifted off, from where it stands",
+        turning_radius=run.turning_radius,
+        spins=spins,
+    )
 
 
 def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:
@@ -366,11 +415,19 @@ def _leg_log(args: argparse.Namespace, scene, out: Path, leg: int) -> Path:
 
 
 def _report(
-    args: argparse.Namespace, scene_name: str, run, held: list, replan_error: str | None = None
+    args: argparse.Namespace,
+    scene_name: str,
+    run,
+    held: list,
+    *,
+    replan_error: str | None = None,
+    drove_on: dict[int, str] | None = None,
 ) -> int:
     """Print what a robot command did (its last leg `run`, the legs the guard ended before it:
-    `held`, and why re-planning after the last hold failed: replan_error), as JSON with
-    --json; its exit status."""
+    `held`, why re-planning after the last hold failed: replan_error, and after which held
+    legs it drove on along the old path instead, why: drove_on), as JSON with --json; its exit
+    status."""
+    drove_on = drove_on or {}
     r = run.result
     summary = {
         "scene": scene_name,
@@ -395,8 +452,10 @@ def _report(
                 "failures": [list(f) for f in h.lookaheads[-1].failures] if h.lookaheads else [],
                 "turning_radius": h.turning_radius,
                 "trim": h.trim,
+                # (why no re-plan was found after it, when it drove on along its path instead)
+                "drove_on": drove_on.get(k),
             }
-            for h in held
+            for k, h in enumerate(held)
         ],
         "plan_seed": run.plan_seed,
         "clearance": run.clearance,
@@ -410,8 +469,13 @@ def _report(
     else:
         drove = "" if summary["drive_time"] is None else f" after {summary['drive_time']:.2f} s"
         late = f"{r.late} of {r.periods} control periods late" if r.periods else "never drove"
-        for h in held:
-            print(f"held by the guard, re-planned: {h.result.detail} (wrote {h.log})")
+        for k, h in enumerate(held):
+            then = (
+                "re-planned"
+                if k not in drove_on
+                else f"drove on along its path (no re-plan: {drove_on[k]})"
+            )
+            print(f"held by the guard, {then}: {h.result.detail} (wrote {h.log})")
         print(f"{r.reason}{drove}: {r.detail}\n{late}")
         if replan_error is not None:
             print(f"not re-planned: {replan_error}")

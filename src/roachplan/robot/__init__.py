@@ -74,6 +74,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "drive_robot": "._run",
         "plan_clear_of": "._run",
         "plan_start": "._run",
+        "rejoin_path": "._run",
+        "REJOIN_MIN": "._run",
         "replan_radius": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
@@ -183,6 +185,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
+    from ._run import REJOIN_MIN as REJOIN_MIN
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
@@ -190,6 +193,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import plan_clear_of as plan_clear_of
     from ._run import plan_start as plan_start
     from ._run import predict as predict
+    from ._run import rejoin_path as rejoin_path
     from ._run import replan_radius as replan_radius
     from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig

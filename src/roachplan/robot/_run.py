@@ -21,7 +21,7 @@ from ._config import RobotSettings
 from ._errors import RobotError
 from ._estimate import pooled_mismatch
 from ._links import CommandLink, open_link
-from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner
+from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner, remaining_path
 from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
@@ -181,6 +181,35 @@ def plan_clear_of(
     return best
 
 
+REJOIN_MIN = 0.10
+"""rejoin_path meets the old path at least this far along it past the point nearest the robot
+[m] (about a body length and a half)."""
+
+
+def rejoin_path(
+    path_xyz, spins, here_xy, *, ahead: float = REJOIN_MIN
+) -> tuple[np.ndarray, tuple[tuple[int, float], ...]]:
+    """The rest of a plan (path_xyz (N, 3) world frame [m], spins (waypoint index, heading
+    [rad]) each) for a robot standing off it at here_xy [m]: a straight line from here_xy to
+    the old path, which it meets at the first waypoint `ahead` [m] or twice the robot's
+    distance from it (whichever is more) past its nearest point, then the old path's waypoints
+    on (remaining_path), spins
+    re-indexed. It meets it at a spin instead where one comes first, so no turn on the spot is
+    skipped; at the old path's end where that comes first. The new path is (M, 3), M >= 2, its
+    first row here_xy at the height of the path's nearest point. (A robot the guard held for
+    drifting, whose re-plan found no path, drives on along it: the path starts where the
+    robot stands, so the drift hold does not fire again at once.)"""
+    rest, kept = remaining_path(path_xyz, spins, here_xy)
+    here = np.array([float(here_xy[0]), float(here_xy[1]), float(rest[0, 2])])
+    off = float(np.linalg.norm(rest[0, :2] - here[:2]))
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(rest[:, :2], axis=0), axis=1))])
+    join = int(np.searchsorted(along, max(ahead, 2.0 * off)))
+    join = min([join, len(rest) - 1, *(i for i, _ in kept)])
+    join = max(join, 1) if len(rest) > 1 else 0
+    # row i >= join of rest is row i - join + 1 of the new path
+    return np.vstack([here, rest[join:]]), tuple((i - join + 1, h) for i, h in kept if i >= join)
+
+
 GUARD_HOLDS = ("lookahead", "drift")
 """How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
 re-plans from where it stands."""
@@ -268,7 +297,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         stands = (p[0], p[1], yaw_of(q))  # (where the robot stands: world frame)
         here = stands  # (the plan's start: where it stands, or the nearest pose planned from)
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
-        radius = None  # (the radius of the plan's arcs [m]; None: a plan given, or no arcs)
+        radius = None if plan is None else plan.turning_radius  # (its arcs' [m]; None: none)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
