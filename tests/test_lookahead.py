@@ -30,25 +30,29 @@ def test_the_rest_of_a_plan_starts_at_the_point_nearest_the_robot_with_its_spins
     assert kept == ((1, 0.0),)
 
 
-def test_a_drifted_robot_rejoins_the_rest_of_its_path_ahead_without_skipping_a_spin():
-    """rejoin_path: from where the robot stands straight to the old path, which it meets at the
-    first waypoint REJOIN_MIN or twice its distance off past the nearest point; at a spin
-    that comes first."""
+def test_a_drifted_robot_turns_to_rejoin_the_rest_of_its_path_ahead_without_skipping_a_spin():
+    """rejoin_path: from where the robot stands, a turn on the spot to face the old path, a
+    straight line to it, meeting it at the first waypoint REJOIN_MIN or twice its distance off
+    past the nearest point (at a spin that comes first), then the old path on."""
     from roachplan.robot import REJOIN_MIN, distance_to_path, rejoin_path
 
     path = np.column_stack([np.arange(0.0, 1.001, 0.05), np.zeros(21), np.full(21, 0.1)])
     new, kept = rejoin_path(path, ((14, math.pi / 2),), (0.3, 0.04))
-    assert np.allclose(new[0], [0.3, 0.04, 0.1])  # (where it stands, at the path's height)
-    assert new[1, 0] == pytest.approx(0.3 + max(REJOIN_MIN, 0.08)) and new[1, 1] == 0.0
-    assert np.allclose(new[2:], path[path[:, 0] > new[1, 0] + 1e-9])  # (the old path on)
-    assert new[kept[0][0], 0] == pytest.approx(0.7) and kept[0][1] == math.pi / 2
+    assert np.allclose(new[:2], [[0.3, 0.04, 0.1]] * 2)  # (where it stands, at the path's height)
+    met = new[2]
+    assert met[0] == pytest.approx(0.3 + max(REJOIN_MIN, 0.08)) and met[1] == 0.0
+    assert kept[0] == (0, pytest.approx(math.atan2(-0.04, met[0] - 0.3)))  # (faces it first)
+    assert np.allclose(new[3:], path[path[:, 0] > met[0] + 1e-9])  # (the old path on)
+    assert new[kept[1][0], 0] == pytest.approx(0.7) and kept[1][1] == math.pi / 2
     assert distance_to_path((0.3, 0.04), new[:, :2]) == 0.0  # (no drift at its start)
     far, _ = rejoin_path(path, (), (0.3, 0.09))  # (farther off: it meets the path farther on)
-    assert 0.3 + 0.18 <= far[1, 0] < 0.3 + 0.18 + 0.05  # (the first waypoint that far on)
+    assert 0.3 + 0.18 <= far[2, 0] < 0.3 + 0.18 + 0.05  # (the first waypoint that far on)
     new, kept = rejoin_path(path, ((7, 1.0),), (0.3, 0.04))  # (a spin 5 cm on: met there)
-    assert new[1, 0] == pytest.approx(0.35) and kept == ((1, 1.0),)
+    assert new[2, 0] == pytest.approx(0.35) and kept[1:] == ((2, 1.0),)
     end, kept = rejoin_path(path, (), (0.98, 0.04))  # (near the end: met at the end)
-    assert np.allclose(end, [[0.98, 0.04, 0.1], [1.0, 0.0, 0.1]]) and kept == ()
+    assert np.allclose(end[1:], [[0.98, 0.04, 0.1], [1.0, 0.0, 0.1]]) and len(kept) == 1
+    on, kept = rejoin_path(path, (), (1.0, 0.005))  # (at the end: no line to face)
+    assert len(on) == 2 and kept == ()
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,12 @@ commands, repeated), and the run is logged."""
 
 from __future__ import annotations
 
+import math
 import re
 import time
+from typing import Any
 
+import numpy as np
 import pytest
 
 from conftest import free_port
@@ -39,9 +42,9 @@ def stopped_run(app, commands: list[list], state: dict, t_stop: float):
     (the twin's commands: [t, seq, left, right, stop])."""
     from roachplan.robot import read_run
 
-    logs = list((app.upload_dir / "robot-runs").glob("*.mcap"))
-    assert len(logs) == 1
-    run = read_run(logs[0])
+    logs = sorted((app.upload_dir / "robot-runs").glob("*.mcap"), key=lambda p: p.stat().st_mtime)
+    assert logs
+    run = read_run(logs[0])  # (the first leg's)
     assert run.complete and run.result is not None and run.result["reason"] == "stop"
     # The loop stops as soon as it hears Stop (its first stop frame, then no moving one
     # after a frame in flight); the click's way through the browser and the websocket to the
@@ -54,6 +57,38 @@ def stopped_run(app, commands: list[list], state: dict, t_stop: float):
     assert len(after) >= 10 and all(c[2] == c[3] == 0.0 for c in after)
     assert state["speeds"] == [0.0, 0.0]
     return run
+
+
+def route_again(page, app) -> None:
+    """After a run the page stopped: Route from robot again, then Stop before Go."""
+    # The same robot, re-planned from where it stopped, in the frame measured at the first
+    # Route (its box holds it), going on from the motors' mismatch estimated on the first leg
+    # (a Stop is no drift hold: the scene's arcs).
+    first = app.core.robot
+    assert first is not None and first.result is not None
+    page.get_by_role("button", name="Route from robot").click()
+    page.get_by_text(re.compile(r"The robot is held: press")).first.wait_for(timeout=120_000)
+    second = app.core.robot
+    assert second is not None and second is not first
+    # (the box holds the transform to 0.1 mm and 0.01 deg)
+    assert np.allclose(second.transform.translation, first.transform.translation, atol=1e-4)
+    assert np.allclose(second.transform.quat, first.transform.quat, atol=1e-4)
+    assert second.drifts == 0
+    assert second.estimates == first.estimates
+    assert second.loop.trim == second.watcher.trim  # (their pool, from the start)
+    page.get_by_role("button", name="Stop", exact=True).click()
+    page.get_by_text(re.compile(r"Robot stopped before Go")).first.wait_for(timeout=30_000)
+    # Its own log (though both legs may start in one second): its plan from where the first
+    # left the robot, and what it stood on.
+    from roachplan.robot import read_run
+
+    logs = sorted((app.upload_dir / "robot-runs").glob("*.mcap"), key=lambda p: p.stat().st_mtime)
+    assert len(logs) == 2
+    before, again = read_run(logs[0]).plan, read_run(logs[1]).plan
+    assert math.dist(again["robot_pose"][:2], first.result.end[:2]) < 0.05
+    assert again["start_moved"] <= 0.05
+    assert again["turning_radius"] == before["turning_radius"]
+    assert before["turning_radius"] == app.core.world.scene.planner.turning_radius
 
 
 def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifacts):
@@ -100,8 +135,9 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
                 page.get_by_text(re.compile(r"Robot stopped:")).first.wait_for(timeout=30_000)
                 page.screenshot(path=artifacts / "robot-03-stopped.png")
                 report = page.get_by_text(re.compile(r"control periods late")).first.inner_text()
-            commands = control("commands")["commands"]
-            state = control("state")
+                commands = control("commands")["commands"]
+                state = control("state")
+                route_again(page, app)
         finally:
             app.stop()
     assert sum(abs(a - b) for a, b in zip(start, moved, strict=True)) > 0.05  # the live pose
@@ -113,3 +149,29 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
     assert periods > 100 and late < 0.5 * periods  # (the 10 % goal: benchmarks/bench_robot.py)
     assert run.prediction is not None and len(run.poses["t_receive"]) > 100
     assert run.lookaheads and all(0.0 <= a["p_hold"] <= 1.0 for a in run.lookaheads)
+
+
+def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
+    """What Route from robot carries from the last leg (app._robot_panel._carried): the
+    mismatch estimates of the same robot (pose source and settings); the drift holds in a
+    row, one more after a drift hold, as many after a leg routed again before Go, none after
+    any other end. Another robot carries nothing."""
+    from types import SimpleNamespace
+
+    from roachplan.app._robot_panel import _carried
+
+    key = ("natnet", (("server", "127.0.0.1"),))
+
+    def ended(reason: str) -> Any:  # (a RunResult's reason)
+        return SimpleNamespace(reason=reason)
+
+    def leg(**kw) -> Any:  # (a RobotSession's fields _carried reads)
+        return SimpleNamespace(
+            **{"source_key": key, "went": True, "drifts": 1, "estimates": ((0.1, 2.0),), **kw}
+        )
+
+    assert _carried(None, key) == ((), 0)
+    assert _carried(leg(result=ended("drift")), key) == (((0.1, 2.0),), 2)
+    assert _carried(leg(result=ended("stop")), key) == (((0.1, 2.0),), 0)
+    assert _carried(leg(went=False, result=None), key) == (((0.1, 2.0),), 1)
+    assert _carried(leg(result=ended("drift")), ("udp-json", ())) == ((), 0)

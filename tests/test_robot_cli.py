@@ -372,7 +372,9 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
     trims = [a["trim"] for leg in (first, second) for a in leg.lookaheads]
     assert trims and trims[0] == 0.0
     assert second.lookaheads and second.lookaheads[0]["trim"] == pytest.approx(held["trim"])
-    assert summary["trim"] == pytest.approx(trims[-1])
+    # (The summary's is the loop's at the end: a newer estimate than the last recorded one's,
+    # when the leg ended while a look-ahead driven under it ran: a window more, a few points.)
+    assert summary["trim"] == pytest.approx(trims[-1], abs=0.03)
 
 
 def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_path(
@@ -419,11 +421,12 @@ def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_pat
     first, second = read_run(log), read_run(tmp_path / "run-2.mcap")
     assert first.result is not None and second.result is not None
     assert second.plan["planner"] == "rejoin"
-    # The second leg's path starts where the first left the robot, and goes on along the
-    # first's path: its every waypoint after the first lies on it.
+    # The second leg's path starts where the first left the robot, turns there on the spot to
+    # face the first's path, and goes on along it: its every waypoint after that lies on it.
     path, old = np.asarray(second.plan["path"]), np.asarray(first.plan["path"])[:, :2]
     assert math.dist(path[0][:2], first.result["end"][:2]) < 0.02
-    assert max(distance_to_path(p[:2], old) for p in path[1:]) < 1e-6
+    assert np.allclose(path[0], path[1]) and second.plan["spins"][0][0] == 0
+    assert max(distance_to_path(p[:2], old) for p in path[2:]) < 1e-6
     assert second.plan["turning_radius"] == first.plan["turning_radius"]
     assert second.result["periods"] > 0  # (it drove)
     assert code == (0 if summary["success"] else 1)

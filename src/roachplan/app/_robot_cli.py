@@ -26,7 +26,7 @@ def _address(text: str | None, flag: str):
     """'HOST:PORT' (or 'PORT') -> (host, port), each checked by the robot's validators."""
     if text is None:
         return None
-    from roachplan.robot._checks import parse_address
+    from roachplan.robot import parse_address
 
     try:
         return parse_address(text)
@@ -501,7 +501,7 @@ def _here(loop) -> tuple[float, float, float]:
     world = loop.latest_world
     if world is None:
         return (math.nan, math.nan, math.nan)
-    from roachplan.robot._transform import yaw_of
+    from roachplan.robot import yaw_of
 
     (x, y, _), q = world
     return (x, y, yaw_of(q))
@@ -624,9 +624,9 @@ def _every(t, step: float) -> list[int]:
 
 
 def _robot_file_written(head: bytes) -> bool:
-    from roachplan.scenes._robot_file import HEADER
+    from roachplan.scenes import ROBOT_FILE_HEADER
 
-    return head.startswith(HEADER.encode())
+    return head.startswith(ROBOT_FILE_HEADER.encode())
 
 
 def cmd_fit(args: argparse.Namespace) -> int:

@@ -17,6 +17,7 @@ loop (its callbacks only put them):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import queue
 import sys
@@ -156,8 +157,8 @@ class RobotPanel:
             RobotError,
             RobotSettings,
             SafetyConfig,
+            parse_address,
         )
-        from roachplan.robot._checks import parse_address
 
         def address(box, name: str) -> tuple[str, int]:
             try:
@@ -224,7 +225,7 @@ class RobotPanel:
 
     def show_transform(self, transform: FrameTransform) -> None:
         """The transform in use, in the box (x,y,z,yaw_deg)."""
-        from roachplan.robot._transform import yaw_of
+        from roachplan.robot import yaw_of
 
         x, y, z = transform.translation
         self.transform.value = f"{x:.4f},{y:.4f},{z:.4f},{math.degrees(yaw_of(transform.quat)):.2f}"
@@ -263,6 +264,16 @@ class RobotSession:
     went: bool = False
     watcher: Any = None
     """The look-ahead beside the loop (robot.watch_ahead; started at Go), or None."""
+    source_key: tuple = ()
+    """(the pose source, its settings): the robot this session drove."""
+    drifts: int = 0
+    """The guard's drift holds in a row before this leg (a Route from robot after one widens
+    its arcs: robot.replan_radius)."""
+    result: Any = None
+    """How the loop ended (a RunResult), once Go's drive has."""
+    estimates: tuple = ()
+    """The motors' mismatch estimated so far, this leg's and those before it (RobotRun's):
+    a Route from robot of the same robot goes on from them."""
 
     def close(self) -> None:
         """Stop the robot (if it moves), end the loop and the look-ahead, close the log, the
@@ -324,13 +335,17 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         measure_transform,
         open_link,
         open_pose_source,
+        start_height,
+        wait_first_pose,
+        yaw_of,
     )
-    from roachplan.robot._run import start_height, wait_first_pose
-    from roachplan.robot._transform import yaw_of
 
     panel = app.page.robot_panel
     form = panel.form()
+    before = app.robot  # (the last leg: a re-plan of the same robot goes on from it)
     _close_session(app)  # (a robot still held or driven stops first)
+    key = (form.source, tuple(sorted(form.source_settings.items())))
+    estimates, drifts = _carried(before, key)
     app.page.view.remove("/lookahead")  # (the last run's look-ahead)
     start, goal = app.page.markers.valid_poses(app.world)
     app.page.set_status("Robot: connecting to the pose source ...")
@@ -348,12 +363,19 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         )
         panel.show_transform(transform)
         p, q = transform.apply(sample.position, sample.quat)
-        here = (p[0], p[1], yaw_of(q))
-        plan = _plan_from(app, here, goal)
+        stands = (p[0], p[1], yaw_of(q))
+        plan, here, moved, radius = _route(app, stands, goal, drifts)
         prediction = _predict(app, plan, here, goal)
         path = np.asarray(plan.path_xyz, dtype=float)
         log, recorder = _recorder(
-            app, form, transform=transform, plan=plan, here=here, goal=goal, prediction=prediction
+            app,
+            form,
+            transform=transform,
+            plan=plan,
+            here=here,
+            stands=stands,
+            goal=goal,
+            prediction=prediction,
         )
         events: queue.Queue = queue.Queue()
         loop = RobotLoop(
@@ -387,6 +409,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 guard=form.guard,
                 drift=defaults.guard_drift,
                 trim=defaults.trim,
+                estimates=estimates,
                 period=defaults.look_ahead_period,
                 seed=plan.seed,
                 safety=loop.cfg.safety,
@@ -411,27 +434,74 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         log=log,
         events=events,
         watcher=watcher,
+        source_key=key,
+        drifts=drifts,
+        estimates=estimates,
     )
+    panel.go_button.disabled = False
+    text = _held_text(stands, moved, radius if drifts else None, len(path), prediction)
+    panel.report.content = text
+    app.page.set_status(text)
+
+
+def _held_text(stands, moved: float, wider: float | None, waypoints: int, prediction) -> str:
+    """What Route from robot says once the robot is held: where it stands (x, y [m], yaw
+    [rad]), how far the plan's start was moved [m], the widened arcs' radius [m] (None: the
+    scene's), the plan, the simulation's prediction (a TrialResult, or None)."""
     said = (
         f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
         if prediction is not None
         else "the simulation of the plan failed"
     )
-    panel.go_button.disabled = False
-    text = (
-        f"Robot at ({here[0]:.3f}, {here[1]:.3f}) m, {math.degrees(here[2]):.0f} deg: planned "
-        f"{len(path)} waypoints (black); {said} (blue). The robot is held: press **Go**."
+    start_note = (
+        f" (planned from {100 * moved:.1f} cm away: the planner refuses where it stands)"
+        if moved > 0
+        else ""
     )
-    panel.report.content = text
-    app.page.set_status(text)
+    arcs = "" if wider is None else f" with arcs of {wider:.2f} m (it drifted off narrower ones)"
+    return (
+        f"Robot at ({stands[0]:.3f}, {stands[1]:.3f}) m, {math.degrees(stands[2]):.0f} deg"
+        f"{start_note}: planned {waypoints} waypoints (black){arcs}; {said} (blue). The "
+        f"robot is held: press **Go**."
+    )
 
 
-def _plan_from(app: App, here, goal) -> PlanResult:
+def _route(app: App, stands, goal, drifts: int):
+    """(the plan, its start, how far that lies from where the robot stands [m], the radius of
+    its arcs [m] or None) from the robot standing at `stands` (x, y [m], yaw [rad]) to goal,
+    as the command line's re-plan: from the nearest pose the planner takes (robot.plan_start:
+    a robot the guard held with a foot over an edge), its arcs widened after `drifts` drift
+    holds in a row (robot.replan_radius)."""
+    from roachplan.robot import plan_start, replan_radius
+
+    here, moved = plan_start(app.world, stands)
+    radius = app.world.scene.planner.turning_radius
+    if radius is not None and drifts:  # (it drifted off arcs this wide: wider ones)
+        radius = replan_radius(radius, drifts)
+    return _plan_from(app, here, goal, turning_radius=radius), here, moved, radius
+
+
+def _carried(before: RobotSession | None, key: tuple) -> tuple[tuple, int]:
+    """(the motors' mismatch estimates, the drift holds in a row) a Route from robot goes on
+    from: the last leg's, when it drove the same robot (pose source and settings: `key`);
+    none of either for another robot. A drift hold's leg adds one; a leg routed again before
+    Go counts as that leg; any other end starts the count again."""
+    if before is None or before.source_key != key:
+        return (), 0
+    if not before.went:
+        return before.estimates, before.drifts
+    drifted = before.result is not None and before.result.reason == "drift"
+    return before.estimates, before.drifts + 1 if drifted else 0
+
+
+def _plan_from(app: App, here, goal, *, turning_radius: float | None = None) -> PlanResult:
     """A plan from the robot's pose to the goal marker (a plan job, followed; Cancel stops
-    it), drawn black as the app's plan."""
+    it), drawn black as the app's plan; its arcs of turning_radius [m] (None: the scene's)."""
     from ._jobs import _plan_job, failure
 
     planner = app.planner(app.page.plan_settings())
+    if turning_radius is not None and planner.turning_radius is not None:
+        planner = dataclasses.replace(planner, turning_radius=turning_radius)
     deadline = time.monotonic() + planner.time_limit
     request = dict(seed=app.next_seed, start=here, goal=goal, planner=planner)
     app.page.view.clear("/trajectories")
@@ -480,15 +550,21 @@ def _predict(app: App, plan: PlanResult, here, goal) -> TrialResult | None:
     return prediction
 
 
-def _recorder(app: App, form: RobotForm, *, transform, plan: PlanResult, here, goal, prediction):
-    """(the log's path, its RunRecorder) with the scene, the settings, the plan and the
-    prediction written: beside the app's uploads, in robot-runs/."""
-    from roachplan.robot import RunRecorder
-    from roachplan.robot._record import scene_record
+def _recorder(
+    app: App, form: RobotForm, *, transform, plan: PlanResult, here, stands, goal, prediction
+):
+    """(the log's path, its RunRecorder) with the scene, the settings, the plan (from `here`,
+    the robot standing at `stands`: x, y [m], yaw [rad]) and the prediction written: beside
+    the app's uploads, in robot-runs/."""
+    from roachplan.robot import RunRecorder, scene_record
 
     log_dir = app.upload_dir / "robot-runs"
     log_dir.mkdir(exist_ok=True)
-    log = log_dir / f"{app.world.scene.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+    stem = f"{app.world.scene.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    log, n = log_dir / f"{stem}.mcap", 1
+    while log.exists() or log.with_name(log.name + ".partial").exists():  # (a leg this second)
+        n += 1
+        log = log_dir / f"{stem}-{n}.mcap"
     recorder = RunRecorder(log)
     t = time.monotonic()
     scene_path = Path(app.world.scene.path)
@@ -513,7 +589,12 @@ def _recorder(app: App, form: RobotForm, *, transform, plan: PlanResult, here, g
             "planner": plan.planner,
             "seed": plan.seed,
             "start": list(here),
+            # (as the command line's: how far that start lies from where the robot stood [m],
+            # where it stood, the radius of the plan's arcs [m]; null: no arcs)
+            "start_moved": math.dist(here[:2], stands[:2]),
+            "robot_pose": list(stands),
             "goal": list(goal),
+            "turning_radius": plan.turning_radius,
         },
     )
     if prediction is not None:
@@ -647,6 +728,9 @@ def do_robot_go(app: App, cmd: RobotGoCmd) -> None:
         session.close()
         raise
     result = session.loop.wait(5.0)
+    session.result = result
+    if session.watcher is not None:  # (the estimates a re-plan of this robot goes on from)
+        session.estimates = session.watcher.estimates
     live.draw()
     if session.recorder is not None and result is not None:
         session.recorder.write("/result", time.monotonic(), result.to_json())

@@ -71,6 +71,11 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "read_run": "._record",
         "RobotSettings": "._config",
         "RobotRun": "._run",
+        "scene_record": "._record",
+        "wait_first_pose": "._run",
+        "start_height": "._run",
+        "yaw_of": "._transform",
+        "parse_address": "._checks",
         "drive_robot": "._run",
         "plan_clear_of": "._run",
         "plan_start": "._run",
@@ -113,6 +118,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
 )
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
+    from ._checks import parse_address as parse_address
     from ._compare import Comparison as Comparison
     from ._compare import FitConfig as FitConfig
     from ._compare import FitResult as FitResult
@@ -182,6 +188,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import RunLog as RunLog
     from ._record import RunRecorder as RunRecorder
     from ._record import read_run as read_run
+    from ._record import scene_record as scene_record
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
@@ -195,6 +202,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import predict as predict
     from ._run import rejoin_path as rejoin_path
     from ._run import replan_radius as replan_radius
+    from ._run import start_height as start_height
+    from ._run import wait_first_pose as wait_first_pose
     from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig
     from ._safety import SafetyMap as SafetyMap
@@ -204,5 +213,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._safety import distance_to_path as distance_to_path
     from ._transform import FrameTransform as FrameTransform
     from ._transform import measure_transform as measure_transform
+    from ._transform import yaw_of as yaw_of
     from ._twin import TwinConfig as TwinConfig
     from ._twin import run_twin as run_twin

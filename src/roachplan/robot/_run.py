@@ -190,15 +190,17 @@ def rejoin_path(
     path_xyz, spins, here_xy, *, ahead: float = REJOIN_MIN
 ) -> tuple[np.ndarray, tuple[tuple[int, float], ...]]:
     """The rest of a plan (path_xyz (N, 3) world frame [m], spins (waypoint index, heading
-    [rad]) each) for a robot standing off it at here_xy [m]: a straight line from here_xy to
-    the old path, which it meets at the first waypoint `ahead` [m] or twice the robot's
-    distance from it (whichever is more) past its nearest point, then the old path's waypoints
-    on (remaining_path), spins
-    re-indexed. It meets it at a spin instead where one comes first, so no turn on the spot is
-    skipped; at the old path's end where that comes first. The new path is (M, 3), M >= 2, its
-    first row here_xy at the height of the path's nearest point. (A robot the guard held for
-    drifting, whose re-plan found no path, drives on along it: the path starts where the
-    robot stands, so the drift hold does not fire again at once.)"""
+    [rad]) each) for a robot standing off it at here_xy [m]: a turn on the spot to face the
+    old path where it meets it, a straight line there, then the old path's waypoints on
+    (remaining_path), spins re-indexed. It meets the old path at the first waypoint `ahead`
+    [m] or twice the robot's distance from it (whichever is more) past its nearest point; at a
+    spin instead where one comes first, so no turn on the spot is skipped; at the old path's
+    end where that comes first. The new path is (M, 3), M >= 2: its first rows here_xy at the
+    height of the old path's nearest point (twice, the spin's, unless the meeting point is
+    under a centimetre away). A robot the guard held for drifting, whose re-plan found no
+    path, drives on along it: the path starts where the robot stands, and the robot turns
+    before it walks (it was held heading off its path: walking on while it turned, a rejoin
+    drifted off again within 0.5 s), so the drift hold does not fire again at once."""
     rest, kept = remaining_path(path_xyz, spins, here_xy)
     here = np.array([float(here_xy[0]), float(here_xy[1]), float(rest[0, 2])])
     off = float(np.linalg.norm(rest[0, :2] - here[:2]))
@@ -206,8 +208,14 @@ def rejoin_path(
     join = int(np.searchsorted(along, max(ahead, 2.0 * off)))
     join = min([join, len(rest) - 1, *(i for i, _ in kept)])
     join = max(join, 1) if len(rest) > 1 else 0
-    # row i >= join of rest is row i - join + 1 of the new path
-    return np.vstack([here, rest[join:]]), tuple((i - join + 1, h) for i, h in kept if i >= join)
+    dx, dy = rest[join, :2] - here[:2]
+    if math.hypot(dx, dy) < 0.01:  # (no line to face: on along the old path)
+        return np.vstack([here, rest[join:]]), tuple(
+            (i - join + 1, h) for i, h in kept if i >= join
+        )
+    # row i >= join of rest is row i - join + 2 of the new path, after here twice (the spin)
+    turned = ((0, math.atan2(dy, dx)), *((i - join + 2, h) for i, h in kept if i >= join))
+    return np.vstack([here, here, rest[join:]]), turned
 
 
 GUARD_HOLDS = ("lookahead", "drift")

@@ -23,6 +23,7 @@ _getattr, __dir__, __all__ = lazy_exports(
         "ScadRender": "._openscad",
         "LIBRARY": "._library",
         "RobotFile": "._robot_file",
+        "ROBOT_FILE_HEADER": "._robot_file",
         "load_robot_file": "._robot_file",
         "write_robot_file": "._robot_file",
         "MAX_SEED": "roachplan._settings",
@@ -81,6 +82,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._openscad import ScadRender as ScadRender
     from ._openscad import render_scad as render_scad
     from ._openscad import render_scad_result as render_scad_result
+    from ._robot_file import ROBOT_FILE_HEADER as ROBOT_FILE_HEADER
     from ._robot_file import RobotFile as RobotFile
     from ._robot_file import load_robot_file as load_robot_file
     from ._robot_file import write_robot_file as write_robot_file

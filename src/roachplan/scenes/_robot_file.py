@@ -76,6 +76,7 @@ class RobotFile:
 
 
 HEADER = "# written by roachplan (robot fit)\n"
+ROBOT_FILE_HEADER = HEADER  # (the name the package exports)
 """The first line of every robot file roachplan writes (`fit -o` replaces such a file)."""
 
 
