@@ -62,6 +62,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_engines.py
 	$(BIN)/python benchmarks/bench_fidelity.py
 	$(BIN)/python benchmarks/bench_guard.py
+	$(BIN)/python benchmarks/bench_page_robot.py
 	$(BIN)/python benchmarks/load_test.py
 
 # Five browsers clicking and uploading at once for 2 minutes; needs chromium.

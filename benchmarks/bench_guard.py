@@ -13,7 +13,8 @@ twin's hidden parameters (what `roachplan fit` recovers at best), so that the lo
 simulates the robot it drives rather than one drawn round the nominal robot.
 
 Prints each run (outcome, legs, drive time, share of control periods late) and, per setting,
-how many reached the goal with a 95 % interval, the falls, and the stops by reason. The goal
+how many reached the goal with a 95 % interval, the falls (a pose of the body FALL_DROP below
+its plan's surface, read from the legs' logs: off a bridge), and the stops by reason. The goal
 (a hidden-parameter twin where unguarded runs stop or fall at least 1 time in 4): guarded runs
 reach the goal at least 90 % of the time with no fall. A run is a whole crossing: a guarded run
 that was held and re-planned and then reached the goal is a success.
@@ -136,6 +137,34 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     return {**json.loads(ran.stdout), "wall": wall}
 
 
+FALL_DROP = 0.05
+"""A run fell when a pose of its robot's body lies this far below the surface of its plan's
+nearest waypoint [m] (the body stands a few cm above it): off a bridge onto the floor below."""
+
+
+def fell(tmp: Path, setting: str, k: int) -> bool:
+    """Whether run k of a setting fell, from its legs' logs (RUN.mcap, RUN-2.mcap, ...): the
+    robot loop stops on no fall of its own (a floor below a bridge is off the standable
+    ground it can reach, as far as the loop's stop allows: a robot can be on it first)."""
+    import numpy as np
+
+    from roachplan.robot import read_run
+
+    legs = [tmp / f"{setting}-{k}.mcap", *sorted(tmp.glob(f"{setting}-{k}-*.mcap"))]
+    for log in legs:
+        if not log.is_file():
+            continue
+        run = read_run(log)
+        path = np.asarray(run.plan["path"], dtype=float)
+        body = np.asarray(run.poses["world_p"], dtype=float).reshape(-1, 3)
+        if not len(body) or not len(path):
+            continue
+        nearest = np.argmin(np.linalg.norm(body[:, None, :2] - path[None, :, :2], axis=2), axis=1)
+        if (body[:, 2] < path[nearest, 2] - FALL_DROP).any():
+            return True
+    return False
+
+
 def held_by(r: dict) -> str:
     """How the guard held a run's legs before its last, each (its reason and the radius of the
     next plan's arcs), e.g. "drift 0.13 m, lookahead 0.19 m"; "-" when none was held."""
@@ -220,10 +249,12 @@ def main() -> None:
         for k in range(args.runs):  # (the settings interleaved: the machine's load falls alike)
             for name, runs in results.items():
                 r = one_run(args, k, name, Path(tmp), scenes[name])
+                r["fell"] = fell(Path(tmp), name, k)
                 runs.append(r)
                 late = r.get("late", 0) / max(r.get("periods", 0) or 1, 1)
                 print(
-                    f"{name:11s} run {k:2d}: {r['reason']:10s} legs {1 + len(r.get('held', []))} "
+                    f"{name:11s} run {k:2d}: {r['reason']:10s}{' FELL' if r['fell'] else ''} "
+                    f"legs {1 + len(r.get('held', []))} "
                     f"({held_by(r)}) "
                     f"drive {r.get('drive_time') or 0:5.1f} s, late {100 * late:4.1f} %, "
                     f"lowest P(hold) {r.get('lowest_p_hold')}, trim {r.get('trim')}; "
@@ -241,7 +272,7 @@ def main() -> None:
         ok = sum(r.get("success", False) for r in runs)
         lo, hi = wilson(ok, len(runs))
         reasons = collections.Counter(r["reason"] for r in runs if not r.get("success"))
-        falls = sum(r["reason"] in ("fell", "flipped") for r in runs)
+        falls = sum(r["fell"] for r in runs)
         held = sum(len(r.get("held", [])) for r in runs)
         late = sum(r.get("late", 0) for r in runs) / max(sum(r.get("periods", 0) for r in runs), 1)
         print(

@@ -463,7 +463,8 @@ def watch_ahead(
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
     "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
     robot drives further than `drift` times safety.max_deviation from the path (None: never;
-    RobotSettings.guard_drift), held as "drift". trim: the motors' mismatch each look-ahead
+    RobotSettings.guard_drift), or its centre comes nearer a cell of the safety map where it
+    cannot stand than one where it can (the edge of a bridge), held as "drift". trim: the motors' mismatch each look-ahead
     estimates (pooled with `estimates`, the legs' before) is divided out of the loop's commands
     from then on (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
@@ -484,13 +485,14 @@ def watch_ahead(
         if also is not None:
             also(t, ahead)
 
+    smap = SafetyMap.from_world(world)
     runner = LookAheadRunner(
         world,
         path,
         spins,
         cfg,
         safety=safety,
-        safety_map=SafetyMap.from_world(world),
+        safety_map=smap,
         period=period,
         seed=seed,
         on_result=record,
@@ -514,6 +516,16 @@ def watch_ahead(
                     "drift",
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
                     f"drift {limit:g} m, before the loop's stop at {safety.max_deviation:g} m)",
+                )
+            elif smap.off_standable(x, y) > 0.0:
+                # (Its centre is nearer a cell where it cannot stand than one where it can: a
+                # path along a bridge's edge runs 4 cm inside that, and a robot 7.5 cm off it
+                # fell off the bridge; the loop's own stop allows standable_margin more.)
+                loop.stop(
+                    "drift",
+                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, to the "
+                    f"edge of the ground it can stand on (guard drift, before the loop's stop "
+                    f"{safety.standable_margin:g} m past it)",
                 )
 
         loop.listeners.append(drifted)

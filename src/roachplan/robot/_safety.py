@@ -78,7 +78,8 @@ class Stop:
 @dataclass(frozen=True, eq=False)
 class SafetyMap:
     """Where the robot may be: the planning area, and the distance from each cell of the
-    standable map to the nearest standable cell."""
+    standable map to the nearest standable cell it can reach from the scene's start (a floor
+    below a bridge is standable but not reachable: a robot there fell off)."""
 
     bounds: tuple[tuple[float, float], tuple[float, float]]
     x0: float
@@ -93,7 +94,11 @@ class SafetyMap:
 
         regions = world.regions
         assert world.scene.bounds is not None  # build_world sets them
-        standable = np.asarray(regions.standable, dtype=bool)
+        # (the start's component: a robot on the standable floor between two bridges fell,
+        # and was taken for one standing, 0 m from standable ground)
+        standable = np.asarray(regions.reachable, dtype=bool)
+        if not standable.any():  # (no cell reachable from the start: every standable one)
+            standable = np.asarray(regions.standable, dtype=bool)
         if standable.any():
             dist = np.asarray(distance_transform_edt(~standable)) * regions.cell
         else:
@@ -107,8 +112,8 @@ class SafetyMap:
         )
 
     def off_standable(self, x: float, y: float) -> float:
-        """Distance from (x, y) [m] to the nearest standable cell centre's cell [m] (inf
-        outside the map)."""
+        """Distance from the map's cell nearest (x, y) [m] to the nearest standable cell it can
+        reach [m]: 0 on one (inf outside the map)."""
         i = round((x - self.x0) / self.cell)
         j = round((y - self.y0) / self.cell)
         ny, nx = self.distance.shape
