@@ -84,6 +84,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "replan_radius": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
+        "EDGE_DRIFT": "._run",
         "START_REACH": "._run",
         "clearance": "._run",
         "watch_ahead": "._run",
@@ -190,6 +191,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import read_run as read_run
     from ._record import scene_record as scene_record
     from ._run import AVOID_RADIUS as AVOID_RADIUS
+    from ._run import EDGE_DRIFT as EDGE_DRIFT
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
     from ._run import REJOIN_MIN as REJOIN_MIN

@@ -218,6 +218,9 @@ def rejoin_path(
     return np.vstack([here, here, rest[join:]]), turned
 
 
+EDGE_DRIFT = 0.5
+"""The guard holds a robot at the edge of the ground it can stand on once it is this share of
+its drift limit off its path [-] (watch_ahead)."""
 GUARD_HOLDS = ("lookahead", "drift")
 """How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
 re-plans from where it stands."""
@@ -463,8 +466,9 @@ def watch_ahead(
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
     "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
     robot drives further than `drift` times safety.max_deviation from the path (None: never;
-    RobotSettings.guard_drift), or its centre comes nearer a cell of the safety map where it
-    cannot stand than one where it can (the edge of a bridge), held as "drift". trim: the motors' mismatch each look-ahead
+    RobotSettings.guard_drift), or, EDGE_DRIFT of that off it, its centre comes nearer a cell
+    of the safety map where it cannot stand than one where it can (the edge of a bridge),
+    held as "drift". trim: the motors' mismatch each look-ahead
     estimates (pooled with `estimates`, the legs' before) is divided out of the loop's commands
     from then on (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
@@ -517,10 +521,12 @@ def watch_ahead(
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
                     f"drift {limit:g} m, before the loop's stop at {safety.max_deviation:g} m)",
                 )
-            elif smap.off_standable(x, y) > 0.0:
+            elif off > EDGE_DRIFT * limit and smap.off_standable(x, y) > 0.0:
                 # (Its centre is nearer a cell where it cannot stand than one where it can: a
                 # path along a bridge's edge runs 4 cm inside that, and a robot 7.5 cm off it
-                # fell off the bridge; the loop's own stop allows standable_margin more.)
+                # fell off the bridge; the loop's own stop allows standable_margin more. Not
+                # on the path itself: the map's 4 cm cells round a bridge's corner off, where
+                # plans checked pose by pose pass, and the robot was held there 1-3 cm off.)
                 loop.stop(
                     "drift",
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, to the "
