@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import json
 import math
 import os
@@ -79,25 +80,36 @@ def fitted_scene(args, tmp: Path) -> Path:
     return out
 
 
+@contextlib.contextmanager
+def twin(args, k: int, scene: str):
+    """A fresh `roachplan twin` of scene with the hidden parameters (args.friction,
+    args.motor_mismatch, args.motor_gain), its motion capture MOCAP with seed k; its ready
+    line (its ports)."""
+    hidden = [
+        "--friction", str(args.friction),
+        "--motor-mismatch", str(args.motor_mismatch),
+        "--motor-gain", str(args.motor_gain),
+    ]  # fmt: skip
+    proc = subprocess.Popen(
+        [*ROACHPLAN, "twin", "--scene", scene, *hidden, *MOCAP, "--seed", str(k)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        yield json.loads(proc.stdout.readline())
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
 def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     """Run k (the twin's noise seed and the plan's seed are k) of a setting ("unguarded", or
     guarded: "guarded", "guarded+fit"): the robot, on `scene`, against a fresh twin of
     args.scene with the hidden parameters; the command's JSON summary, with the wall time."""
     guarded = setting != "unguarded"
     drift = ["--guard-drift", "none", "--no-trim"] if setting == "look-ahead only" else []
-    hidden = [
-        "--friction", str(args.friction),
-        "--motor-mismatch", str(args.motor_mismatch),
-        "--motor-gain", str(args.motor_gain),
-    ]  # fmt: skip
-    twin = subprocess.Popen(
-        [*ROACHPLAN, "twin", "--scene", args.scene, *hidden, *MOCAP, "--seed", str(k)],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert twin.stdout is not None
-        ready = json.loads(twin.stdout.readline())
+    with twin(args, k, args.scene) as ready:
         flags = [
             "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
             "--look-ahead-engine", args.look_ahead_engine, *drift,
@@ -129,9 +141,6 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
             check=False,
         )
         wall = time.monotonic() - t
-    finally:
-        twin.terminate()
-        twin.wait()
     if not ran.stdout.strip():
         return {"reason": "error", "detail": ran.stderr.strip()[-300:], "wall": wall}
     return {**json.loads(ran.stdout), "wall": wall}

@@ -18,48 +18,19 @@ not what this measures. The machine's load average is printed with the figures.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
-ROACHPLAN = [sys.executable, "-m", "roachplan"]
-MOCAP = ["--latency", "0.04", "--noise", "0.002"]
-"""The twin's motion capture: 40 ms late, 2 mm of noise (as bench_guard's)."""
+from bench_app import free_port
+from bench_guard import ROACHPLAN, twin
+
 SCENE = "double_bridge_rough"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@contextlib.contextmanager
-def twin(args, k: int):
-    """A fresh twin of SCENE with the hidden parameters (its noise seed k); its ready line."""
-    hidden = [
-        "--friction", str(args.friction),
-        "--motor-mismatch", str(args.motor_mismatch),
-        "--motor-gain", str(args.motor_gain),
-    ]  # fmt: skip
-    proc = subprocess.Popen(
-        [*ROACHPLAN, "twin", "--scene", SCENE, *hidden, *MOCAP, "--seed", str(k)],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        yield json.loads(proc.stdout.readline())
-    finally:
-        proc.terminate()
-        proc.wait()
 
 
 def type_into(page, label: str, value: str) -> None:
@@ -71,7 +42,7 @@ def type_into(page, label: str, value: str) -> None:
 
 def page_run(args, k: int, page, app) -> dict:
     """Run k in the page: Route from robot, Go, until the loop stops; how it ended."""
-    with twin(args, k) as ready:
+    with twin(args, k, SCENE) as ready:
         type_into(page, "Source address", f"127.0.0.1:{ready['natnet_port']}")
         type_into(page, "Sink address", f"127.0.0.1:{ready['command_port']}")
         app.core.next_seed = k  # (the plan's seed: the command line's --seed k)
@@ -88,7 +59,7 @@ def page_run(args, k: int, page, app) -> dict:
 
 def cli_run(args, k: int) -> dict:
     """Run k by the command line (no page): the same twin and plan seed; how it ended."""
-    with twin(args, k) as ready, TemporaryDirectory() as tmp:
+    with twin(args, k, SCENE) as ready, TemporaryDirectory() as tmp:
         argv = [
             *ROACHPLAN, "robot", "--scene", SCENE, "--go", "--json", "--no-predict",
             "--seed", str(k), "--natnet-port", str(ready["natnet_port"]),

@@ -209,13 +209,12 @@ def rejoin_path(
     join = min([join, len(rest) - 1, *(i for i, _ in kept)])
     join = max(join, 1) if len(rest) > 1 else 0
     dx, dy = rest[join, :2] - here[:2]
-    if math.hypot(dx, dy) < 0.01:  # (no line to face: on along the old path)
-        return np.vstack([here, rest[join:]]), tuple(
-            (i - join + 1, h) for i, h in kept if i >= join
-        )
-    # row i >= join of rest is row i - join + 2 of the new path, after here twice (the spin)
-    turned = ((0, math.atan2(dy, dx)), *((i - join + 2, h) for i, h in kept if i >= join))
-    return np.vstack([here, here, rest[join:]]), turned
+    # (a spin at here unless the meeting point is too near for a line to face)
+    turn = ((0, math.atan2(dy, dx)),) if math.hypot(dx, dy) >= 0.01 else ()
+    lead = 1 + len(turn)  # (here once, or twice: a spin's next waypoint repeats its place)
+    # row i >= join of rest is row i - join + lead of the new path
+    moved = tuple((i - join + lead, h) for i, h in kept if i >= join)
+    return np.vstack([here] * lead + [rest[join:]]), (*turn, *moved)
 
 
 EDGE_DRIFT = 0.5
@@ -489,7 +488,7 @@ def watch_ahead(
         if also is not None:
             also(t, ahead)
 
-    smap = SafetyMap.from_world(world)
+    smap = loop.safety_map  # (the loop's own: the look-ahead judges its rollouts as it does)
     runner = LookAheadRunner(
         world,
         path,

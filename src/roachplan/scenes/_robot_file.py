@@ -72,11 +72,10 @@ class RobotFile:
         }
         if self.fitted is not None:
             data["fitted"] = self.fitted
-        return HEADER + yaml.safe_dump(data, sort_keys=False)
+        return ROBOT_FILE_HEADER + yaml.safe_dump(data, sort_keys=False)
 
 
-HEADER = "# written by roachplan (robot fit)\n"
-ROBOT_FILE_HEADER = HEADER  # (the name the package exports)
+ROBOT_FILE_HEADER = "# written by roachplan (robot fit)\n"
 """The first line of every robot file roachplan writes (`fit -o` replaces such a file)."""
 
 
