@@ -55,6 +55,30 @@ def test_a_drifted_robot_turns_to_rejoin_the_rest_of_its_path_ahead_without_skip
     assert len(on) == 2 and kept == ()
 
 
+def test_a_rejoin_is_a_plan_to_drive_whose_states_face_along_it_and_turn_at_its_spins():
+    """rejoin_plan: rejoin_path's path and spins as a plan (the planner "rejoin", the old
+    plan's seed and arcs), each state's heading toward the next waypoint, a spin's next
+    waypoint at the spin's heading; the tracking driver takes it."""
+    from roachplan.robot import rejoin_path, rejoin_plan
+    from roachplan.sim import DriverConfig, make_follower
+
+    path = np.column_stack([np.arange(0.0, 1.001, 0.05), np.zeros(21), np.full(21, 0.1)])
+    spins = ((14, math.pi / 2),)
+    plan = rejoin_plan(path, spins, (0.3, 0.04), seed=7, turning_radius=0.26)
+    new, kept = rejoin_path(path, spins, (0.3, 0.04))
+    assert plan.found and plan.planner == "rejoin" and plan.seed == 7
+    assert plan.turning_radius == 0.26 and plan.spins == kept
+    assert np.array_equal(plan.path_xyz, new) and np.allclose(plan.states[:, :2], new[:, :2])
+    for k, heading in kept:
+        assert plan.states[k + 1, 2] == heading
+    ahead = [i for i in range(len(new) - 1) if i not in {k + 1 for k, _ in kept}]
+    step = np.diff(new[:, :2], axis=0)
+    for i in ahead:
+        if np.linalg.norm(step[i]) > 1e-9:  # (toward the next waypoint)
+            assert plan.states[i, 2] == pytest.approx(math.atan2(step[i, 1], step[i, 0]))
+    make_follower(plan.path_xyz, DriverConfig(), plan.spins)  # (a path the driver takes)
+
+
 @pytest.fixture(scope="module")
 def bridge():
     from roachplan.experiments import plan
@@ -137,26 +161,42 @@ def _engine_settings(world, engine: str):
 
 def test_the_runner_keeps_the_legs_phase_from_the_commands_sent(bridge):
     """The phase a look-ahead starts its legs at: the commands' integral (a stop frame stands
-    still), as compare's windows take it from a log."""
-    from roachplan.robot import CommandEvent, CommandFrame, LookAheadRunner, PoseEvent, PoseSample
+    still), as compare's windows take it from a log, at the moment the pose was the robot's
+    (phase_at: between commands too, and before them); a look-ahead starts its rollouts
+    that long before it began (LookAhead.lead: the pose's age and latency)."""
+    from roachplan.robot import (
+        CommandEvent,
+        CommandFrame,
+        LookAheadRunner,
+        PoseEvent,
+        PoseSample,
+        phase_at,
+    )
 
     world, planned = bridge
+    assert world.robot.motor_gain == (1.0, 1.0)  # (the phase: the commands' integral)
     seen = []
+    cfg = LookAheadConfig(draws=2, horizon=0.5, latency=0.05)
     runner = LookAheadRunner(
-        world, planned.path_xyz, planned.spins, LookAheadConfig(draws=1, horizon=0.5),
+        world, planned.path_xyz, planned.spins, cfg,
         safety=SafetyConfig(), safety_map=SafetyMap.from_world(world), period=60.0, seed=0,
         on_result=lambda t, a: seen.append(a),
     )  # fmt: skip
+    t0 = time.monotonic() - 1.0
     try:
-        for t, left, right, stop in ((10.0, 2.0, 3.0, False), (10.5, 0.0, 0.0, True)):
+        for t, left, right, stop in ((t0, 2.0, 3.0, False), (t0 + 0.5, 0.0, 0.0, True)):
             frame = CommandFrame(seq=0, t_us=0, left=left, right=right, stop=stop)
             runner.listen(CommandEvent(t=t, scheduled=t, frame=frame))
         with runner._lock:
-            assert runner._phase_at(99.0) == pytest.approx((1.0, 1.5))
+            phases = list(runner._phases)
+        assert phase_at(phases, t0 + 99.0) == pytest.approx((1.0, 1.5))  # (stopped since)
+        assert phase_at(phases, t0 + 0.25) == pytest.approx((0.5, 0.75))  # (between them)
+        assert phase_at(phases, t0 - 1.0) == (0.0, 0.0)  # (before the first: at rest)
         # A pose heard, the first look-ahead starts at once, from it.
         x, y, yaw = _pose_on_path(planned, 0.3)
+        heard = time.monotonic()
         sample = PoseSample(
-            t_receive=0.0, t_source=0.0, seq=0, position=(x, y, 0.0), quat=(0.0, 0.0, 0.0, 1.0)
+            t_receive=heard, t_source=0.0, seq=0, position=(x, y, 0.0), quat=(0.0, 0.0, 0.0, 1.0)
         )
         q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
         runner.listen(PoseEvent(sample=sample, position=(x, y, 0.2), quat=q))
@@ -167,6 +207,7 @@ def test_the_runner_keeps_the_legs_phase_from_the_commands_sent(bridge):
     finally:
         runner.close()
     assert len(seen) == 1 and seen[0].start == pytest.approx((x, y, yaw))
+    assert cfg.latency <= seen[0].lead <= cfg.latency + (time.monotonic() - heard)
 
 
 def test_what_happened_over_each_horizon_scores_the_predictions():
@@ -198,8 +239,9 @@ def test_what_happened_over_each_horizon_scores_the_predictions():
 def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
     """plan_clear_of: a point on the seed's own path (on its bridge) is a place to keep clear
     of; the plan it gives keeps at least AVOID_RADIUS from it (another seed's plan), and says
-    how far. A point within the radius of the start is not avoided (no path could)."""
-    from roachplan.robot import AVOID_RADIUS, distance_to_path, plan_clear_of
+    how far. A point within the radius of the start is not avoided (no path could). Past its
+    deadline it tries once, with at most MIN_TRY to plan."""
+    from roachplan.robot import AVOID_RADIUS, MIN_TRY, distance_to_path, plan_clear_of
 
     world, planned = bridge
     start = world.start
@@ -212,6 +254,10 @@ def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
     same, clear = plan_clear_of(world, start, 0, near_start)
     assert same.seed == 0 and clear == math.inf
     assert np.array_equal(same.path_xyz, planned.path_xyz)
+    # Its deadline passed: one try only (the first always runs), within MIN_TRY of planning.
+    once, kept = plan_clear_of(world, start, 0, [spot], deadline=time.monotonic())
+    assert once.seed == 0 and kept < AVOID_RADIUS  # (the seed's own path: no other tried)
+    assert once.plan_time <= MIN_TRY + 0.25
 
 
 def test_a_re_plan_starts_from_the_nearest_pose_the_planner_takes(bridge):

@@ -152,26 +152,115 @@ def test_the_robot_folder_drives_a_twin_shows_its_live_pose_and_stops_it(artifac
 
 
 def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
-    """What Route from robot carries from the last leg (app._robot_panel._carried): the
+    """What Route from robot carries from the last leg (app._robot_route.carried_from): the
     mismatch estimates of the same robot (pose source and settings); the drift holds in a
     row, one more after a drift hold, as many after a leg routed again before Go, none after
-    any other end. Another robot carries nothing."""
+    any other end; after a guard's hold, where its last look-ahead's rollouts failed (to keep
+    clear of), and after a drift hold, the leg (to drive on along with no re-plan). Another
+    robot carries nothing."""
     from types import SimpleNamespace
 
-    from roachplan.app._robot_panel import _carried
+    from roachplan.app._robot_route import carried_from
 
     key = ("natnet", (("server", "127.0.0.1"),))
+    looked = [
+        SimpleNamespace(failures=((0.0, 0.0, "deviation"),)),
+        SimpleNamespace(failures=((0.3, -0.2, "off_standable"), (0.31, -0.22, "fell"))),
+    ]
 
     def ended(reason: str) -> Any:  # (a RunResult's reason)
         return SimpleNamespace(reason=reason)
 
     def leg(**kw) -> Any:  # (a RobotSession's fields _carried reads)
         return SimpleNamespace(
-            **{"source_key": key, "went": True, "drifts": 1, "estimates": ((0.1, 2.0),), **kw}
+            **{
+                "source_key": key,
+                "went": True,
+                "drifts": 1,
+                "estimates": ((0.1, 2.0),),
+                "lookaheads": looked,
+                **kw,
+            }
         )
 
-    assert _carried(None, key) == ((), 0)
-    assert _carried(leg(result=ended("drift")), key) == (((0.1, 2.0),), 2)
-    assert _carried(leg(result=ended("stop")), key) == (((0.1, 2.0),), 0)
-    assert _carried(leg(went=False, result=None), key) == (((0.1, 2.0),), 1)
-    assert _carried(leg(result=ended("drift")), ("udp-json", ())) == ((), 0)
+    def said(carried) -> tuple:
+        return carried.estimates, carried.drifts, carried.avoid, carried.drifted is not None
+
+    failed = ((0.3, -0.2), (0.31, -0.22))  # (the last look-ahead's: not the one before)
+    assert said(carried_from(None, key)) == ((), 0, (), False)
+    assert said(carried_from(leg(result=ended("drift")), key)) == (((0.1, 2.0),), 2, failed, True)
+    assert said(carried_from(leg(result=ended("lookahead")), key)) == (
+        ((0.1, 2.0),),
+        0,
+        failed,
+        False,
+    )
+    assert said(carried_from(leg(result=ended("stop")), key)) == (((0.1, 2.0),), 0, (), False)
+    assert said(carried_from(leg(result=ended("drift"), lookaheads=[]), key))[2] == ()
+    assert said(carried_from(leg(went=False, result=None), key)) == (((0.1, 2.0),), 1, (), False)
+    assert said(carried_from(leg(result=ended("drift")), ("udp-json", ()))) == ((), 0, (), False)
+
+
+def test_a_route_after_a_guard_hold_keeps_clear_of_its_rollouts_failures_or_drives_on():
+    """Route from robot after the guard held the last leg (app._robot_route.route_from), the
+    page's commands put as its buttons put them: after a look-ahead hold, the re-plan keeps
+    clear of where that leg's last look-ahead's rollouts failed (its /plan record: the places
+    and the path's clearance of them); after a drift hold whose re-plan finds nothing (a
+    0.1 s budget), the robot drives on along the rest of the path it drifted off, from where
+    it stands (the planner "rejoin"), as the command line's does."""
+    from types import SimpleNamespace
+
+    from roachplan.app._commands import RobotPlanCmd
+    from roachplan.app._server import RoachApp
+    from roachplan.robot import AVOID_RADIUS, clearance, read_run
+    from roachplan.scenes import build_world, load_scene
+
+    with twin(*MOCAP) as (ready, _control):
+        app = RoachApp(build_world(load_scene("double_bridge")), host="127.0.0.1", port=free_port())
+        try:
+            panel = app.robot_panel
+            panel.source_address.value = f"127.0.0.1:{ready['natnet_port']}"
+            panel.sink_address.value = f"127.0.0.1:{ready['command_port']}"
+            panel.look_ahead.value = True
+            panel.max_pose_age.value = 600  # (a loaded machine's stream: test_robot_folder's)
+
+            def route():
+                """Route from robot, pressed: the new leg (held), the report."""
+                before = app.core.robot
+                app.loop.put(RobotPlanCmd(None))
+                deadline = time.monotonic() + 120
+                while app.core.robot is None or app.core.robot is before:
+                    assert time.monotonic() < deadline, app.status.content
+                    time.sleep(0.1)
+                return app.core.robot, panel.report.content
+
+            first, _ = route()
+            path = np.asarray(first.path, dtype=float)
+            along = np.concatenate(
+                [[0.0], np.cumsum(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1))]
+            )
+            failed = tuple(path[int(np.searchsorted(along, along[-1] / 2)), :2].tolist())
+            assert math.dist(failed, path[0, :2]) >= AVOID_RADIUS  # (one a re-plan can avoid)
+            # The first leg as the guard leaves a leg it held on a look-ahead (Go pressed).
+            first.went = True
+            first.result = SimpleNamespace(reason="lookahead")
+            first.lookaheads.append(SimpleNamespace(failures=((*failed, "fell"),)))
+            second, report = route()
+            keeps = clearance(np.asarray(second.path), [failed])
+            assert f"keeps {keeps:.2f} m from the 1 places" in report, report
+            # Held for drifting, and no plan from there within the budget: on along its path.
+            second.went = True
+            second.result = SimpleNamespace(reason="drift")
+            app.time_limit.value = 0.1
+            third, report = route()
+            assert third.plan.planner == "rejoin" and "no re-plan" in report, report
+        finally:
+            app.stop()
+    # Each leg's log (closed as the next was routed, the last at the app's end): its /plan.
+    plan = read_run(second.log).plan
+    assert plan["avoid"] == [list(failed)]
+    assert plan["clearance"] == pytest.approx(keeps)
+    plan = read_run(third.log).plan
+    assert plan["planner"] == "rejoin"
+    assert np.allclose(third.path[-1], second.path[-1])  # (the old path's end)
+    assert math.dist(third.path[0][:2], plan["robot_pose"][:2]) < 1e-9  # (from where it stood)

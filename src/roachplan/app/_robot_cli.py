@@ -182,7 +182,13 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
 def _look_ahead_flags(args: argparse.Namespace) -> dict:
     """LookAheadConfig's settings from the --look-ahead-* flags (those given); UsageError for
     one of them, or --guard, without --look-ahead."""
-    names = {"draws": "draws", "horizon": "horizon", "noise": "position_sd", "engine": "engine"}
+    names = {
+        "draws": "draws",
+        "horizon": "horizon",
+        "noise": "position_sd",
+        "engine": "engine",
+        "latency": "latency",
+    }
     ahead = {
         field: getattr(args, f"look_ahead_{k}")
         for k, field in names.items()
@@ -247,6 +253,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
         drive_robot,
         open_link,
         open_pose_source,
+        rejoin_plan,
     )
     from roachplan.scenes import build_world, load_scene
 
@@ -349,41 +356,19 @@ def cmd_robot(args: argparse.Namespace) -> int:
                 run = drive_robot(
                     world,
                     settings,
-                    plan=_rejoined(run),
+                    plan=rejoin_plan(
+                        run.path_xyz,
+                        run.spins,
+                        run.result.end[:2],
+                        seed=run.plan_seed or 0,
+                        turning_radius=run.turning_radius,
+                    ),
                     ready=ready,
                     source=source,
                     link=link,
                     estimates=run.estimates,
                 )
     return _report(args, scene.name, run, held, replan_error=replan_error, drove_on=drove_on)
-
-
-def _rejoined(run):
-    """The plan a leg the guard held for drifting drives on along when no re-plan is found:
-    the rest of its path from where the robot stands (rejoin_path), its seed and arcs."""
-    import numpy as np
-
-    from roachplan.planning import PlanResult
-    from roachplan.robot import rejoin_path
-
-    assert run.result.end is not None  # (a drift hold's: the robot's last pose)
-    path, spins = rejoin_path(run.path_xyz, run.spins, run.result.end[:2])
-    step = np.diff(path[:, :2], axis=0)
-    yaw = np.append(np.arctan2(step[:, 1], step[:, 0]), 0.0)  # (toward the next waypoint)
-    yaw[-1] = yaw[-2]
-    for k, heading in spins:  # (a spin's next waypoint repeats its place, turned)
-        yaw[k + 1] = heading
-    return PlanResult(
-        found=True,
-        planner="rejoin",
-        seed=run.plan_seed or 0,
-        states=np.column_stack([path[:, :2], yaw]),
-        path_xyz=path,
-        plan_time=0.0,
-        message="the rest of the path the robot drifted off, from where it stands",
-        turning_radius=run.turning_radius,
-        spins=spins,
-    )
 
 
 def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:

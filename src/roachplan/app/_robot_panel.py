@@ -17,7 +17,6 @@ loop (its callbacks only put them):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import queue
 import sys
@@ -28,10 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roachplan.experiments import TrialResult
-from roachplan.planning import PlanningError, PlanResult
-
 from ._commands import RobotGoCmd, RobotPlanCmd, RobotStopCmd
+from ._robot_route import carried_from, held_text, leg_recorder, predict_from, route_from
 
 if TYPE_CHECKING:
     from roachplan.robot import FrameTransform, RobotLoop, RunRecorder
@@ -63,6 +60,9 @@ class RobotForm:
     max_pose_age: float = 0.2
     """The loop stops the robot when its newest pose is older than this [s]
     (SafetyConfig.max_pose_age)."""
+    latency: float = 0.0
+    """How late a pose arrives [s] (LookAheadConfig.latency: the look-ahead starts its
+    rollouts that long before)."""
 
 
 class RobotPanel:
@@ -125,6 +125,16 @@ class RobotPanel:
                 hint="Stop the robot when the newest pose is older than this: the tracker lost "
                 "it or the stream stopped (raise it for a slow or bursty stream)",
             )
+            self.latency = gui.add_number(
+                "Pose latency [ms]",
+                0,
+                min=0,
+                max=5000,
+                step=5,
+                hint="How late a pose arrives (the motion capture's latency: Motive shows it): "
+                "the look-ahead starts its rollouts from the pose at the moment it was the "
+                "robot's, the legs at the commands' phase then",
+            )
             self.plan_button = gui.add_button(
                 "Route from robot", hint="Plan from where the robot stands; it is held until Go"
             )
@@ -153,6 +163,7 @@ class RobotPanel:
         from roachplan import SettingError, setting_problem
         from roachplan.robot import (
             FrameTransform,
+            LookAheadConfig,
             NatNetSettings,
             RobotError,
             RobotSettings,
@@ -212,6 +223,10 @@ class RobotPanel:
             raise RobotError(
                 f"Max pose age [ms] {self.max_pose_age.value!r} ({max_pose_age:g} s): {why}"
             )
+        latency = float(self.latency.value) / 1000
+        why = setting_problem(LookAheadConfig, "latency", latency)
+        if why is not None:
+            raise RobotError(f"Pose latency [ms] {self.latency.value!r} ({latency:g} s): {why}")
         return RobotForm(
             source=source,
             source_settings=source_settings,
@@ -221,6 +236,7 @@ class RobotPanel:
             look_ahead=bool(self.look_ahead.value),
             guard=guard if guard > 0 else None,
             max_pose_age=max_pose_age,
+            latency=latency,
         )
 
     def show_transform(self, transform: FrameTransform) -> None:
@@ -274,6 +290,12 @@ class RobotSession:
     estimates: tuple = ()
     """The motors' mismatch estimated so far, this leg's and those before it (RobotRun's):
     a Route from robot of the same robot goes on from them."""
+    plan: Any = None
+    """The PlanResult this leg drives (its seed and arcs: a rejoin after a drift hold keeps
+    them)."""
+    lookaheads: list = field(default_factory=list)
+    """The look-aheads made while it drove, in order (the watcher's own list: it outlives
+    the watcher)."""
 
     def close(self) -> None:
         """Stop the robot (if it moves), end the loop and the look-ahead, close the log, the
@@ -345,7 +367,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
     before = app.robot  # (the last leg: a re-plan of the same robot goes on from it)
     _close_session(app)  # (a robot still held or driven stops first)
     key = (form.source, tuple(sorted(form.source_settings.items())))
-    estimates, drifts = _carried(before, key)
+    carried = carried_from(before, key)
     app.page.view.remove("/lookahead")  # (the last run's look-ahead)
     start, goal = app.page.markers.valid_poses(app.world)
     app.page.set_status("Robot: connecting to the pose source ...")
@@ -364,10 +386,11 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         panel.show_transform(transform)
         p, q = transform.apply(sample.position, sample.quat)
         stands = (p[0], p[1], yaw_of(q))
-        plan, here, moved, radius = _route(app, stands, goal, drifts)
-        prediction = _predict(app, plan, here, goal)
+        route = route_from(app, stands, goal, carried)
+        plan, here = route.plan, route.here
+        prediction = predict_from(app, plan, here, goal)
         path = np.asarray(plan.path_xyz, dtype=float)
-        log, recorder = _recorder(
+        log, recorder = leg_recorder(
             app,
             form,
             transform=transform,
@@ -376,6 +399,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
             stands=stands,
             goal=goal,
             prediction=prediction,
+            route=route,
         )
         events: queue.Queue = queue.Queue()
         loop = RobotLoop(
@@ -405,11 +429,11 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 path,
                 tuple(plan.spins),
                 loop,
-                cfg=LookAheadConfig(),
+                cfg=LookAheadConfig(latency=form.latency),
                 guard=form.guard,
                 drift=defaults.guard_drift,
                 trim=defaults.trim,
-                estimates=estimates,
+                estimates=carried.estimates,
                 period=defaults.look_ahead_period,
                 seed=plan.seed,
                 safety=loop.cfg.safety,
@@ -435,182 +459,15 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         events=events,
         watcher=watcher,
         source_key=key,
-        drifts=drifts,
-        estimates=estimates,
+        drifts=carried.drifts,
+        estimates=carried.estimates,
+        plan=plan,
+        lookaheads=watcher.results if watcher is not None else [],
     )
     panel.go_button.disabled = False
-    text = _held_text(stands, moved, radius if drifts else None, len(path), prediction)
+    text = held_text(stands, route, len(path), prediction)
     panel.report.content = text
     app.page.set_status(text)
-
-
-def _held_text(stands, moved: float, wider: float | None, waypoints: int, prediction) -> str:
-    """What Route from robot says once the robot is held: where it stands (x, y [m], yaw
-    [rad]), how far the plan's start was moved [m], the widened arcs' radius [m] (None: the
-    scene's), the plan, the simulation's prediction (a TrialResult, or None)."""
-    said = (
-        f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
-        if prediction is not None
-        else "the simulation of the plan failed"
-    )
-    start_note = (
-        f" (planned from {100 * moved:.1f} cm away: the planner refuses where it stands)"
-        if moved > 0
-        else ""
-    )
-    arcs = "" if wider is None else f" with arcs of {wider:.2f} m (it drifted off narrower ones)"
-    return (
-        f"Robot at ({stands[0]:.3f}, {stands[1]:.3f}) m, {math.degrees(stands[2]):.0f} deg"
-        f"{start_note}: planned {waypoints} waypoints (black){arcs}; {said} (blue). The "
-        f"robot is held: press **Go**."
-    )
-
-
-def _route(app: App, stands, goal, drifts: int):
-    """(the plan, its start, how far that lies from where the robot stands [m], the radius of
-    its arcs [m] or None) from the robot standing at `stands` (x, y [m], yaw [rad]) to goal,
-    as the command line's re-plan: from the nearest pose the planner takes (robot.plan_start:
-    a robot the guard held with a foot over an edge), its arcs widened after `drifts` drift
-    holds in a row (robot.replan_radius)."""
-    from roachplan.robot import plan_start, replan_radius
-
-    here, moved = plan_start(app.world, stands)
-    radius = app.world.scene.planner.turning_radius
-    if radius is not None and drifts:  # (it drifted off arcs this wide: wider ones)
-        radius = replan_radius(radius, drifts)
-    return _plan_from(app, here, goal, turning_radius=radius), here, moved, radius
-
-
-def _carried(before: RobotSession | None, key: tuple) -> tuple[tuple, int]:
-    """(the motors' mismatch estimates, the drift holds in a row) a Route from robot goes on
-    from: the last leg's, when it drove the same robot (pose source and settings: `key`);
-    none of either for another robot. A drift hold's leg adds one; a leg routed again before
-    Go counts as that leg; any other end starts the count again."""
-    if before is None or before.source_key != key:
-        return (), 0
-    if not before.went:
-        return before.estimates, before.drifts
-    drifted = before.result is not None and before.result.reason == "drift"
-    return before.estimates, before.drifts + 1 if drifted else 0
-
-
-def _plan_from(app: App, here, goal, *, turning_radius: float | None = None) -> PlanResult:
-    """A plan from the robot's pose to the goal marker (a plan job, followed; Cancel stops
-    it), drawn black as the app's plan; its arcs of turning_radius [m] (None: the scene's)."""
-    from ._jobs import _plan_job, failure
-
-    planner = app.planner(app.page.plan_settings())
-    if turning_radius is not None and planner.turning_radius is not None:
-        planner = dataclasses.replace(planner, turning_radius=turning_radius)
-    deadline = time.monotonic() + planner.time_limit
-    request = dict(seed=app.next_seed, start=here, goal=goal, planner=planner)
-    app.page.view.clear("/trajectories")
-    app.page.view.remove("/live")
-    job = app.world_job(_plan_job, 1, request, deadline)
-    found: list = []
-
-    def planning(events: list) -> bool:
-        found.extend(a.plan for a in events if a.plan is not None)
-        app.loop.progress(
-            job.elapsed / planner.time_limit,
-            f"Robot: planning from where it stands ({here[0]:.3f}, {here[1]:.3f}), "
-            f"{job.elapsed:.1f} s",
-        )
-        return job.done
-
-    end = app.loop.follow(job, "Route from robot", planning, hard_stop=deadline + 0.8)
-    app.next_seed += 1
-    if end == "cancelled" or not found:
-        why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
-        raise PlanningError(f"no plan from where the robot stands: {why}")
-    app.plan_endpoints = (here, goal)
-    app.set_plans([found[0]])  # (black; Drive simulates it too)
-    return found[0].plan
-
-
-def _predict(app: App, plan: PlanResult, here, goal) -> TrialResult | None:
-    """The simulation of the plan from the robot's pose (a drive job, followed), drawn blue."""
-    from roachplan.processes import Returned
-
-    from ._draw import BLUE
-    from ._jobs import _drive_job
-
-    drive = app.world_job(_drive_job, plan, here, goal)
-
-    def predicting(events: list) -> bool:
-        app.loop.progress(None, f"Robot: simulating the plan from the robot, {drive.elapsed:.1f} s")
-        return drive.done
-
-    app.loop.follow(drive, "Route from robot", predicting)
-    outcome = drive.outcome
-    if not isinstance(outcome, Returned) or not isinstance(outcome.value, TrialResult):
-        return None
-    prediction = outcome.value
-    app.page.view.draw("/trajectories/prediction", [r[1:] for r in prediction.trajectory], BLUE)
-    return prediction
-
-
-def _recorder(
-    app: App, form: RobotForm, *, transform, plan: PlanResult, here, stands, goal, prediction
-):
-    """(the log's path, its RunRecorder) with the scene, the settings, the plan (from `here`,
-    the robot standing at `stands`: x, y [m], yaw [rad]) and the prediction written: beside
-    the app's uploads, in robot-runs/."""
-    from roachplan.robot import RunRecorder, scene_record
-
-    log_dir = app.upload_dir / "robot-runs"
-    log_dir.mkdir(exist_ok=True)
-    stem = f"{app.world.scene.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    log, n = log_dir / f"{stem}.mcap", 1
-    while log.exists() or log.with_name(log.name + ".partial").exists():  # (a leg this second)
-        n += 1
-        log = log_dir / f"{stem}-{n}.mcap"
-    recorder = RunRecorder(log)
-    t = time.monotonic()
-    scene_path = Path(app.world.scene.path)
-    scene_file = scene_path if scene_path.is_file() else None
-    recorder.write("/scene", t, scene_record(scene_file, app.world.scene.name))
-    settings = {
-        "source": form.source,
-        "source_settings": form.source_settings,
-        "link": form.link,
-        "link_settings": form.link_settings,
-        "transform": transform.to_json(),
-        "transform_measured": form.transform is None,
-        "page": True,
-    }
-    recorder.write("/settings", t, settings)
-    recorder.write(
-        "/plan",
-        t,
-        {
-            "path": np.asarray(plan.path_xyz).tolist(),
-            "spins": [list(s) for s in plan.spins],
-            "planner": plan.planner,
-            "seed": plan.seed,
-            "start": list(here),
-            # (as the command line's: how far that start lies from where the robot stood [m],
-            # where it stood, the radius of the plan's arcs [m]; null: no arcs)
-            "start_moved": math.dist(here[:2], stands[:2]),
-            "robot_pose": list(stands),
-            "goal": list(goal),
-            "turning_radius": plan.turning_radius,
-        },
-    )
-    if prediction is not None:
-        frames = [[r[0], r[1], r[2], r[3], here[2]] for r in prediction.trajectory]
-        recorder.write(
-            "/prediction",
-            t,
-            {
-                "start": list(here),
-                "outcome": prediction.outcome,
-                "reason": prediction.reason,
-                "drive_time": prediction.drive_time,
-                "trajectory": frames,
-            },
-        )
-    return log, recorder
 
 
 class _Live:

@@ -80,15 +80,18 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "plan_clear_of": "._run",
         "plan_start": "._run",
         "rejoin_path": "._run",
+        "rejoin_plan": "._run",
         "REJOIN_MIN": "._run",
         "replan_radius": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
         "EDGE_DRIFT": "._run",
         "START_REACH": "._run",
+        "MIN_TRY": "._run",
         "clearance": "._run",
         "watch_ahead": "._run",
         "AVOID_RADIUS": "._run",
+        "AVOID_TRIES": "._run",
         "predict": "._run",
         "LookAhead": "._lookahead",
         "LookAheadConfig": "._lookahead",
@@ -101,6 +104,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "trim_commands": "._estimate",
         "straight_mismatches": "._estimate",
         "remaining_path": "._lookahead",
+        "phase_at": "._lookahead",
+        "PHASE_KEPT": "._lookahead",
         "Comparison": "._compare",
         "FitConfig": "._compare",
         "FitResult": "._compare",
@@ -154,12 +159,14 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._links import UdpLinkSettings as UdpLinkSettings
     from ._links import open_link as open_link
     from ._links import register_link as register_link
+    from ._lookahead import PHASE_KEPT as PHASE_KEPT
     from ._lookahead import LookAhead as LookAhead
     from ._lookahead import LookAheadConfig as LookAheadConfig
     from ._lookahead import LookAheadRunner as LookAheadRunner
     from ._lookahead import look_ahead as look_ahead
     from ._lookahead import look_ahead_reliability as look_ahead_reliability
     from ._lookahead import observed_hold as observed_hold
+    from ._lookahead import phase_at as phase_at
     from ._lookahead import remaining_path as remaining_path
     from ._loop import CommandEvent as CommandEvent
     from ._loop import FinishedEvent as FinishedEvent
@@ -191,9 +198,11 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import read_run as read_run
     from ._record import scene_record as scene_record
     from ._run import AVOID_RADIUS as AVOID_RADIUS
+    from ._run import AVOID_TRIES as AVOID_TRIES
     from ._run import EDGE_DRIFT as EDGE_DRIFT
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
+    from ._run import MIN_TRY as MIN_TRY
     from ._run import REJOIN_MIN as REJOIN_MIN
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
@@ -203,6 +212,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import plan_start as plan_start
     from ._run import predict as predict
     from ._run import rejoin_path as rejoin_path
+    from ._run import rejoin_plan as rejoin_plan
     from ._run import replan_radius as replan_radius
     from ._run import start_height as start_height
     from ._run import wait_first_pose as wait_first_pose

@@ -154,6 +154,7 @@ def plan_clear_of(
     *,
     radius: float = AVOID_RADIUS,
     tries: int = AVOID_TRIES,
+    deadline: float | None = None,
 ) -> tuple[PlanResult, float]:
     """A plan from start (x, y [m], yaw [rad], world frame) to the scene's goal that keeps
     `radius` from every point of avoid ((x, y) [m]: where a look-ahead's rollouts failed),
@@ -162,13 +163,22 @@ def plan_clear_of(
     the one that keeps clearest (of those found). Points within radius of start are not
     avoided (no path from there can be). No points to avoid: the first of those seeds whose
     planner finds a path (from a pose at a bridge's edge, the sampling planner's iteration
-    budget ran out once for a seed whose path the next seed would have found)."""
+    budget ran out once for a seed whose path the next seed would have found). deadline: a
+    time.monotonic() [s] by which every try has ended (each gets what is left, at most the
+    planner's time_limit; none starts with under MIN_TRY left; the first always does): a
+    robot held for a re-plan that finds nothing waits that long, not tries x time_limit."""
     from roachplan.experiments import plan as plan_trial
 
     points = [p for p in avoid if math.dist(p[:2], start[:2]) >= radius]
     best: tuple[PlanResult, float] | None = None
+    cfg = world.scene.planner
     for k in range(tries):
-        planned = plan_trial(world, seed=seed + k, start=start)
+        left = math.inf if deadline is None else deadline - time.monotonic()
+        if best is not None and left < MIN_TRY:
+            break
+        limit = max(min(cfg.time_limit, left), MIN_TRY)
+        planner = cfg if limit >= cfg.time_limit else dataclasses.replace(cfg, time_limit=limit)
+        planned = plan_trial(world, seed=seed + k, start=start, planner=planner)
         if not planned.found:
             best = best or (planned, math.inf)
             continue
@@ -179,6 +189,11 @@ def plan_clear_of(
             break
     assert best is not None  # (tries >= 1)
     return best
+
+
+MIN_TRY = 0.5
+"""plan_clear_of starts no try after its first with under this much of its time left [s]:
+setting up a plan takes a good part of it."""
 
 
 REJOIN_MIN = 0.10
@@ -215,6 +230,34 @@ def rejoin_path(
     # row i >= join of rest is row i - join + lead of the new path
     moved = tuple((i - join + lead, h) for i, h in kept if i >= join)
     return np.vstack([here] * lead + [rest[join:]]), (*turn, *moved)
+
+
+def rejoin_plan(
+    path_xyz, spins, here_xy, *, seed: int = 0, turning_radius: float | None = None
+) -> PlanResult:
+    """rejoin_path's path and spins from here_xy [m] as a plan to drive (the planner "rejoin"):
+    what a robot the guard held for drifting drives on along when no re-plan is found, on the
+    command line and in the page alike. seed and turning_radius [m]: the old plan's; each
+    state's heading faces the next waypoint (a spin's next waypoint: the spin's heading)."""
+    from roachplan.planning import PlanResult
+
+    path, kept = rejoin_path(path_xyz, spins, here_xy)
+    step = np.diff(path[:, :2], axis=0)
+    yaw = np.append(np.arctan2(step[:, 1], step[:, 0]), 0.0)  # (toward the next waypoint)
+    yaw[-1] = yaw[-2]
+    for k, heading in kept:  # (a spin's next waypoint repeats its place, turned)
+        yaw[k + 1] = heading
+    return PlanResult(
+        found=True,
+        planner="rejoin",
+        seed=seed,
+        states=np.column_stack([path[:, :2], yaw]),
+        path_xyz=path,
+        plan_time=0.0,
+        message="the rest of the path the robot drifted off, from where it stands",
+        turning_radius=turning_radius,
+        spins=kept,
+    )
 
 
 EDGE_DRIFT = 0.5
@@ -323,9 +366,14 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             planner = scene.planner
             if turning_radius is not None and planner.turning_radius is not None:
                 planner = dataclasses.replace(planner, turning_radius=turning_radius)
-            plan, clear = plan_clear_of(world.with_planner(planner), here, seed, avoid)
+            # (every try of this leg's plan within the planner's budget: a held robot waits
+            # for a re-plan that finds nothing that long, not 8 tries of it)
+            deadline = time.monotonic() + scene.planner.time_limit
+            plan, clear = plan_clear_of(
+                world.with_planner(planner), here, seed, avoid, deadline=deadline
+            )
             if not plan.found and planner != scene.planner:  # (wider arcs: none; the scene's)
-                plan, clear = plan_clear_of(world, here, seed, avoid)
+                plan, clear = plan_clear_of(world, here, seed, avoid, deadline=deadline)
                 planner = scene.planner
             radius = planner.turning_radius
             kept = None if math.isinf(clear) else clear

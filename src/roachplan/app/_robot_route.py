@@ -1,0 +1,303 @@
+"""Route from robot (the page's Robot folder): the plan from where the robot stands, as the
+command line's re-plan makes it (robot.plan_start, robot.replan_radius, clear of where the
+last look-ahead's rollouts failed, or on along the old path after a drift hold), what a leg
+carries from the last one of the same robot, the simulation's prediction of the plan, and the
+leg's log with its plan. Each runs on the app's command loop (do_robot_plan calls them)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roachplan.experiments import LabelledPlan, TrialResult
+from roachplan.planning import PlanningError, PlanResult
+
+if TYPE_CHECKING:
+    from ._app import App
+    from ._robot_panel import RobotForm, RobotSession
+
+
+def held_text(stands, route: Route, waypoints: int, prediction) -> str:
+    """What Route from robot says once the robot is held: where it stands (x, y [m], yaw
+    [rad]), the route (how far its start was moved, its widened arcs, how far it keeps from
+    where the last look-ahead's rollouts failed, or why it drives on along the old path), the
+    plan, the simulation's prediction (a TrialResult, or None)."""
+    said = (
+        f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
+        if prediction is not None
+        else "the simulation of the plan failed"
+    )
+    notes = ""
+    if route.moved > 0:
+        notes += (
+            f" (planned from {100 * route.moved:.1f} cm away: the planner refuses where it stands)"
+        )
+    if route.drove_on is not None:
+        what = f"no re-plan ({route.drove_on}): on along the rest of the path it drifted off"
+    else:
+        what = f"planned {waypoints} waypoints (black)"
+        if route.wider is not None:
+            what += f" with arcs of {route.wider:.2f} m (it drifted off narrower ones)"
+        if route.avoid:
+            what += (
+                f"; the {len(route.avoid)} places the look-ahead's rollouts failed are all "
+                "next to the robot"
+                if route.clearance is None
+                else f"; it keeps {route.clearance:.2f} m from the {len(route.avoid)} places "
+                "the look-ahead's rollouts failed"
+            )
+    return (
+        f"Robot at ({stands[0]:.3f}, {stands[1]:.3f}) m, {math.degrees(stands[2]):.0f} deg"
+        f"{notes}: {what}; {said} (blue). The robot is held: press **Go**."
+    )
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Carried:
+    """What a Route from robot goes on from, of the last leg of the same robot (carried_from)."""
+
+    estimates: tuple = ()
+    """The motors' mismatch estimated so far ((mismatch, walked [m]) each)."""
+    drifts: int = 0
+    """The guard's drift holds in a row (robot.replan_radius widens the arcs)."""
+    avoid: tuple[tuple[float, float], ...] = ()
+    """Where the last look-ahead's rollouts failed (x, y [m]), when the guard held the last
+    leg: the re-plan keeps clear of them (robot.plan_clear_of's rule)."""
+    drifted: Any = None
+    """The last leg's RobotSession, when the guard held it for drifting: with no re-plan,
+    the robot drives on along the rest of its path (robot.rejoin_plan)."""
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Route:
+    """What Route from robot planned (route_from)."""
+
+    plan: PlanResult
+    here: tuple[float, float, float]
+    """The plan's start (x, y [m], yaw [rad])."""
+    moved: float = 0.0
+    """How far that start lies from where the robot stands [m] (robot.plan_start)."""
+    wider: float | None = None
+    """The radius of its arcs [m] when widened after drift holds (None: the scene's)."""
+    avoid: tuple[tuple[float, float], ...] = ()
+    """The places it was to keep clear of (Carried.avoid)."""
+    clearance: float | None = None
+    """How far its path keeps from them [m] (robot.clearance; None: none to keep from)."""
+    drove_on: str | None = None
+    """Why no re-plan was found, when the robot drives on along the old path instead."""
+
+
+def route_from(app: App, stands, goal, carried: Carried) -> Route:
+    """The plan from the robot standing at `stands` (x, y [m], yaw [rad]) to goal, as the
+    command line's re-plan: from the nearest pose the planner takes (robot.plan_start: a
+    robot the guard held with a foot over an edge), its arcs widened after drift holds in a
+    row (robot.replan_radius), clear of where the last look-ahead's rollouts failed; after a
+    drift hold with no plan found, the rest of the old path from where the robot stands
+    (robot.rejoin_plan)."""
+    from roachplan.processes import ChildError
+    from roachplan.robot import RobotError, clearance, plan_start, rejoin_plan, replan_radius
+
+    radius = app.world.scene.planner.turning_radius
+    wider = None
+    if radius is not None and carried.drifts:  # (it drifted off arcs this wide: wider ones)
+        wider = radius = replan_radius(radius, carried.drifts)
+    try:
+        here, moved = plan_start(app.world, stands)
+        plan = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
+    except (RobotError, PlanningError, ChildError) as exc:
+        old = carried.drifted
+        if old is None or old.plan is None:
+            raise
+        plan = rejoin_plan(
+            old.path,
+            old.spins,
+            stands[:2],
+            seed=old.plan.seed,
+            turning_radius=old.plan.turning_radius,
+        )
+        app.plan_endpoints = (tuple(stands), goal)
+        app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
+        return Route(plan=plan, here=tuple(stands), drove_on=str(exc))
+    keeps = clearance(plan.path_xyz, carried.avoid) if carried.avoid else math.inf
+    return Route(
+        plan=plan,
+        here=here,
+        moved=moved,
+        wider=wider,
+        avoid=carried.avoid,
+        clearance=None if math.isinf(keeps) else keeps,
+    )
+
+
+def carried_from(before: RobotSession | None, key: tuple) -> Carried:
+    """What a Route from robot goes on from: the last leg's, when it drove the same robot
+    (pose source and settings: `key`); nothing for another robot. The mismatch estimates;
+    the drift holds in a row (a drift hold's leg adds one; a leg routed again before Go
+    counts as that leg; any other end starts the count again); after a guard's hold, where
+    its last look-ahead's rollouts failed, and after a drift hold, the leg itself."""
+    from roachplan.robot import GUARD_HOLDS
+
+    if before is None or before.source_key != key:
+        return Carried()
+    if not before.went:
+        return Carried(estimates=before.estimates, drifts=before.drifts)
+    reason = before.result.reason if before.result is not None else None
+    held = reason in GUARD_HOLDS
+    return Carried(
+        estimates=before.estimates,
+        drifts=before.drifts + 1 if reason == "drift" else 0,
+        avoid=tuple((x, y) for x, y, _ in before.lookaheads[-1].failures)
+        if held and before.lookaheads
+        else (),
+        drifted=before if reason == "drift" else None,
+    )
+
+
+def plan_from(app: App, here, goal, *, turning_radius: float | None = None, avoid=()) -> PlanResult:
+    """A plan from the robot's pose to the goal marker (a plan job, followed; Cancel stops
+    it), drawn black as the app's plan; its arcs of turning_radius [m] (None: the scene's).
+    avoid: points (x, y) [m] it keeps robot.AVOID_RADIUS from (those that far from here):
+    up to robot.AVOID_TRIES distinct plans, the first that keeps clear, else the clearest
+    (robot.plan_clear_of's rule)."""
+    from roachplan.robot import AVOID_RADIUS, AVOID_TRIES, clearance
+
+    from ._jobs import _plan_job, failure
+
+    points = [p for p in avoid if math.dist(p[:2], here[:2]) >= AVOID_RADIUS]
+
+    planner = app.planner(app.page.plan_settings())
+    if turning_radius is not None and planner.turning_radius is not None:
+        planner = dataclasses.replace(planner, turning_radius=turning_radius)
+    deadline = time.monotonic() + planner.time_limit
+    request = dict(seed=app.next_seed, start=here, goal=goal, planner=planner)
+    app.page.view.clear("/trajectories")
+    app.page.view.remove("/live")
+    job = app.world_job(_plan_job, AVOID_TRIES if points else 1, request, deadline)
+    found: list = []  # (LabelledPlan, its clearance [m]) each
+
+    def planning(events: list) -> bool:
+        for a in events:
+            if a.plan is not None:
+                found.append((a.plan, clearance(a.plan.plan.path_xyz, points)))
+        if found and found[-1][1] >= AVOID_RADIUS:  # (clear: no more tries; inf: none to avoid)
+            return True
+        app.loop.progress(
+            job.elapsed / planner.time_limit,
+            f"Robot: planning from where it stands ({here[0]:.3f}, {here[1]:.3f}), "
+            f"{job.elapsed:.1f} s",
+        )
+        return job.done
+
+    end = app.loop.follow(job, "Route from robot", planning, hard_stop=deadline + 0.8)
+    app.next_seed += 1
+    if end == "cancelled" or not found:
+        why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
+        raise PlanningError(f"no plan from where the robot stands: {why}")
+    app.plan_endpoints = (here, goal)
+    best = max(found, key=lambda f: f[1])[0]  # (the first of equals: the first found)
+    app.set_plans([best])  # (black; Drive simulates it too)
+    return best.plan
+
+
+def predict_from(app: App, plan: PlanResult, here, goal) -> TrialResult | None:
+    """The simulation of the plan from the robot's pose (a drive job, followed), drawn blue."""
+    from roachplan.processes import Returned
+
+    from ._draw import BLUE
+    from ._jobs import _drive_job
+
+    drive = app.world_job(_drive_job, plan, here, goal)
+
+    def predicting(events: list) -> bool:
+        app.loop.progress(None, f"Robot: simulating the plan from the robot, {drive.elapsed:.1f} s")
+        return drive.done
+
+    app.loop.follow(drive, "Route from robot", predicting)
+    outcome = drive.outcome
+    if not isinstance(outcome, Returned) or not isinstance(outcome.value, TrialResult):
+        return None
+    prediction = outcome.value
+    app.page.view.draw("/trajectories/prediction", [r[1:] for r in prediction.trajectory], BLUE)
+    return prediction
+
+
+def leg_recorder(
+    app: App,
+    form: RobotForm,
+    *,
+    transform,
+    plan: PlanResult,
+    here,
+    stands,
+    goal,
+    prediction,
+    route: Route | None = None,
+):
+    """(the log's path, its RunRecorder) with the scene, the settings, the plan (from `here`,
+    the robot standing at `stands`: x, y [m], yaw [rad]) and the prediction written: beside
+    the app's uploads, in robot-runs/."""
+    from roachplan.robot import RunRecorder, scene_record
+
+    log_dir = app.upload_dir / "robot-runs"
+    log_dir.mkdir(exist_ok=True)
+    stem = f"{app.world.scene.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    log, n = log_dir / f"{stem}.mcap", 1
+    while log.exists() or log.with_name(log.name + ".partial").exists():  # (a leg this second)
+        n += 1
+        log = log_dir / f"{stem}-{n}.mcap"
+    recorder = RunRecorder(log)
+    t = time.monotonic()
+    scene_path = Path(app.world.scene.path)
+    scene_file = scene_path if scene_path.is_file() else None
+    recorder.write("/scene", t, scene_record(scene_file, app.world.scene.name))
+    settings = {
+        "source": form.source,
+        "source_settings": form.source_settings,
+        "link": form.link,
+        "link_settings": form.link_settings,
+        "transform": transform.to_json(),
+        "transform_measured": form.transform is None,
+        "page": True,
+    }
+    recorder.write("/settings", t, settings)
+    recorder.write(
+        "/plan",
+        t,
+        {
+            "path": np.asarray(plan.path_xyz).tolist(),
+            "spins": [list(s) for s in plan.spins],
+            "planner": plan.planner,
+            "seed": plan.seed,
+            "start": list(here),
+            # (as the command line's: how far that start lies from where the robot stood [m],
+            # where it stood, the radius of the plan's arcs [m]; null: no arcs)
+            "start_moved": math.dist(here[:2], stands[:2]),
+            "robot_pose": list(stands),
+            "goal": list(goal),
+            "turning_radius": plan.turning_radius,
+            # (where the last look-ahead's rollouts failed, and how far the path keeps from
+            # them [m]; null: none to keep clear of)
+            "avoid": [list(p) for p in (route.avoid if route else ())],
+            "clearance": route.clearance if route else None,
+        },
+    )
+    if prediction is not None:
+        frames = [[r[0], r[1], r[2], r[3], here[2]] for r in prediction.trajectory]
+        recorder.write(
+            "/prediction",
+            t,
+            {
+                "start": list(here),
+                "outcome": prediction.outcome,
+                "reason": prediction.reason,
+                "drive_time": prediction.drive_time,
+                "trajectory": frames,
+            },
+        )
+    return log, recorder
