@@ -35,7 +35,10 @@ from pathlib import Path
 from tempfile import TemporaryDirectory
 
 ROACHPLAN = [sys.executable, "-m", "roachplan"]
-MOCAP = ["--latency", "0.04", "--noise", "0.002"]
+LATENCY = 0.04
+"""The twin's motion capture's latency [s]: what Motive would show, so the guarded robot's
+look-ahead is told it (--look-ahead-latency; not one of the hidden parameters)."""
+MOCAP = ["--latency", str(LATENCY), "--noise", "0.002"]
 """The twin's motion capture: 40 ms late, 2 mm of noise (as bench_robot's)."""
 
 
@@ -112,7 +115,8 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     with twin(args, k, args.scene) as ready:
         flags = [
             "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
-            "--look-ahead-engine", args.look_ahead_engine, *drift,
+            "--look-ahead-engine", args.look_ahead_engine,
+            "--look-ahead-latency", str(LATENCY), *drift,
         ]  # fmt: skip
         log = tmp / f"{setting}-{k}.mcap"
         t = time.monotonic()

@@ -160,6 +160,10 @@ FLAGS: dict[str, tuple[str, Callable[[], Check]]] = {
         "--look-ahead-engine",
         _of("roachplan.robot", "LookAheadConfig", "engine"),
     ),
+    "look_ahead_latency": (
+        "--look-ahead-latency",
+        _of("roachplan.robot", "LookAheadConfig", "latency"),
+    ),
     "latency": ("--latency", _of("roachplan.robot", "FitConfig", "latency")),
     "evaluations": ("--evaluations", _of("roachplan.robot", "FitConfig", "max_evaluations")),
     "rounds": ("--rounds", _of("roachplan.robot", "FitConfig", "rounds")),

@@ -825,6 +825,15 @@ def _add_robot_parser(sub) -> None:
         "(default 0.01)",
     )
     p.add_argument(
+        "--look-ahead-latency",
+        type=float,
+        default=None,
+        metavar="S",
+        help="how late a pose arrives [s] (the motion capture's latency: Motive shows it); each "
+        "rollout starts at a moment drawn from 0 to twice this before the pose arrived, the "
+        "legs at the commands' phase then (default 0)",
+    )
+    p.add_argument(
         "--look-ahead-period",
         type=float,
         default=None,

@@ -25,7 +25,10 @@ mismatch holds for the robot; a re-planned leg goes on from the legs before), an
 rollouts drive with that, so a robot whose motors differ from the model's is simulated
 drifting as it does; with the loop's trim (RobotSettings.trim) the loop divides the pool out
 of its commands, and the rollouts are driven so trimmed.
-What it does not model yet: the pose's latency (the pose is taken as now).
+The pose is late (LookAheadConfig.latency, the motion capture's, and the time since it
+arrived): each rollout starts from it at the moment it was the robot's, a lag drawn between its
+arrival and twice the latency before it, with the legs at the phase the commands gave then,
+and walks on until the horizon after the look-ahead began (LookAhead.lead).
 
 look_ahead is a pure function of its inputs and seed: rollout k draws from
 np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop about once a
@@ -35,6 +38,7 @@ np.random.default_rng((seed, k)). LookAheadRunner runs it beside the robot loop 
 
 from __future__ import annotations
 
+import bisect
 import collections
 import contextlib
 import dataclasses
@@ -49,6 +53,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roachplan._settings import (
+    between,
     boolean,
     check_settings,
     integer,
@@ -94,6 +99,12 @@ class LookAheadConfig:
     with the estimates before (pooled_mismatch, the legs' before too); its rollouts then drive
     with it, on top of their draws (a robot that drifts is simulated drifting), and with the
     loop's trim (RobotSettings.trim). 0: not estimated."""
+    latency: float = s(0.0, between(0.0, 5.0, "s"))
+    """How late a pose is when it arrives [s]: the motion capture's latency (Motive shows
+    it; the twin's --latency), taken as uncertain: each rollout starts from the newest pose at
+    a moment drawn evenly between its arrival and twice this before it, the legs at the phase
+    the commands gave then (at 20 rad/s, 40 ms is 0.8 rad of the gait), and walks the time
+    since then on top of the horizon. 0: the pose was the robot's when it arrived."""
     robot_draws: bool = s(True, boolean())
     """Each rollout's robot is also drawn from the scene's uncertainty (friction, body mass,
     each motor's speed: the robot it might be, as choose's rollouts draw it); False: the
@@ -124,6 +135,9 @@ class LookAhead:
     trim: float = 0.0
     """The mismatch the robot loop divided out of its commands meanwhile (RobotLoop.trim), and
     its rollouts' driver with it."""
+    lead: float = 0.0
+    """How long before the look-ahead began its rollouts start [s], at the most likely lag:
+    the pose's age on arrival (LookAheadConfig.latency) and since; they walk horizon + lead."""
 
     @property
     def p_hold(self) -> float:
@@ -142,6 +156,7 @@ class LookAhead:
             "wall_time": self.wall_time,
             "mismatch": self.mismatch,
             "trim": self.trim,
+            "lead": self.lead,
         }
 
 
@@ -180,7 +195,8 @@ def _drawn_worlds(
 ):
     """A look-ahead's cfg.draws simulations of `ahead` (world under the look-ahead's engine and
     horizon), each fresh (a rollout is its seed's alone), reset at pose (x, y, yaw) moved by
-    the pose's noise drawn from (seed, k), the legs at phase, its robot drawn from the scene's
+    the pose's noise drawn from (seed, k), the legs at phase ((2,) [rad], or (draws, 2): each
+    rollout's), its robot drawn from the scene's
     uncertainty (cfg.robot_draws) with its motors' speeds moved by mismatch (left x (1 + d),
     right x (1 - d)) and back by the loop's trim (left / (1 + trim), right / (1 - trim): the
     driver's speeds are divided so before they are sent). A generator: the caller closes
@@ -188,6 +204,7 @@ def _drawn_worlds(
     from roachplan.experiments import draw
 
     x0, y0, yaw0 = pose
+    phases = np.broadcast_to(np.asarray(phase, dtype=float), (cfg.draws, 2))
     # The estimate is the robot's whole mismatch; perturb's gains multiply the robot's own (a
     # fitted robot file's), so its own is divided out.
     own_l, own_r = world.robot.motor_gain
@@ -211,7 +228,7 @@ def _drawn_worlds(
                     motor_gain=(gain[0] * moved[0], gain[1] * moved[1]),
                 )
             surface = float(world.heightfield.sample(np.array(start[:2])))
-            sim.reset(*start, surface=surface, phase=phase)
+            sim.reset(*start, surface=surface, phase=tuple(phases[k].tolist()))
         except BaseException:
             sim.close()
             raise
@@ -228,15 +245,17 @@ def look_ahead(
     safety: SafetyConfig,
     safety_map: SafetyMap,
     seed: int,
-    phase: tuple[float, float] = (0.0, 0.0),
+    phase=(0.0, 0.0),
     mismatch: float | None = None,
     trim: float = 0.0,
+    lead: float = 0.0,
 ) -> LookAhead:
-    """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon
-    seconds, the legs at `phase` (module docstring), checked by the loop's safety settings on
-    safety_map; the motors' mismatch (estimate_mismatch; None: none) applied to each, and the
-    trim the robot loop divides out of its commands (RobotLoop.trim: what the robot is sent
-    differs from what the driver asks by as much)."""
+    """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon +
+    lead seconds (lead: how long before now the pose was the robot's [s]), the legs at `phase`
+    ((2,) [rad], or (cfg.draws, 2): each rollout's; module docstring), checked by the loop's
+    safety settings on safety_map; the motors' mismatch (estimate_mismatch; None: none)
+    applied to each, and the trim the robot loop divides out of its commands (RobotLoop.trim:
+    what the robot is sent differs from what the driver asks by as much)."""
     from roachplan.scenes import with_engine
     from roachplan.sim import drive_lockstep, drive_path
 
@@ -244,7 +263,8 @@ def look_ahead(
     x0, y0, yaw0 = (float(v) for v in pose)
     rest, rest_spins = remaining_path(path_xyz, spins, (x0, y0))
     scene = world.scene if cfg.engine is None else with_engine(world.scene, cfg.engine)
-    ahead = world.with_sim(scene.sim, dataclasses.replace(scene.driver, time_limit=cfg.horizon))
+    walk = cfg.horizon + lead
+    ahead = world.with_sim(scene.sim, dataclasses.replace(scene.driver, time_limit=walk))
     path_xy = np.asarray(path_xyz, dtype=float)[:, :2]
 
     def stop_at(p_world_body) -> tuple[float, float, str] | None:
@@ -318,6 +338,7 @@ def look_ahead(
         wall_time=time.perf_counter() - t0,
         mismatch=mismatch,
         trim=trim,
+        lead=lead,
     )
 
 
@@ -333,6 +354,32 @@ def _look_in(world: World, path_xyz, spins, pose, cfg, **settings) -> LookAhead:
 SETTLE = 1.0
 """The mismatch is not estimated on a leg's first second of walk [s]: from rest, on the rough
 bridge, the first estimates of a twin's 0.12 came out at -0.01 and 0.035."""
+
+
+PHASE_KEPT = 2.0
+"""LookAheadRunner keeps the motors' phase of the commands of the last this many seconds [s]:
+a rollout starts at the pose's moment (its latency and age), never that long ago."""
+
+
+def phase_at(phases, t: float) -> tuple[float, float]:
+    """The motors' (left, right) phase [rad, in [0, 2 pi)] at t [s, monotonic] from phases
+    ((t_k, left, right phase then [rad], left, right speed since [rad/s]) at each command, in
+    time order): the last command at or before t, run on at its speeds; before the first kept,
+    the first's phase."""
+    kept = list(phases)
+    k = bisect.bisect_right([c[0] for c in kept], t) - 1
+    if k < 0:
+        return kept[0][1], kept[0][2]
+    return _run_on(kept[k], t)
+
+
+def _run_on(entry, t: float) -> tuple[float, float]:
+    """The phase of one of phase_at's entries run on at its speeds to t [s] (none before the
+    first command: its time is -inf)."""
+    t0, left, right, wl, wr = entry
+    dt = max(t - t0, 0.0) if math.isfinite(t0) else 0.0
+    two_pi = 2 * math.pi
+    return ((left + wl * dt) % two_pi, (right + wr * dt) % two_pi)
 
 
 class LookAheadRunner:
@@ -369,12 +416,14 @@ class LookAheadRunner:
         self.on_result = on_result
         self.results: list[LookAhead] = []
         self._pose: tuple[float, float, float] | None = None
+        self._pose_t = 0.0
+        """When the newest pose arrived [s, monotonic]."""
         self._gain = world.robot.motor_gain
         self._limit = world.robot.max_motor_speed
-        self._phase = (0.0, 0.0)
-        """The motors' phase [rad] at the last command's time (self._speeds since then)."""
-        self._speeds: tuple[float, float, float] | None = None
-        """(t [s, monotonic], left, right [rad/s]) of the last command."""
+        self._phases: collections.deque = collections.deque([(-math.inf, 0.0, 0.0, 0.0, 0.0)])
+        """(t [s, monotonic], left, right phase [rad] then, left, right speed [rad/s] from then
+        on) at each command of the last PHASE_KEPT seconds, and the one before them: the
+        motors' phase at any moment since (phase_at; a rollout starts at the pose's)."""
         self._poses: collections.deque = collections.deque()
         """(t [s, monotonic], x, y [m], yaw [rad]) of the poses within cfg.mismatch_window."""
         self._commands: collections.deque = collections.deque()
@@ -407,7 +456,7 @@ class LookAheadRunner:
             x, y, _ = event.position
             t = event.sample.t_receive
             with self._lock:
-                self._pose = (float(x), float(y), yaw_of(event.quat))
+                self._pose, self._pose_t = (float(x), float(y), yaw_of(event.quat)), t
                 if window > 0:
                     self._poses.append((t, *self._pose))
                     while self._poses and self._poses[0][0] < t - window:
@@ -425,21 +474,14 @@ class LookAheadRunner:
                     self._commands.append(sent)
                     while self._commands and self._commands[0][0] < event.t - window:
                         self._commands.popleft()
-                self._phase = self._phase_at(event.t)
-                self._speeds = (
-                    event.t,
-                    min(max(wl, -self._limit), self._limit),
-                    min(max(wr, -self._limit), self._limit),
+                phases = self._phases
+                at = _run_on(phases[-1], event.t)  # (the last command's: O(1) in the loop)
+                limit = self._limit
+                phases.append(
+                    (event.t, *at, min(max(wl, -limit), limit), min(max(wr, -limit), limit))
                 )
-
-    def _phase_at(self, t: float) -> tuple[float, float]:
-        """The motors' phase at t [s, monotonic] (self._lock held)."""
-        if self._speeds is None:
-            return self._phase
-        t0, wl, wr = self._speeds
-        dt = max(t - t0, 0.0)
-        two_pi = 2 * math.pi
-        return ((self._phase[0] + wl * dt) % two_pi, (self._phase[1] + wr * dt) % two_pi)
+                while len(phases) > 2 and phases[1][0] < event.t - PHASE_KEPT:
+                    phases.popleft()
 
     @property
     def estimates(self) -> tuple[tuple[float, float], ...]:
@@ -467,13 +509,17 @@ class LookAheadRunner:
 
         n = 0
         while not self._stop.wait(self.period if n else 0.0):
+            path, spins, cfg, safety, smap = self._args
+            # The pose's lag behind now, drawn per rollout (LookAheadConfig.latency), and the
+            # motors' phase at each such moment.
+            lags = 2.0 * cfg.latency * np.random.default_rng((self.seed, n, 1)).random(cfg.draws)
             with self._lock:
-                pose, phase = self._pose, self._phase_at(time.monotonic())
+                pose, t_pose = self._pose, self._pose_t
+                phase = [phase_at(self._phases, t_pose - lag) for lag in lags]
                 poses, commands = np.array(self._poses), np.array(self._commands)
                 walking = self._walking
             if pose is None:
                 continue
-            path, spins, cfg, safety, smap = self._args
             if cfg.mismatch_window and len(poses) and walking is not None:
                 # The straight stretches of the window not estimated before, pooled with the
                 # legs' before them.
@@ -488,6 +534,8 @@ class LookAheadRunner:
                 self.on_trim(mismatch)
             seed = int(np.random.SeedSequence([self.seed, n]).generate_state(1)[0])
             t = time.monotonic()
+            # (at the lags' mean; a pose older than PHASE_KEPT is stale: the loop stops first)
+            lead = min(max(t - t_pose, 0.0), PHASE_KEPT) + cfg.latency
             child = Child(
                 _look_in,
                 (path, spins, pose, cfg),
@@ -498,6 +546,7 @@ class LookAheadRunner:
                     "phase": phase,
                     "mismatch": mismatch,
                     "trim": self.trim,
+                    "lead": lead,
                 },
                 start=self._host,
                 task="look-ahead",
