@@ -101,7 +101,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
     drift hold with no plan found, the rest of the old path from where the robot stands
     (robot.rejoin_plan)."""
     from roachplan.processes import ChildError
-    from roachplan.robot import RobotError, clearance, plan_start, rejoin_plan, replan_radius
+    from roachplan.robot import RobotError, plan_start, rejoin_plan, replan_radius
 
     radius = app.world.scene.planner.turning_radius
     wider = None
@@ -109,7 +109,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
         wider = radius = replan_radius(radius, carried.drifts)
     try:
         here, moved = plan_start(app.world, stands)
-        plan = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
+        plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
     except (RobotError, PlanningError, ChildError) as exc:
         old = carried.drifted
         if old is None or old.plan is None:
@@ -124,7 +124,6 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
         app.plan_endpoints = (tuple(stands), goal)
         app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
         return Route(plan=plan, here=tuple(stands), drove_on=str(exc))
-    keeps = clearance(plan.path_xyz, carried.avoid) if carried.avoid else math.inf
     return Route(
         plan=plan,
         here=here,
@@ -159,12 +158,15 @@ def carried_from(before: RobotSession | None, key: tuple) -> Carried:
     )
 
 
-def plan_from(app: App, here, goal, *, turning_radius: float | None = None, avoid=()) -> PlanResult:
-    """A plan from the robot's pose to the goal marker (a plan job, followed; Cancel stops
-    it), drawn black as the app's plan; its arcs of turning_radius [m] (None: the scene's).
-    avoid: points (x, y) [m] it keeps robot.AVOID_RADIUS from (those that far from here):
-    up to robot.AVOID_TRIES distinct plans, the first that keeps clear, else the clearest
-    (robot.plan_clear_of's rule)."""
+def plan_from(
+    app: App, here, goal, *, turning_radius: float | None = None, avoid=()
+) -> tuple[PlanResult, float]:
+    """(a plan from the robot's pose to the goal marker, its clearance [m]: robot.clearance,
+    inf with none to keep from): a plan job, followed (Cancel stops it), drawn black as the
+    app's plan; its arcs of turning_radius [m] (None: the scene's). avoid: points (x, y) [m]
+    it keeps robot.AVOID_RADIUS from (those that far from here): up to robot.AVOID_TRIES
+    distinct plans, the first that keeps clear, else the clearest (robot.plan_clear_of's
+    rule)."""
     from roachplan.robot import AVOID_RADIUS, AVOID_TRIES, clearance
 
     from ._jobs import _plan_job, failure
@@ -200,9 +202,9 @@ def plan_from(app: App, here, goal, *, turning_radius: float | None = None, avoi
         why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
         raise PlanningError(f"no plan from where the robot stands: {why}")
     app.plan_endpoints = (here, goal)
-    best = max(found, key=lambda f: f[1])[0]  # (the first of equals: the first found)
+    best, keeps = max(found, key=lambda f: f[1])  # (the first of equals: the first found)
     app.set_plans([best])  # (black; Drive simulates it too)
-    return best.plan
+    return best.plan, keeps
 
 
 def predict_from(app: App, plan: PlanResult, here, goal) -> TrialResult | None:
