@@ -236,6 +236,36 @@ def test_what_happened_over_each_horizon_scores_the_predictions():
 
 
 @pytest.mark.slow
+def test_a_plan_from_the_robot_keeps_clear_of_the_drop_offs(bridge):
+    """edge_margin: seed 0's path on the double bridge passes a drop-off closer than 4 cm (a
+    robot 4 cm sideways off it somewhere has a foot over the edge); with keep, plan_clear_of
+    gives another seed's plan, every pose of which, past its first 10 cm, stays valid 4 cm to
+    either side. Without keep it is seed 0's. The path carried a metre sideways, over the gap
+    and off the area, keeps nothing."""
+    from roachplan.planning import check_states
+    from roachplan.robot import edge_margin, plan_clear_of
+
+    world, planned = bridge
+    keep = 0.04
+    assert edge_margin(world, planned.path_xyz, keep) < keep
+    chosen, clear = plan_clear_of(world, world.start, 0, keep=keep)
+    assert chosen.found and chosen.seed != 0 and clear == math.inf
+    assert edge_margin(world, chosen.path_xyz, keep) == keep
+    xy = np.asarray(chosen.path_xyz)[:, :2]
+    step = np.diff(xy, axis=0)
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])[:-1]
+    yaw = np.arctan2(step[:, 1], step[:, 0])[along >= 0.1]
+    left = np.column_stack([-np.sin(yaw), np.cos(yaw)])
+    for side in (1.0, -1.0):
+        poses = np.column_stack([xy[:-1][along >= 0.1] + side * keep * left, yaw])
+        hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+        assert check_states(hf, fp, cfg, poses).valid.all()
+    same, _ = plan_clear_of(world, world.start, 0)
+    assert same.seed == 0
+    assert edge_margin(world, np.asarray(planned.path_xyz) + [1.0, 0.0, 0.0], keep) == 0.0
+
+
+@pytest.mark.slow
 def test_a_re_plan_keeps_clear_of_where_the_rollouts_failed(bridge):
     """plan_clear_of: a point on the seed's own path (on its bridge) is a place to keep clear
     of; the plan it gives keeps at least AVOID_RADIUS from it (another seed's plan), and says

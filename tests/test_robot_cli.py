@@ -145,6 +145,8 @@ def wait_for(stream, text: str, timeout: float) -> str:
             ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "near"],
             "--guard-drift near: expected a share of --max-deviation or 'none'",
         ),
+        (["robot", "--edge-keep", "wide"], "--edge-keep wide: expected a distance [m] or 'none'"),
+        (["robot", "--edge-keep", "0.5"], "--edge-keep 0.5: expected a number from 0 to 0.2"),
         (["robot", "--no-trim"], "--no-trim: only the look-ahead trims the commands; add"),
         (["robot", "--look-ahead-horizon", "2"], "--look-ahead-horizon is a setting of the look"),
         (

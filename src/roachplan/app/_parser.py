@@ -802,6 +802,14 @@ def _add_robot_parser(sub) -> None:
         "mismatch the look-ahead estimates from the robot's walk is divided out of them)",
     )
     p.add_argument(
+        "--edge-keep",
+        default=None,
+        metavar="M",
+        help="plans from where the robot stands keep M m from the drop-offs: the robot may "
+        "drift that far sideways anywhere and still stand (default 0.04; 'none': the "
+        "planner's first valid plan)",
+    )
+    p.add_argument(
         "--guard-drift",
         default=None,
         metavar="F",

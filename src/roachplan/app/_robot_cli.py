@@ -167,6 +167,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             guard=args.guard,
             trim=not args.no_trim,
             **_guard_drift(args),
+            **_edge_keep(args),
             **(
                 {}
                 if args.look_ahead_period is None
@@ -176,6 +177,8 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
     except SettingError as exc:
         if exc.key == "guard_drift":  # (its one validator)
             raise refused("--guard-drift", args.guard_drift, exc.expected) from None
+        if exc.key == "edge_keep":
+            raise refused("--edge-keep", args.edge_keep, exc.expected) from None
         raise
 
 
@@ -222,6 +225,18 @@ def _guard_drift(args: argparse.Namespace) -> dict:
         raise refused(
             "--guard-drift", args.guard_drift, "expected a share of --max-deviation or 'none'"
         ) from None
+
+
+def _edge_keep(args: argparse.Namespace) -> dict:
+    """RobotSettings' edge_keep from --edge-keep (metres, or 'none'), as a keyword; none when
+    the flag is absent (the setting's default)."""
+    if args.edge_keep is None:
+        return {}
+    text = args.edge_keep.strip().lower()
+    try:
+        return {"edge_keep": None if text == "none" else float(text)}
+    except ValueError:
+        raise refused("--edge-keep", args.edge_keep, "expected a distance [m] or 'none'") from None
 
 
 def _ask_go(loop) -> bool:

@@ -164,14 +164,25 @@ def plan_from(
     """(a plan from the robot's pose to the goal marker, its clearance [m]: robot.clearance,
     inf with none to keep from): a plan job, followed (Cancel stops it), drawn black as the
     app's plan; its arcs of turning_radius [m] (None: the scene's). avoid: points (x, y) [m]
-    it keeps robot.AVOID_RADIUS from (those that far from here): up to robot.AVOID_TRIES
-    distinct plans, the first that keeps clear, else the clearest (robot.plan_clear_of's
-    rule)."""
-    from roachplan.robot import AVOID_RADIUS, AVOID_TRIES, clearance
+    it keeps robot.AVOID_RADIUS from (those that far from here), and it keeps the command
+    line's RobotSettings.edge_keep from the drop-offs (the page has no box for it): up to
+    robot.EDGE_TRIES distinct plans (AVOID_TRIES without edge_keep), the first that keeps
+    clear of both, else the clearest (robot.plan_clear_of's rule, robot.plan_keeps)."""
+    from roachplan.robot import (
+        AVOID_RADIUS,
+        AVOID_TRIES,
+        EDGE_TRIES,
+        RobotSettings,
+        clearance,
+        edge_margin,
+        plan_keeps,
+    )
 
     from ._jobs import _plan_job, failure
 
     points = [p for p in avoid if math.dist(p[:2], here[:2]) >= AVOID_RADIUS]
+    keep = RobotSettings().edge_keep
+    tries = EDGE_TRIES if keep is not None else AVOID_TRIES if points else 1
 
     planner = app.planner(app.page.plan_settings())
     if turning_radius is not None and planner.turning_radius is not None:
@@ -180,14 +191,17 @@ def plan_from(
     request = dict(seed=app.next_seed, start=here, goal=goal, planner=planner)
     app.page.view.clear("/trajectories")
     app.page.view.remove("/live")
-    job = app.world_job(_plan_job, AVOID_TRIES if points else 1, request, deadline)
-    found: list = []  # (LabelledPlan, its clearance [m]) each
+    job = app.world_job(_plan_job, tries, request, deadline)
+    found: list = []  # (LabelledPlan, its clearance [m], its plan_keeps) each
 
     def planning(events: list) -> bool:
         for a in events:
             if a.plan is not None:
-                found.append((a.plan, clearance(a.plan.plan.path_xyz, points)))
-        if found and found[-1][1] >= AVOID_RADIUS:  # (clear: no more tries; inf: none to avoid)
+                path = a.plan.plan.path_xyz
+                clear = clearance(path, points)
+                margin = math.inf if keep is None else edge_margin(app.world, path, keep)
+                found.append((a.plan, clear, plan_keeps(clear, margin, AVOID_RADIUS, keep)))
+        if found and found[-1][2] >= 1.0:  # (clear of both: no more tries)
             return True
         app.loop.progress(
             job.elapsed / planner.time_limit,
@@ -202,7 +216,7 @@ def plan_from(
         why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
         raise PlanningError(f"no plan from where the robot stands: {why}")
     app.plan_endpoints = (here, goal)
-    best, keeps = max(found, key=lambda f: f[1])  # (the first of equals: the first found)
+    best, keeps, _ = max(found, key=lambda f: f[2])  # (the first of equals: the first found)
     app.set_plans([best])  # (black; Drive simulates it too)
     return best.plan, keeps
 

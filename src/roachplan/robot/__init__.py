@@ -92,6 +92,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "watch_ahead": "._run",
         "AVOID_RADIUS": "._run",
         "AVOID_TRIES": "._run",
+        "EDGE_TRIES": "._run",
+        "edge_margin": "._run",
+        "plan_keeps": "._run",
         "predict": "._run",
         "LookAhead": "._lookahead",
         "LookAheadConfig": "._lookahead",
@@ -200,6 +203,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import AVOID_TRIES as AVOID_TRIES
     from ._run import EDGE_DRIFT as EDGE_DRIFT
+    from ._run import EDGE_TRIES as EDGE_TRIES
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
     from ._run import MIN_TRY as MIN_TRY
@@ -208,7 +212,9 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
     from ._run import drive_robot as drive_robot
+    from ._run import edge_margin as edge_margin
     from ._run import plan_clear_of as plan_clear_of
+    from ._run import plan_keeps as plan_keeps
     from ._run import plan_start as plan_start
     from ._run import predict as predict
     from ._run import rejoin_path as rejoin_path

@@ -74,6 +74,13 @@ class RobotSettings:
     A look-ahead's chance comes a second or more after the pose it started from, too late for
     a turn the robot cannot make; the drift is seen in the period it happens. None: only the
     look-ahead's chance holds it."""
+    edge_keep: float | None = s(0.04, optional(between(0.0, 0.2, "m")))
+    """A plan from where the robot stands keeps this far from the drop-offs [m]: the robot may
+    drift this far sideways off it anywhere (past its first 10 cm) and still stand where the
+    planner lets it (robot.edge_margin); of up to EDGE_TRIES plans (seeds), the first that
+    does, else the one that keeps farthest. 4 cm: where the guard's edge hold stops a robot
+    (EDGE_DRIFT of its 7.5 cm drift limit); plans along a bridge's inner edge kept 0-3 cm, and
+    a robot that drifted 4 cm fell off. None: any valid plan (the planner's first)."""
     trim: bool = s(True, boolean())
     """With the look-ahead: divide the motors' mismatch it estimates from the robot's own walk
     (pooled_mismatch) out of the commands sent, from each look-ahead on (RobotLoop.trim): a

@@ -80,6 +80,54 @@ body's half length, about the spread of its feet."""
 AVOID_TRIES = 4
 """Plans (seeds) a plan from the robot tries: for one that keeps clear of the points to avoid, or
 for one at all."""
+EDGE_TRIES = 12
+"""...and for one that keeps RobotSettings.edge_keep from the drop-offs besides (a plan takes
+0.1-0.2 s on the double bridge, and 3 of its first 12 seeds keep 4 cm at every waypoint)."""
+EDGE_STEP = 0.01
+"""edge_margin's offsets are whole multiples of this [m]."""
+
+
+def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> float:
+    """How far the robot could drift sideways off a path ((N, >=2) world frame [m]) and still
+    stand where the planner would let it (its validity checks: feet on ground, no pit under the
+    body), up to `keep` [m]: the least over the path's waypoints of the largest offset, to
+    either side of its heading there (the direction to the next waypoint) and in EDGE_STEP
+    steps, at which the footprint and every smaller offset pass; `keep` where every waypoint
+    passes it. The first `skip` [m] of the path are not measured (a robot the guard held at a
+    bridge's edge starts there: no path from it keeps clear). A path along a bridge's inner
+    edge, or cutting its corner, keeps 0-3 cm: a robot drifting the 4 cm the guard's edge hold
+    allows (EDGE_DRIFT) fell off."""
+    from roachplan.planning import check_states
+
+    xy = np.asarray(path_xyz, dtype=float)[:, :2]
+    if len(xy) < 2 or keep <= 0:
+        return float(keep)
+    step = np.diff(xy, axis=0)
+    yaw = np.arctan2(step[:, 1], step[:, 0])
+    yaw = np.append(yaw, yaw[-1])
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
+    xy, yaw = xy[along >= skip], yaw[along >= skip]
+    if not len(xy):
+        return float(keep)
+    offsets = EDGE_STEP * np.arange(1, max(math.floor(keep / EDGE_STEP + 1e-9), 1) + 1)
+    normal = np.column_stack([-np.sin(yaw), np.cos(yaw)])  # (N, 2): the heading's left
+    states = np.concatenate(
+        [np.column_stack([xy + side * m * normal, yaw]) for m in offsets for side in (1.0, -1.0)]
+    )
+    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
+    ok = check_states(hf, fp, validity, states).valid.reshape(len(offsets), 2, len(xy)).all(axis=1)
+    passed = np.cumprod(ok, axis=0).sum(axis=0)  # (N,): offsets passed in a row from the first
+    least = int(passed.min())
+    return float(keep) if least == len(offsets) else float(offsets[least - 1]) if least else 0.0
+
+
+def plan_keeps(clear: float, margin: float, radius: float, keep: float | None) -> float:
+    """How well a plan keeps clear [-]: the smaller of its clearance of the points to avoid
+    over `radius` and its edge_margin over `keep` (None: drop-offs not kept from), at most 1:
+    1 keeps clear of both, the plan from the robot's rule takes the first that does, else the
+    one highest on this."""
+    edge = 1.0 if keep is None or keep <= 0 else margin / keep
+    return min(clear / radius, edge, 1.0)
 
 
 def clearance(path_xy, avoid: Sequence[tuple[float, float]], radius: float = AVOID_RADIUS) -> float:
@@ -153,8 +201,9 @@ def plan_clear_of(
     avoid: Sequence[tuple[float, float]] = (),
     *,
     radius: float = AVOID_RADIUS,
-    tries: int = AVOID_TRIES,
+    tries: int | None = None,
     deadline: float | None = None,
+    keep: float | None = None,
 ) -> tuple[PlanResult, float]:
     """A plan from start (x, y [m], yaw [rad], world frame) to the scene's goal that keeps
     `radius` from every point of avoid ((x, y) [m]: where a look-ahead's rollouts failed),
@@ -166,11 +215,17 @@ def plan_clear_of(
     budget ran out once for a seed whose path the next seed would have found). deadline: a
     time.monotonic() [s] by which every try has ended (each gets what is left, at most the
     planner's time_limit; none starts with under MIN_TRY left; the first always does): a
-    robot held for a re-plan that finds nothing waits that long, not tries x time_limit."""
+    robot held for a re-plan that finds nothing waits that long, not tries x time_limit.
+    keep [m]: the plan keeps clear of the drop-offs too, its edge_margin at least this (None:
+    not asked; tries then default to EDGE_TRIES, else AVOID_TRIES), the clearest by
+    plan_keeps where none does."""
     from roachplan.experiments import plan as plan_trial
 
     points = [p for p in avoid if math.dist(p[:2], start[:2]) >= radius]
+    if tries is None:
+        tries = AVOID_TRIES if keep is None else EDGE_TRIES
     best: tuple[PlanResult, float] | None = None
+    score = -math.inf  # (best's plan_keeps)
     cfg = world.scene.planner
     for k in range(tries):
         left = math.inf if deadline is None else deadline - time.monotonic()
@@ -183,9 +238,11 @@ def plan_clear_of(
             best = best or (planned, math.inf)
             continue
         clear = clearance(planned.path_xyz, points, radius)
-        if best is None or not best[0].found or clear > best[1]:
-            best = (planned, clear)
-        if clear >= radius:
+        margin = math.inf if keep is None else edge_margin(world, planned.path_xyz, keep)
+        keeps = plan_keeps(clear, margin, radius, keep)
+        if best is None or not best[0].found or keeps > score:
+            best, score = (planned, clear), keeps
+        if keeps >= 1.0:
             break
     assert best is not None  # (tries >= 1)
     return best
@@ -369,11 +426,12 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             # (every try of this leg's plan within the planner's budget: a held robot waits
             # for a re-plan that finds nothing that long, not 8 tries of it)
             deadline = time.monotonic() + scene.planner.time_limit
+            keep = settings.edge_keep
             plan, clear = plan_clear_of(
-                world.with_planner(planner), here, seed, avoid, deadline=deadline
+                world.with_planner(planner), here, seed, avoid, deadline=deadline, keep=keep
             )
             if not plan.found and planner != scene.planner:  # (wider arcs: none; the scene's)
-                plan, clear = plan_clear_of(world, here, seed, avoid, deadline=deadline)
+                plan, clear = plan_clear_of(world, here, seed, avoid, deadline=deadline, keep=keep)
                 planner = scene.planner
             radius = planner.turning_radius
             kept = None if math.isinf(clear) else clear
@@ -383,6 +441,8 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     f"{math.degrees(stands[2]):.0f} deg): {plan.message}"
                 )
         path, spins = np.asarray(plan.path_xyz, dtype=float), tuple(plan.spins)
+        keep = settings.edge_keep
+        margin = None if keep is None else edge_margin(world, path, keep)
         if settings.log is not None:
             recorder = RunRecorder(settings.log)
             t = time.monotonic()
@@ -408,6 +468,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     # (the radius its arcs were planned with [m]: a re-plan's may be wider than
                     # the scene's, after drift holds; null: a plan given, or no arcs)
                     "turning_radius": radius,
+                    # (how far it keeps from the drop-offs, up to edge_keep [m]: edge_margin;
+                    # null: not asked)
+                    "edge_margin": margin,
+                    "edge_keep": keep,
                 },
             )
         loop = RobotLoop(
