@@ -100,6 +100,8 @@ def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> f
     from roachplan.planning import check_states
 
     xy = np.asarray(path_xyz, dtype=float)[:, :2]
+    if len(xy) >= 2:  # (a spin repeats its waypoint: it has no heading of its own)
+        xy = xy[np.concatenate([[True], np.linalg.norm(np.diff(xy, axis=0), axis=1) > 1e-9])]
     if len(xy) < 2 or keep <= 0:
         return float(keep)
     step = np.diff(xy, axis=0)
