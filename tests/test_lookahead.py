@@ -412,14 +412,28 @@ def _arc(kappa: float, speed: float, seconds: float, t0: float = 0.0, start=(0.0
     return np.column_stack([t0 + t, x, y, yaw])
 
 
-def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_up_to_a_limit():
-    """replan_radius: the scene's radius, doubled for each drift hold so far, at most
-    MAX_WIDENING times."""
-    from roachplan.robot import MAX_WIDENING, replan_radius
+def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_then_turns_on_the_spot(bridge):
+    """replan_radius: the scene's radius, doubled for each drift hold so far, up to
+    MAX_WIDENING times; past that SPIN_ONLY_RADIUS, with which the drivable planner's path
+    is straight lines joined by turns on the spot (its heading changes only at its spins)."""
+    from roachplan.experiments import plan
+    from roachplan.robot import MAX_WIDENING, SPIN_ONLY_RADIUS, replan_radius
 
     assert replan_radius(0.13, 0) == 0.13
     assert replan_radius(0.13, 1) == pytest.approx(0.26)
-    assert replan_radius(0.13, 5) == pytest.approx(0.13 * MAX_WIDENING)
+    widened = max(k for k in range(8) if 2.0**k <= MAX_WIDENING)
+    assert replan_radius(0.13, widened) == pytest.approx(0.13 * 2.0**widened)
+    assert replan_radius(0.13, widened + 1) == replan_radius(0.13, 5) == SPIN_ONLY_RADIUS
+    world, _ = bridge
+    planner = dataclasses.replace(world.scene.planner, turning_radius=SPIN_ONLY_RADIUS)
+    lines = plan(world.with_planner(planner), seed=0)
+    assert lines.found and lines.spins
+    xy = np.asarray(lines.path_xyz)[:, :2]
+    step = np.diff(xy, axis=0)
+    moving = np.linalg.norm(step, axis=1) > 1e-9
+    heading = np.arctan2(step[moving, 1], step[moving, 0])
+    turns = np.abs(np.remainder(np.diff(heading) + math.pi, 2 * math.pi) - math.pi)
+    assert np.count_nonzero(turns > 1e-3) <= len(lines.spins)
 
 
 def test_trimmed_commands_make_mismatched_motors_run_as_the_driver_asked():

@@ -390,12 +390,17 @@ def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:
     """(the radius of a re-plan's arcs [m], what to tell of it): the scene's `radius` (None: a
     planner without arcs) widened for each leg the guard held for drifting off its path
     (replan_radius)."""
-    from roachplan.robot import replan_radius
+    from roachplan.robot import SPIN_ONLY_RADIUS, replan_radius
 
     drifts = sum(h.result.reason == "drift" for h in held)
     if radius is None or not drifts:
         return radius, ""
     wider = replan_radius(radius, drifts)
+    if wider == SPIN_ONLY_RADIUS:
+        return wider, (
+            f"; straight lines and turns on the spot: it drifted off arcs of {radius:.2f} m "
+            "and wider"
+        )
     return wider, f"; arcs of {wider:.2f} m: it drifted off arcs of {radius:.2f} m or wider"
 
 

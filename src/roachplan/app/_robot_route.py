@@ -28,6 +28,8 @@ def held_text(stands, route: Route, waypoints: int, prediction) -> str:
     [rad]), the route (how far its start was moved, its widened arcs, how far it keeps from
     where the last look-ahead's rollouts failed, or why it drives on along the old path), the
     plan, the simulation's prediction (a TrialResult, or None)."""
+    from roachplan.robot import SPIN_ONLY_RADIUS
+
     said = (
         f"the simulation predicts **{prediction.outcome}** in {prediction.drive_time:.1f} s"
         if prediction is not None
@@ -42,7 +44,9 @@ def held_text(stands, route: Route, waypoints: int, prediction) -> str:
         what = f"no re-plan ({route.drove_on}): on along the rest of the path it drifted off"
     else:
         what = f"planned {waypoints} waypoints (black)"
-        if route.wider is not None:
+        if route.wider == SPIN_ONLY_RADIUS:
+            what += " of straight lines and turns on the spot (it drifted off arcs)"
+        elif route.wider is not None:
             what += f" with arcs of {route.wider:.2f} m (it drifted off narrower ones)"
         if route.avoid:
             what += (

@@ -85,6 +85,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "replan_radius": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
+        "SPIN_ONLY_RADIUS": "._run",
         "EDGE_DRIFT": "._run",
         "START_REACH": "._run",
         "MIN_TRY": "._run",
@@ -208,6 +209,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import MAX_WIDENING as MAX_WIDENING
     from ._run import MIN_TRY as MIN_TRY
     from ._run import REJOIN_MIN as REJOIN_MIN
+    from ._run import SPIN_ONLY_RADIUS as SPIN_ONLY_RADIUS
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance

@@ -325,19 +325,29 @@ its drift limit off its path [-] (watch_ahead)."""
 GUARD_HOLDS = ("lookahead", "drift")
 """How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
 re-plans from where it stands."""
-MAX_WIDENING = 4.0
-"""replan_radius widens a plan's arcs at most this many times [-]."""
+MAX_WIDENING = 2.0
+"""replan_radius widens a plan's arcs at most this many times [-]: a robot that drifted off arcs
+that wide too is re-planned along lines and turns on the spot (SPIN_ONLY_RADIUS)."""
+SPIN_ONLY_RADIUS = 100.0
+"""The radius of a re-plan's arcs after the widening [m]: wider than any scene's area, so the
+drivable planner fits no arc and turns the robot on the spot at every corner (its spin_margin;
+where the scene allows no spin, no such plan is found and the scene's own arcs are planned).
+A twin on a slippery floor (friction 0.6) whose one motor ran 12 % slow turned the other way
+when driven at the largest motor ratio towards its slow side: after two drift holds it was
+held again on arcs 4 times the scene's, leg after leg (bench_guard, the mismatch -0.12)."""
 
 
 def replan_radius(radius: float, drifts: int) -> float:
     """The radius of a re-plan's arcs [m]: the scene's `radius` [m] doubled for each time the
-    guard held the robot for drifting off its path so far (`drifts`), at most MAX_WIDENING
-    times. A robot that drifted off arcs of one radius is asked for wider ones, and the
-    drivable planner turns it on the spot where they do not fit. (An estimate of how tightly
+    guard held the robot for drifting off its path so far (`drifts`), up to MAX_WIDENING
+    times; past that SPIN_ONLY_RADIUS (lines and turns on the spot). A robot that drifted off
+    arcs of one radius is asked for wider ones, and the drivable planner turns it on the spot
+    where they do not fit. (An estimate of how tightly
     the robot turns, from its heading against its commands in hard turns, read 0.0-0.3 of the
     turning curve on legs that reached the goal as well as on legs that drifted: the tracking
     driver's hard turns are mostly short corrections, which say little of the tightest turn.)"""
-    return radius * min(2.0**drifts, MAX_WIDENING)
+    wider = 2.0**drifts
+    return radius * wider if wider <= MAX_WIDENING else SPIN_ONLY_RADIUS
 
 
 def start_height(world: World, xy) -> float:
