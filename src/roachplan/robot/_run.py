@@ -421,6 +421,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
         radius = None if plan is None else plan.turning_radius  # (its arcs' [m]; None: none)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
+        keep = settings.edge_keep  # (how far its path keeps from the drop-offs [m]; None: any)
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
             here, moved = plan_start(world, stands)
@@ -438,7 +439,6 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             # (every try of this leg's plan within the planner's budget: a held robot waits
             # for a re-plan that finds nothing that long, not 8 tries of it)
             deadline = time.monotonic() + scene.planner.time_limit
-            keep = settings.edge_keep
             plan, clear = plan_clear_of(
                 world.with_planner(planner), here, seed, avoid, deadline=deadline, keep=keep
             )
@@ -453,7 +453,6 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     f"{math.degrees(stands[2]):.0f} deg): {plan.message}"
                 )
         path, spins = np.asarray(plan.path_xyz, dtype=float), tuple(plan.spins)
-        keep = settings.edge_keep
         margin = None if keep is None else edge_margin(world, path, keep)
         if settings.log is not None:
             recorder = RunRecorder(settings.log)
