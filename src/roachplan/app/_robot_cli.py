@@ -214,29 +214,30 @@ def _look_ahead_flags(args: argparse.Namespace) -> dict:
 def _guard_drift(args: argparse.Namespace) -> dict:
     """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none'), as
     a keyword; none when the flag is absent (the setting's default)."""
-    if args.guard_drift is None:
-        return {}
-    if args.guard is None:
+    if args.guard_drift is not None and args.guard is None:
         raise UsageError("--guard-drift is a setting of the guard; add --guard P")
-    text = args.guard_drift.strip().lower()
-    try:
-        return {"guard_drift": None if text == "none" else float(text)}
-    except ValueError:
-        raise refused(
-            "--guard-drift", args.guard_drift, "expected a share of --max-deviation or 'none'"
-        ) from None
+    return _number_or_none(
+        "guard_drift", "--guard-drift", args.guard_drift, "a share of --max-deviation"
+    )
 
 
 def _edge_keep(args: argparse.Namespace) -> dict:
     """RobotSettings' edge_keep from --edge-keep (metres, or 'none'), as a keyword; none when
     the flag is absent (the setting's default)."""
-    if args.edge_keep is None:
+    return _number_or_none("edge_keep", "--edge-keep", args.edge_keep, "a distance [m]")
+
+
+def _number_or_none(key: str, flag: str, text: str | None, number: str) -> dict:
+    """{key: the number `text` gives, or None for 'none'} for a flag that may turn its setting
+    off; {} when the flag is absent; the flag refused (expected `number` or 'none') else. The
+    setting's own validator checks the number's range (robot_settings)."""
+    if text is None:
         return {}
-    text = args.edge_keep.strip().lower()
+    word = text.strip().lower()
     try:
-        return {"edge_keep": None if text == "none" else float(text)}
+        return {key: None if word == "none" else float(word)}
     except ValueError:
-        raise refused("--edge-keep", args.edge_keep, "expected a distance [m] or 'none'") from None
+        raise refused(flag, text, f"expected {number} or 'none'") from None
 
 
 def _ask_go(loop) -> bool:

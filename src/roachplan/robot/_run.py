@@ -120,7 +120,7 @@ def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> f
     ok = check_states(hf, fp, validity, states).valid.reshape(len(offsets), 2, len(xy)).all(axis=1)
     passed = np.cumprod(ok, axis=0).sum(axis=0)  # (N,): offsets passed in a row from the first
     least = int(passed.min())
-    return float(keep) if least == len(offsets) else float(offsets[least - 1]) if least else 0.0
+    return float(keep) if least == len(offsets) else float(offsets[0] * least)
 
 
 def plan_keeps(clear: float, margin: float, radius: float, keep: float | None) -> float:
