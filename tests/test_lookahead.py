@@ -30,6 +30,43 @@ def test_the_rest_of_a_plan_starts_at_the_point_nearest_the_robot_with_its_spins
     assert kept == ((1, 0.0),)
 
 
+def test_a_spin_the_robot_has_yet_to_make_is_not_behind_it_where_it_stands_at_it():
+    """remaining_path(pending=True): the spins given are the loop's still to make, so one at
+    the nearest point or just behind it (a plan that starts with a spin repeats its first
+    waypoint; a robot turning through a spin wanders a few cm past it) is made first, at the
+    rest's start. Without pending such a spin counts as made and is dropped."""
+    path = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]])
+    spins = ((0, 0.0), (2, math.pi / 2))
+    rest, kept = remaining_path(path, spins, (0.0, 0.01), pending=True)
+    assert np.allclose(rest[0], [0.0, 0.0, 0.0]) and kept[0] == (0, 0.0)
+    assert [rest[i, :2].tolist() for i, _ in kept] == [[0.0, 0.0], [1.0, 0.0]]
+    assert remaining_path(path, spins, (0.0, 0.01))[1] == ((2, math.pi / 2),)  # (made, behind)
+    # Wandered 3 cm past the second spin's waypoint while turning there: still to make.
+    rest, kept = remaining_path(path, spins[1:], (1.0, 0.03), pending=True)
+    assert kept == ((0, math.pi / 2),) and np.allclose(rest[0], [1.0, 0.03, 0.0])
+
+
+@pytest.mark.slow
+def test_a_look_ahead_from_a_robot_about_to_turn_on_the_spot_makes_that_turn_first(bridge):
+    """A leg that starts with a spin (a rejoin's, a re-plan of lines and turns on the spot)
+    and a robot standing at it facing back along its path: the rollouts turn on the spot and
+    walk on (the spin is still to make: RobotLoop.pending_spins), rather than walk off the
+    way the robot faces as if the spin were behind it."""
+    from roachplan.robot import rejoin_path
+
+    world, planned = bridge
+    smap = SafetyMap.from_world(world)
+    x, y, yaw = _pose_on_path(planned, 0.3)
+    new, kept = rejoin_path(planned.path_xyz, planned.spins, (x, y))
+    assert kept and kept[0][0] == 0 and np.allclose(new[0], new[1])  # (a spin where it stands)
+    cfg = LookAheadConfig(draws=4, horizon=3.0, robot_draws=False)
+    ahead = look_ahead(
+        world, new, kept, (x, y, yaw + math.pi), cfg,
+        safety=SafetyConfig(), safety_map=smap, seed=1,
+    )  # fmt: skip
+    assert (ahead.holds, ahead.failures) == (4, ()), ahead
+
+
 def test_a_drifted_robot_turns_to_rejoin_the_rest_of_its_path_ahead_without_skipping_a_spin():
     """rejoin_path: from where the robot stands, a turn on the spot to face the old path, a
     straight line to it, meeting it at the first waypoint REJOIN_MIN or twice its distance off

@@ -161,11 +161,15 @@ class LookAhead:
 
 
 def remaining_path(
-    path_xyz: np.ndarray, spins, xy
+    path_xyz: np.ndarray, spins, xy, *, pending: bool = False
 ) -> tuple[np.ndarray, tuple[tuple[int, float], ...]]:
     """The plan from the point of path_xyz ((N, 3) world frame [m]) nearest xy on: that point,
     then the waypoints after it; spins ((waypoint index, heading [rad]) each) re-indexed to it,
-    those behind it dropped."""
+    those behind it dropped. pending: spins are those the robot has yet to make (a loop's
+    RobotLoop.pending_spins), and one at or behind the nearest point is made first, at the
+    rest's start: a robot standing at a spin (a plan that starts with one repeats its first
+    waypoint, and the nearest point is that waypoint's) or turning through it, a few
+    centimetres past it, has not made it yet."""
     path = np.asarray(path_xyz, dtype=float)
     if len(path) < 2:
         return path.copy(), tuple((0, float(h)) for _, h in spins)
@@ -178,7 +182,8 @@ def remaining_path(
     nearest = a[k] + d[k] * u[k]
     rest = np.vstack([nearest, path[k + 1 :]])
     # waypoint i > k is row i - k of rest; a spin at waypoint k or before is behind the robot
-    kept = tuple((int(i) - k, float(h)) for i, h in spins if i > k)
+    # (made, unless pending: then it is made first, where the rest starts)
+    kept = tuple((max(int(i) - k, 0), float(h)) for i, h in spins if i > k or pending)
     return rest, kept
 
 
@@ -250,9 +255,10 @@ def look_ahead(
     trim: float = 0.0,
     lead: float = 0.0,
 ) -> LookAhead:
-    """cfg.draws rollouts of the plan (path_xyz, spins) from the live pose for cfg.horizon +
-    lead seconds (lead: how long before now the pose was the robot's [s]), the legs at `phase`
-    ((2,) [rad], or (cfg.draws, 2): each rollout's; module docstring), checked by the loop's
+    """cfg.draws rollouts of the plan (path_xyz, and the spins the robot has yet to make:
+    RobotLoop.pending_spins; from the plan's start, all of them) from the live pose for
+    cfg.horizon + lead seconds (lead: how long before now the pose was the robot's [s]), the
+    legs at `phase` ((2,) [rad], or (cfg.draws, 2): each rollout's; module docstring), checked by the loop's
     safety settings on safety_map; the motors' mismatch (estimate_mismatch; None: none)
     applied to each, and the trim the robot loop divides out of its commands (RobotLoop.trim:
     what the robot is sent differs from what the driver asks by as much)."""
@@ -261,7 +267,7 @@ def look_ahead(
 
     t0 = time.perf_counter()
     x0, y0, yaw0 = (float(v) for v in pose)
-    rest, rest_spins = remaining_path(path_xyz, spins, (x0, y0))
+    rest, rest_spins = remaining_path(path_xyz, spins, (x0, y0), pending=True)
     scene = world.scene if cfg.engine is None else with_engine(world.scene, cfg.engine)
     walk = cfg.horizon + lead
     ahead = world.with_sim(scene.sim, dataclasses.replace(scene.driver, time_limit=walk))
@@ -391,7 +397,9 @@ class LookAheadRunner:
     (seed, n). Before each, the motors' mismatch is estimated from the robot's last window and
     pooled with the windows before (estimates: those of the legs before this one); on_trim
     (None: none) is given the pool, for the loop to divide out of its commands
-    (RobotLoop.trim), and the look-ahead then simulates the robot so trimmed."""
+    (RobotLoop.trim), and the look-ahead then simulates the robot so trimmed. pending() gives
+    the spins the robot has yet to make at each look-ahead (RobotLoop.pending_spins; None: the
+    plan's `spins`, all of them, whatever the robot's progress)."""
 
     def __init__(
         self,
@@ -407,8 +415,11 @@ class LookAheadRunner:
         on_result: Callable[[float, LookAhead], None],
         estimates: tuple[tuple[float, float], ...] = (),
         on_trim: Callable[[float], None] | None = None,
+        pending: Callable[[], tuple[tuple[int, float], ...]] | None = None,
     ) -> None:
         from roachplan.processes import Host
+
+        self.pending = pending
 
         self._args = (np.asarray(path_xyz, dtype=float), tuple(spins), cfg, safety, safety_map)
         self.period = period
@@ -510,6 +521,8 @@ class LookAheadRunner:
         n = 0
         while not self._stop.wait(self.period if n else 0.0):
             path, spins, cfg, safety, smap = self._args
+            if self.pending is not None:  # (a spin made is behind; one under way is not)
+                spins = self.pending()
             # The pose's lag behind now, drawn per rollout (LookAheadConfig.latency), and the
             # motors' phase at each such moment.
             lags = 2.0 * cfg.latency * np.random.default_rng((self.seed, n, 1)).random(cfg.draws)

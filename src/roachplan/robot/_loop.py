@@ -173,6 +173,20 @@ class RobotLoop:
         self._requested: Stop | None = None
         self._thread: threading.Thread | None = None
         self._result: RunResult | None = None
+
+    @property
+    def pending_spins(self) -> tuple[tuple[int, float], ...]:
+        """The plan's spins not yet made ((waypoint index, heading [rad]) each): the one under
+        way first. Any thread may read it (the look-ahead's rollouts go on from the robot's
+        progress: a spin at the waypoint where the robot stands is still to be made)."""
+        # (a copy: the loop pops a spin once made; the reference follower makes none)
+        return tuple(getattr(self._follower, "spins", ()))
+
+    @property
+    def spinning(self) -> bool:
+        """The robot is turning on the spot at a spin of its plan (the follower's; any thread
+        may read it)."""
+        return bool(getattr(self._follower, "spinning", False))  # (the reference one: never)
         self._done = threading.Event()
         self.latest_world: tuple[tuple[float, float, float], tuple] | None = None
         """The newest pose, world frame (position [m], quat xyzw)."""
