@@ -173,6 +173,9 @@ class RobotLoop:
         self._requested: Stop | None = None
         self._thread: threading.Thread | None = None
         self._result: RunResult | None = None
+        self._done = threading.Event()
+        self.latest_world: tuple[tuple[float, float, float], tuple] | None = None
+        """The newest pose, world frame (position [m], quat xyzw)."""
 
     @property
     def pending_spins(self) -> tuple[tuple[int, float], ...]:
@@ -187,9 +190,6 @@ class RobotLoop:
         """The robot is turning on the spot at a spin of its plan (the follower's; any thread
         may read it)."""
         return bool(getattr(self._follower, "spinning", False))  # (the reference one: never)
-        self._done = threading.Event()
-        self.latest_world: tuple[tuple[float, float, float], tuple] | None = None
-        """The newest pose, world frame (position [m], quat xyzw)."""
 
     # -- control ---------------------------------------------------------------------------
 

@@ -322,6 +322,10 @@ def rejoin_plan(
 EDGE_DRIFT = 0.5
 """The guard holds a robot at the edge of the ground it can stand on once it is this share of
 its drift limit off its path [-] (watch_ahead)."""
+RETURN_SLACK = 0.01
+"""After a spin that left the robot further off its path than the guard's drift limit, the
+guard holds it once it is this much further off than the nearest it has come back to [m]
+(watch_ahead: the motion capture's noise, 2 mm, and the gait's sway sideways)."""
 GUARD_HOLDS = ("lookahead", "drift")
 """How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
 re-plans from where it stands."""
@@ -632,22 +636,30 @@ def watch_ahead(
     if guard is not None and drift is not None:
         path_xy = np.asarray(path, dtype=float)[:, :2]
         limit = drift * safety.max_deviation  # [m]
+        allowed = [limit]  # (how far off it may be [m]: more after a spin, while it comes back)
 
         def drifted(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
             if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
                 return
             x, y = float(event.position[0]), float(event.position[1])
             off = distance_to_path((x, y), path_xy)
-            # (Not while it turns on the spot: a spin wanders from its point, up to 7.4 cm in
-            # a 55 deg spin of bench_guard's mirrored twin on its slippery floor, and pure
-            # pursuit takes that back once the spin is made; held for it, 7 of 53 legs there
-            # ended in a spin, using up the run's re-plans. The edge check below still holds,
-            # as does the loop's own stop at safety.max_deviation.)
-            if off > limit and not loop.spinning:
+            # (Not while it turns on the spot, nor while it comes back after: a spin wanders
+            # from its point, up to 7.4 cm in a 55 deg spin of bench_guard's mirrored twin on
+            # its slippery floor, and pure pursuit takes that back once the spin is made; held
+            # for it, 7 of 53 legs there ended in a spin, using up the run's re-plans. Past
+            # the spin the robot is held once it goes RETURN_SLACK further off than it has
+            # come back to. The edge check below still holds, as does the loop's own stop at
+            # safety.max_deviation.)
+            if loop.spinning:
+                allowed[0] = max(allowed[0], off)
+            else:
+                allowed[0] = max(limit, min(allowed[0], off + RETURN_SLACK))
+            if off > allowed[0]:
                 loop.stop(
                     "drift",
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
-                    f"drift {limit:g} m, before the loop's stop at {safety.max_deviation:g} m)",
+                    f"drift {allowed[0]:.3g} m, before the loop's stop at "
+                    f"{safety.max_deviation:g} m)",
                 )
             elif off > EDGE_DRIFT * limit and smap.off_standable(x, y) > 0.0:
                 # (Its centre is nearer a cell where it cannot stand than one where it can: a
