@@ -637,21 +637,23 @@ def watch_ahead(
         path_xy = np.asarray(path, dtype=float)[:, :2]
         limit = drift * safety.max_deviation  # [m]
         allowed = [limit]  # (how far off it may be [m]: more after a spin, while it comes back)
+        spin_limit = (limit + safety.max_deviation) / 2  # (a spin's wander: held before the stop)
 
         def drifted(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
             if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
                 return
             x, y = float(event.position[0]), float(event.position[1])
             off = distance_to_path((x, y), path_xy)
-            # (Not while it turns on the spot, nor while it comes back after: a spin wanders
-            # from its point, up to 7.4 cm in a 55 deg spin of bench_guard's mirrored twin on
-            # its slippery floor, and pure pursuit takes that back once the spin is made; held
-            # for it, 7 of 53 legs there ended in a spin, using up the run's re-plans. Past
-            # the spin the robot is held once it goes RETURN_SLACK further off than it has
-            # come back to. The edge check below still holds, as does the loop's own stop at
-            # safety.max_deviation.)
+            # (A spin wanders from its point: up to 7.4 cm in a 55 deg spin of bench_guard's
+            # mirrored twin on its slippery rough bridge, 15 cm in 110 deg, where the same
+            # spins on a flat floor moved under 2 cm. Pure pursuit takes a few cm back once
+            # the spin is made; held for them, 7 of 53 legs there ended in a spin, using up
+            # the run's re-plans. So a spinning robot is held only halfway from the drift
+            # limit to the loop's stop (safety.max_deviation), and past the spin once it goes
+            # RETURN_SLACK further off than it has come back to. The edge check below holds
+            # throughout.)
             if loop.spinning:
-                allowed[0] = max(allowed[0], off)
+                allowed[0] = max(allowed[0], min(off, spin_limit))
             else:
                 allowed[0] = max(limit, min(allowed[0], off + RETURN_SLACK))
             if off > allowed[0]:
