@@ -67,6 +67,38 @@ def test_a_look_ahead_from_a_robot_about_to_turn_on_the_spot_makes_that_turn_fir
     assert (ahead.holds, ahead.failures) == (4, ()), ahead
 
 
+def test_the_guard_lets_a_spin_wander_halfway_to_the_stop_and_the_robot_come_back_after():
+    """drift_allowance, pose by pose: walking, the guard's limit; in a spin, what the robot has
+    wandered plus RETURN_SLACK, held once past spin_limit; after it, held only where the robot
+    goes RETURN_SLACK further off than the nearest it came back to, and never before the
+    limit."""
+    from roachplan.robot import RETURN_SLACK, drift_allowance
+
+    limit, spin_limit = 0.075, 0.1125
+
+    def held(poses) -> list[bool]:
+        allowed, out = limit, []
+        for off, spinning in poses:
+            allowed = drift_allowance(
+                allowed, off, spinning=spinning, limit=limit, spin_limit=spin_limit
+            )
+            out.append(off > allowed)
+        return out
+
+    assert held([(0.02, False), (0.07, False), (0.08, False)]) == [False, False, True]
+    spin = [(0.04, True), (0.09, True), (0.10, True)]  # (wandered past the limit, turning)
+    assert held(spin) == [False, False, False]
+    assert held([*spin, (0.12, True)]) == [False, False, False, True]  # (past spin_limit)
+    # Made at 0.10 off: coming back is not drifting; going further off than that is.
+    assert held([*spin, (0.10 + 0.5 * RETURN_SLACK, False)])[-1] is False  # (the gait's sway)
+    back = [(0.10, False), (0.095, False), (0.09, False)]
+    assert held([*spin, *back]) == [False] * 6
+    assert held([*spin, *back, (0.09 + 0.9 * RETURN_SLACK, False)])[-1] is False
+    assert held([*spin, *back, (0.09 + 1.5 * RETURN_SLACK, False)])[-1] is True
+    # Back within the limit, the limit again.
+    assert held([*spin, (0.05, False), (0.07, False), (0.08, False)])[-2:] == [False, True]
+
+
 def test_a_drifted_robot_turns_to_rejoin_the_rest_of_its_path_ahead_without_skipping_a_spin():
     """rejoin_path: from where the robot stands, a turn on the spot to face the old path, a
     straight line to it, meeting it at the first waypoint REJOIN_MIN or twice its distance off

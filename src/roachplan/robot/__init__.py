@@ -83,6 +83,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "rejoin_plan": "._run",
         "REJOIN_MIN": "._run",
         "replan_radius": "._run",
+        "drift_allowance": "._run",
+        "RETURN_SLACK": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
         "SPIN_ONLY_RADIUS": "._run",
@@ -209,10 +211,12 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import MAX_WIDENING as MAX_WIDENING
     from ._run import MIN_TRY as MIN_TRY
     from ._run import REJOIN_MIN as REJOIN_MIN
+    from ._run import RETURN_SLACK as RETURN_SLACK
     from ._run import SPIN_ONLY_RADIUS as SPIN_ONLY_RADIUS
     from ._run import START_REACH as START_REACH
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
+    from ._run import drift_allowance as drift_allowance
     from ._run import drive_robot as drive_robot
     from ._run import edge_margin as edge_margin
     from ._run import plan_clear_of as plan_clear_of

@@ -258,10 +258,11 @@ def look_ahead(
     """cfg.draws rollouts of the plan (path_xyz, and the spins the robot has yet to make:
     RobotLoop.pending_spins; from the plan's start, all of them) from the live pose for
     cfg.horizon + lead seconds (lead: how long before now the pose was the robot's [s]), the
-    legs at `phase` ((2,) [rad], or (cfg.draws, 2): each rollout's; module docstring), checked by the loop's
-    safety settings on safety_map; the motors' mismatch (estimate_mismatch; None: none)
-    applied to each, and the trim the robot loop divides out of its commands (RobotLoop.trim:
-    what the robot is sent differs from what the driver asks by as much)."""
+    legs at `phase` ((2,) [rad], or (cfg.draws, 2): each rollout's; module docstring),
+    checked by the loop's safety settings on safety_map; the motors' mismatch
+    (estimate_mismatch; None: none) applied to each, and the trim the robot loop divides out
+    of its commands (RobotLoop.trim: what the robot is sent differs from what the driver asks
+    by as much)."""
     from roachplan.scenes import with_engine
     from roachplan.sim import drive_lockstep, drive_path
 
@@ -419,8 +420,7 @@ class LookAheadRunner:
     ) -> None:
         from roachplan.processes import Host
 
-        self.pending = pending
-
+        self._pending = pending
         self._args = (np.asarray(path_xyz, dtype=float), tuple(spins), cfg, safety, safety_map)
         self.period = period
         self.seed = seed
@@ -521,8 +521,8 @@ class LookAheadRunner:
         n = 0
         while not self._stop.wait(self.period if n else 0.0):
             path, spins, cfg, safety, smap = self._args
-            if self.pending is not None:  # (a spin made is behind; one under way is not)
-                spins = self.pending()
+            if self._pending is not None:  # (a spin made is behind; one under way is not)
+                spins = self._pending()
             # The pose's lag behind now, drawn per rollout (LookAheadConfig.latency), and the
             # motors' phase at each such moment.
             lags = 2.0 * cfg.latency * np.random.default_rng((self.seed, n, 1)).random(cfg.draws)

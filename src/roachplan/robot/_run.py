@@ -341,6 +341,26 @@ when driven at the largest motor ratio towards its slow side: after two drift ho
 held again on arcs 4 times the scene's, leg after leg (bench_guard, the mismatch -0.12)."""
 
 
+def drift_allowance(
+    allowed: float, off: float, *, spinning: bool, limit: float, spin_limit: float
+) -> float:
+    """How far off its path [m] the guard lets the robot be at a pose `off` [m] from it, given
+    what it allowed at the pose before (`allowed` [m]; `limit` at a leg's first): the guard's
+    drift limit [m]; while the robot turns on the spot at a spin (`spinning`), as far as it
+    has wandered plus RETURN_SLACK, up to `spin_limit` [m] (watch_ahead: halfway to the loop's
+    stop); after the spin, RETURN_SLACK further than the nearest it has come back to since,
+    never under `limit`. The guard holds the robot where off is more.
+
+    A spin wanders from its point: up to 7.4 cm in a 55 deg spin of bench_guard's mirrored
+    twin on its slippery rough bridge, 15 cm in 110 deg (to the loop's stop), where the same
+    spins on a flat floor moved under 2 cm. Pure pursuit takes a few cm back once the spin is
+    made; held for them at `limit`, 7 of 53 legs there ended in a spin and used up the run's
+    re-plans."""
+    if spinning:
+        return max(allowed, min(off + RETURN_SLACK, spin_limit))
+    return max(limit, min(allowed, off + RETURN_SLACK))
+
+
 def replan_radius(radius: float, drifts: int) -> float:
     """The radius of a re-plan's arcs [m]: the scene's `radius` [m] doubled for each time the
     guard held the robot for drifting off its path so far (`drifts`), up to MAX_WIDENING
@@ -594,9 +614,10 @@ def watch_ahead(
     robot drives further than `drift` times safety.max_deviation from the path (None: never;
     RobotSettings.guard_drift), or, EDGE_DRIFT of that off it, its centre comes nearer a cell
     of the safety map where it cannot stand than one where it can (the edge of a bridge),
-    held as "drift"; while it turns on the spot at a spin, at that edge only. trim: the motors' mismatch each look-ahead
-    estimates (pooled with `estimates`, the legs' before) is divided out of the loop's commands
-    from then on (loop.trim), and from the start the pool of `estimates` is. The
+    held as "drift" (a robot turning on the spot at a spin: halfway from that limit to the
+    loop's stop; RETURN_SLACK). trim: the motors' mismatch each look-ahead estimates (pooled
+    with `estimates`, the legs' before) is divided out of the loop's commands from then on
+    (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
     it."""
 
@@ -644,18 +665,11 @@ def watch_ahead(
                 return
             x, y = float(event.position[0]), float(event.position[1])
             off = distance_to_path((x, y), path_xy)
-            # (A spin wanders from its point: up to 7.4 cm in a 55 deg spin of bench_guard's
-            # mirrored twin on its slippery rough bridge, 15 cm in 110 deg, where the same
-            # spins on a flat floor moved under 2 cm. Pure pursuit takes a few cm back once
-            # the spin is made; held for them, 7 of 53 legs there ended in a spin, using up
-            # the run's re-plans. So a spinning robot is held only halfway from the drift
-            # limit to the loop's stop (safety.max_deviation), and past the spin once it goes
-            # RETURN_SLACK further off than it has come back to. The edge check below holds
-            # throughout.)
-            if loop.spinning:
-                allowed[0] = max(allowed[0], min(off, spin_limit))
-            else:
-                allowed[0] = max(limit, min(allowed[0], off + RETURN_SLACK))
+            # (drift_allowance: a spinning robot held only halfway to the loop's stop; the
+            # edge check below holds throughout)
+            allowed[0] = drift_allowance(
+                allowed[0], off, spinning=loop.spinning, limit=limit, spin_limit=spin_limit
+            )
             if off > allowed[0]:
                 loop.stop(
                     "drift",
