@@ -546,3 +546,15 @@ def test_the_mismatch_is_estimated_on_the_stretches_the_driver_asked_to_walk_str
     # Told to turn hard (ratio 2.5 as the driver asked) while it turned less: left out.
     turn = np.column_stack([t, np.full(len(t), 20.0), np.full(len(t), 50.0), np.zeros(len(t))])
     assert straight_mismatches(_arc(2.0, 0.2, 3.5), turn, curve, top) == []
+    # A turn on the spot in the middle second (the spin's heading in its poses): that second
+    # is left out, the others estimate as before.
+    spun = straight.copy()
+    during = (spun[:, 0] >= 1.2) & (spun[:, 0] < 1.6)
+    spun[during, 1:3] = spun[np.argmax(during), 1:3]  # (on the spot)
+    spun[during, 3] = np.linspace(0.0, 1.5, during.sum())
+    spun[spun[:, 0] >= 1.6, 3] += 1.5
+    spin = commands.copy()
+    on_spot = (t >= 1.2) & (t < 1.6)
+    spin[on_spot, 1:3] = (10.0, -10.0)
+    kept = straight_mismatches(spun, spin, curve, top)
+    assert len(kept) == 2 and all(e == pytest.approx(d, abs=0.005) for e, _ in kept)

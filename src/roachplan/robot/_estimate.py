@@ -69,7 +69,9 @@ def straight_mismatches(
     the driver asked the robot to walk near straight: poses ((K, 4): t [s], x, y [m], yaw
     [rad]), commands ((M, 4): t [s], left, right [rad/s] as sent, and the trim they were sent
     with: RobotLoop.trim, the driver having asked left x (1 + trim), right x (1 - trim)). A
-    stretch whose driver's mean speed ratio is STRAIGHT_RATIO or more either way is left out:
+    stretch with a turn on the spot in it is left out (its poses turn with the spin, which
+    read as a walk's turn gave 0.35 for a twin's -0.12), and so is one whose driver's mean
+    speed ratio is STRAIGHT_RATIO or more either way:
     in a hard turn the curve bends, and a floor that turns the robot less than the curve says
     (a slippery one) would be read as a mismatch of the motors; on the rough bridge the
     estimates of whole 3 s windows so scattered from 0.05 to 0.47 for a twin's 0.12."""
@@ -82,6 +84,8 @@ def straight_mismatches(
         a = t0 + k * piece
         p = poses[(poses[:, 0] >= a) & (poses[:, 0] <= a + piece)]
         c = commands[(commands[:, 0] >= a) & (commands[:, 0] < a + piece)]
+        if (c[:, 1] * c[:, 2] < 0).any():  # (a turn on the spot: its poses' turn is no walk's)
+            continue
         c = c[(c[:, 1] > 0) & (c[:, 2] > 0)]
         if len(p) < 2 or not len(c):
             continue
