@@ -359,7 +359,10 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
         )  # fmt: skip
         out, err = proc.communicate(timeout=240)
     summary = json.loads(out)
-    assert len(summary["held"]) == 1, err
+    assert len(summary["held"]) == 1, (
+        err,
+        {k: summary.get(k) for k in ("reason", "detail", "trim")},
+    )
     held = summary["held"][0]
     assert held["reason"] == "drift" and "guard drift 0.0225 m" in held["detail"], held
     assert "off its path" in held["detail"] and "arcs of" in err
