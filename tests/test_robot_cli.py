@@ -391,7 +391,8 @@ def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_pat
     from a bridge's edge for every seed; here the planner is made to find none after the first
     plan, as that cannot be brought about on demand), the robot drives on along the rest of the
     path it drifted off, from where it stands (rejoin_path), instead of ending the run held.
-    In-process, so that the planner can be replaced; the twin is the real one."""
+    In-process, so that the planner can be replaced; the twin is the real one, on slippery
+    ground so that the drift hold comes (the test above says why)."""
     import roachplan.robot._run as run_module
     from roachplan.app.cli import main
     from roachplan.robot import distance_to_path, read_run
@@ -408,7 +409,7 @@ def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_pat
 
     monkeypatch.setattr(run_module, "plan_clear_of", plan_once)
     log = tmp_path / "run.mcap"
-    with twin(*MOCAP, "--motor-mismatch", "0.12") as (ready, _control):
+    with twin(*MOCAP, "--motor-mismatch", "0.12", "--friction", "0.6") as (ready, _control):
         code = main(
             [
                 "robot", "--scene", "double_bridge", "--natnet-port", str(ready["natnet_port"]),
