@@ -15,11 +15,14 @@ import trimesh
 from roachplan.planning import heightfield_from_mesh
 from roachplan.sim import LEG_NAMES, PyBulletSimulation, RobotConfig, SimConfig
 from roachplan.sim._mujoco import (
+    GROUND_CLEARANCE,
     INTEGRATOR,
     OVERHEAD,
     MujocoSimulation,
     leg_inertia_about_hip,
+    terrain_shape,
 )
+from roachplan.sim._pieces import MAX_PIECES, convex_prisms
 
 
 def _box(size, centre) -> trimesh.Trimesh:
@@ -81,7 +84,7 @@ def test_the_model_is_the_robot_config():
 
 def test_the_robot_stands_on_a_floor_and_on_a_box_step():
     """Reset stands the body standing_height above the surface under it, level: on the open
-    floor, on a 5 cm box step (the height field) and on the floor beside it (the plane)."""
+    floor, on a 5 cm box step (a convex prism) and on the floor beside it (the plane)."""
     robot = RobotConfig()
     with MujocoSimulation.open_floor(robot, SimConfig()) as sim:
         sim.reset(0.3, -0.2, 1.0)
@@ -267,3 +270,75 @@ def test_a_diverged_world_is_at_no_finite_place_and_says_so_off_stdout(
         assert math.isnan(x)
     assert capfd.readouterr().out == ""
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+def test_a_terrain_of_flat_convex_tops_is_built_of_prisms_and_any_other_of_a_height_field():
+    """The double bridge (two ramps, two decks) is four convex prisms standing in the ground
+    plane, each its top's corners and the same outline GROUND_CLEARANCE under the plane; the
+    world has no height field, rays find each top, the floor between is the plane's. Tops
+    that are no such solids are a field: an L-shaped deck, a table over the floor (a prism
+    would fill the room under it), a top more than OVERHEAD over the plane, more than
+    MAX_PIECES tops (a bumpy deck)."""
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene("double_bridge"))
+    v, f = np.asarray(world.sim_terrain.vertices), np.asarray(world.sim_terrain.faces)
+    field, prisms = terrain_shape(v, f, 0.0)
+    assert field is None and prisms is not None and len(prisms) == 4
+    for corners in prisms:
+        top, bottom = np.split(corners, 2)
+        assert np.allclose(bottom[:, :2], top[:, :2]) and np.all(bottom[:, 2] == -GROUND_CLEARANCE)
+        assert top[:, 2].max() == pytest.approx(0.2)  # (each ramp rises to the decks' 0.2 m)
+    with MujocoSimulation(v, f, ground_height=0.0, robot=RobotConfig(), cfg=SimConfig()) as sim:
+        assert sim.model.nhfield == 0 and sim.model.nmesh == 4
+        probes = np.array([[-0.75, 0.0], [0.75, 0.0], [0.0, 0.0], [0.0, -1.0], [0.0, -1.6]])
+        z, on_terrain = sim.surface_heights(probes)
+        np.testing.assert_allclose(z, [0.2, 0.2, 0.0, 0.1, 0.0], atol=1e-6)
+        assert on_terrain.tolist() == [True, True, False, True, False]
+        sim.reset(-0.75, 0.0, math.pi / 2)
+        assert sim.pose()[0][2] == pytest.approx(0.2 + RobotConfig().standing_height, abs=5e-4)
+
+    def shape(*parts, ground=0.0):
+        return convex_prisms(*_mesh(*parts), ground, base=-0.005, overhead=OVERHEAD)
+
+    deck = _box((0.4, 0.4, 0.05), (0.0, 0.0, 0.025))
+    one = shape(deck)
+    assert one is not None and len(one) == 1
+    assert shape(deck, _box((0.4, 0.4, 0.05), (0.5, 0.0, 0.025))) is not None  # (side by side)
+    ell = trimesh.boolean.union(
+        [deck, _box((0.4, 0.2, 0.05), (0.4, 0.1, 0.025))], engine="manifold"
+    )
+    assert shape(ell) is None
+    table = _box((0.8, 0.6, 0.03), (0.0, 0.0, 0.2))
+    assert shape(deck, table) is None
+    assert shape(_box((0.4, 0.4, 0.5), (0.0, 0.0, 0.25))) is None  # (over OVERHEAD)
+    bumps = [_box((0.02, 0.02, 0.01), (0.03 * k, 0.0, 0.005)) for k in range(MAX_PIECES + 1)]
+    assert shape(*bumps) is None and shape(*bumps[:MAX_PIECES]) is not None
+    rough = build_world(load_scene("double_bridge_rough")).sim_terrain
+    field, prisms = terrain_shape(np.asarray(rough.vertices), np.asarray(rough.faces), 0.0)
+    assert field is not None and prisms is None
+
+
+def test_a_box_step_walks_the_same_built_of_prisms_as_of_a_height_field(monkeypatch):
+    """The same walk up onto a 2 cm box step, the step a prism and then the height field (as
+    it was built before prisms): both climb it and end within 2 cm and 5 % of energy of each
+    other (the field rounds the step's edge into a 5 mm slope; the prism keeps it sharp)."""
+    import roachplan.sim._mujoco as engine
+
+    step = _mesh(_box((0.6, 0.6, 0.02), (0.45, 0.0, 0.01)))
+    ends = []
+    for shaped in (engine.terrain_shape, lambda v, f, g: (engine.terrain_field(v, f, g), None)):
+        monkeypatch.setattr(engine, "_cached_shape", shaped)
+        with MujocoSimulation(
+            *step, ground_height=0.0, robot=RobotConfig(), cfg=SimConfig(timestep=0.002)
+        ) as sim:
+            assert (sim.model.nmesh, sim.model.nhfield) == ((1, 0) if not ends else (0, 1))
+            sim.reset(0.0, 0.0, 0.0)
+            sim.set_leg_speeds(20.0, 20.0)
+            sim.advance(1500)
+            pos, _ = sim.body_pose()
+            ends.append((pos.copy(), sim.energy))
+    (p_prism, e_prism), (p_field, e_field) = ends
+    assert p_prism[0] > 0.3 and p_prism[2] > 0.02, "climbed onto the step"
+    assert np.linalg.norm(p_prism[:2] - p_field[:2]) < 0.02
+    assert abs(e_prism - e_field) < 0.05 * e_field

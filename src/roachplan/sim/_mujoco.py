@@ -50,6 +50,7 @@ from mujoco import rollout
 
 from ._config import SimConfig
 from ._motors import SideMotors, targets_together
+from ._pieces import convex_prisms
 from ._placement import (
     DROP_CLEARANCE,
     ground_height,
@@ -239,18 +240,38 @@ def _kept(cache: dict, kept: int, key, make: Callable[[], Any]) -> Any:
     return cache[key]
 
 
-_FIELDS: dict[tuple, HeightField | None] = {}
-_FIELDS_KEPT = 4
+_SHAPES: dict[tuple, tuple[HeightField | None, list[np.ndarray] | None]] = {}
+_SHAPES_KEPT = 4
 
 
-def _cached_field(
+def terrain_shape(
     vertices: np.ndarray, faces: np.ndarray, ground_height: float | None
-) -> HeightField | None:
-    """terrain_field, kept for the last _FIELDS_KEPT terrains by their content: a drive makes a
+) -> tuple[HeightField | None, list[np.ndarray] | None]:
+    """(the height field, None) or (None, the convex prisms) the engine builds the terrain of
+    (vertices (V, 3) [m] world frame, faces (F, 3); ground_height [m], None: no plane): prisms
+    where the terrain is a few flat convex tops none over another (sim/_pieces.py), standing
+    in the ground plane GROUND_CLEARANCE deep, or FIELD_BASE under the lowest vertex without
+    one; else the field (terrain_field). (None, None): no terrain but the plane."""
+    if len(faces):
+        base = (
+            ground_height - GROUND_CLEARANCE
+            if ground_height is not None
+            else float(vertices[:, 2].min()) - FIELD_BASE
+        )
+        prisms = convex_prisms(vertices, faces, ground_height, base=base, overhead=OVERHEAD)
+        if prisms is not None:
+            return None, prisms or None
+    return terrain_field(vertices, faces, ground_height), None
+
+
+def _cached_shape(
+    vertices: np.ndarray, faces: np.ndarray, ground_height: float | None
+) -> tuple[HeightField | None, list[np.ndarray] | None]:
+    """terrain_shape, kept for the last _SHAPES_KEPT terrains by their content: a drive makes a
     fresh simulation of the same world each time, and the rasterising takes most of building
     one (0.2-0.7 s on double_bridge at 5 mm; compiling the model about 20 ms)."""
     key = (_content(vertices, faces), vertices.shape, faces.shape, ground_height)
-    return _kept(_FIELDS, _FIELDS_KEPT, key, lambda: terrain_field(vertices, faces, ground_height))
+    return _kept(_SHAPES, _SHAPES_KEPT, key, lambda: terrain_shape(vertices, faces, ground_height))
 
 
 def field_elevation(heights: np.ndarray, ground_height: float | None) -> tuple[np.ndarray, float]:
@@ -273,11 +294,13 @@ def build_world_model(
     cfg: SimConfig,
     *,
     field: HeightField | None = None,
+    prisms: list[np.ndarray] | None = None,
     ground_height: float | None = None,
 ) -> tuple[mujoco.MjModel, float | None]:
     """(the compiled model of the world: the terrain's height field (a planning HeightField,
-    or None), a ground plane at ground_height [m] (None: none) and the roach, standing at the
-    origin; the height of the field's hole level [m], None without holes)."""
+    or None) or its convex prisms (convex_prisms' corner points, each a mesh geom), a ground
+    plane at ground_height [m] (None: none) and the roach, standing at the origin; the height
+    of the field's hole level [m], None without holes)."""
     spec = mujoco.MjSpec()
     spec.modelname = "roach"
     opt = spec.option
@@ -290,6 +313,17 @@ def build_world_model(
         "solref": [CONTACT_TIMECONST, 1.0],
     }
     hole_level, elevation = _add_terrain(spec, field, ground_height, contact)
+    for k, corners in enumerate(prisms or ()):
+        spec.add_mesh(name=f"terrain_{k}", uservert=corners.ravel().tolist())
+        spec.worldbody.add_geom(
+            name=f"terrain_{k}",
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=f"terrain_{k}",
+            group=_TERRAIN_GROUP,
+            contype=0,
+            conaffinity=_FIELD_BIT,
+            **contact,
+        )
     _add_robot(spec, robot, contact, on_field=field is not None)
     model = spec.compile()
     if elevation is not None:
@@ -437,13 +471,14 @@ class MujocoSimulation:
         )
         self.robot = robot
         self.cfg = cfg
-        field = _cached_field(terrain_vertices, terrain_faces, ground_height)
+        field, prisms = _cached_shape(terrain_vertices, terrain_faces, ground_height)
         self.model, self._hole_level = build_world_model(
-            robot, cfg, field=field, ground_height=ground_height
+            robot, cfg, field=field, prisms=prisms, ground_height=ground_height
         )
         self.data: mujoco.MjData = mujoco.MjData(self.model)
         m = self.model
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "terrain")
+        self._ground_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "ground")
         self._body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "body")
         self._nominal = (float(m.body_mass[self._body]), m.body_inertia[self._body].copy())
         self._free = robot.body_mass > 0  # the body has its free joint (build_world_model)
@@ -504,7 +539,7 @@ class MujocoSimulation:
         on_terrain = np.zeros(len(xy), dtype=bool)
         for k, (x, y) in enumerate(xy.tolist()):
             z[k], geom = self._ray_down(x, y, top)
-            on_terrain[k] = geom == self._terrain_geom and geom >= 0
+            on_terrain[k] = geom >= 0 and geom != self._ground_geom  # (the field or a prism)
         return z, on_terrain
 
     def reset(
