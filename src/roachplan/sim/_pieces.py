@@ -28,9 +28,16 @@ AREA_TOLERANCE = 1e-6
 """A top is convex, and two tops do not overlap, to within this share of the top's area."""
 
 
-def upward_tops(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
+def upward_tops(
+    vertices: np.ndarray, faces: np.ndarray, most: int | None = None
+) -> list[np.ndarray] | None:
     """The terrain's tops: for each connected set of upward triangles on one plane (sharing
-    edges), its face indices ((k,) int). vertices (V, 3) [m], faces (F, 3) int."""
+    edges), its face indices ((k,) int). vertices (V, 3) [m], faces (F, 3) int. None when
+    there are more than `most` (a capture's thousands of facets are told in one sort, before
+    any are joined)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     normal = np.cross(b - a, c - a)
     length = np.linalg.norm(normal, axis=1)
@@ -39,7 +46,13 @@ def upward_tops(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     up = np.flatnonzero(good & (normal[:, 2] > UPWARD))
     if len(up) == 0:
         return []
-    offset = np.einsum("ij,ij->i", normal, a)
+    n = normal[up]
+    d = np.einsum("ij,ij->i", n, a[up])
+    if most is not None:
+        # Tops on one plane are at least as many as the planes: too many planes, too many tops.
+        # (Their offsets alone, a 1-D sort, tell a capture: planes of one offset are fewer.)
+        if len(np.unique(np.round(d / (10 * PLANE_TOLERANCE)))) > most:
+            return None
     # The edges of the upward triangles, each as its sorted vertex pair, and which triangle.
     tri = faces[up]
     edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
@@ -48,24 +61,16 @@ def upward_tops(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     edges, owner = edges[order], owner[order]
     same = np.all(edges[1:] == edges[:-1], axis=1)
     i, j = owner[:-1][same], owner[1:][same]  # two upward triangles sharing an edge
-    n, d = normal[up], offset[up]
     coplanar = np.all(np.abs(n[i] - n[j]) <= PLANE_TOLERANCE, axis=1) & (
         np.abs(d[i] - d[j]) <= PLANE_TOLERANCE
     )
-    parent = np.arange(len(up))
-
-    def root(k: int) -> int:
-        while parent[k] != k:
-            parent[k] = parent[parent[k]]
-            k = parent[k]
-        return k
-
-    for p, q in zip(i[coplanar].tolist(), j[coplanar].tolist(), strict=True):
-        rp, rq = root(p), root(q)
-        if rp != rq:
-            parent[rp] = rq
-    roots = np.array([root(k) for k in range(len(up))])
-    return [up[roots == r] for r in np.unique(roots)]
+    i, j = i[coplanar], j[coplanar]
+    joined = coo_matrix((np.ones(len(i)), (i, j)), shape=(len(up), len(up)))
+    count, label = connected_components(joined, directed=False)
+    if most is not None and count > most:
+        return None
+    order = np.argsort(label, kind="stable")
+    return np.split(up[order], np.flatnonzero(np.diff(label[order])) + 1)
 
 
 def _hull(points: np.ndarray) -> np.ndarray:
@@ -141,8 +146,8 @@ def convex_prisms(
     is that surface. [] for a terrain whose every top is so (or that has none)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    tops = upward_tops(vertices, faces) if len(faces) else []
-    if len(tops) > MAX_PIECES:
+    tops = upward_tops(vertices, faces, MAX_PIECES) if len(faces) else []
+    if tops is None:
         return None
     outlines, heights = [], []
     for top in tops:
