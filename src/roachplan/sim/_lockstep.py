@@ -1,11 +1,12 @@
 """Rollouts in lockstep (issue 31, item 3): a worker's MuJoCo drives advanced together, one
-batched MuJoCo call per physics step for all of them, each stopped at its outcome.
+batched MuJoCo call per control period (its n physics steps) for all of them, each stopped at
+its outcome.
 
 Each rollout is a MujocoSimulation the caller made, reset and perturbed as for a drive of its
 own (its terrain, friction, masses and motor gains are its own: its model), and a Drive (the
 driver's controller and bookkeeping, sim/_driver.py). Every control period each rollout still
 running reads its pose and says its motor speeds; then `mujoco.batch.Batch` steps them all
-(one call per step, on its own threads with the GIL released), its state rows the
+(one call per control period, on its own threads with the GIL released), its state rows the
 simulations' own, so that a rollout gives bit for bit what it gives driven alone (drive_path):
 a rollout re-runs exactly from its seed, whoever ran it with what.
 
@@ -31,6 +32,7 @@ from ._errors import SimError
 from ._mujoco import MujocoSimulation
 
 _STATE = mujoco.mjtState.mjSTATE_INTEGRATION.value
+_CTRL = mujoco.mjtState.mjSTATE_CTRL.value
 _DIVERGED = (
     mujoco.mjtWarning.mjWARN_BADQPOS.value,
     mujoco.mjtWarning.mjWARN_BADQVEL.value,
@@ -68,7 +70,6 @@ def drive_lockstep(
     n = max(1, round(cfg.control_period / timestep))
     batch = Batch(sims[0].model, nsim=len(sims), nthread=threads)
     batch.set_models([s.model for s in sims])
-    ctrl, sensordata = batch.bind("ctrl"), batch.bind("sensordata")
     results: list[DriveResult | None] = [None] * len(sims)
     running = list(range(len(sims)))
     while running:
@@ -91,12 +92,16 @@ def drive_lockstep(
         for i in running:  # (the batch's state rows: the simulations' own)
             mujoco.mj_getState(sims[i].model, sims[i].data, batch.state[i], _STATE)
         before = batch.warning[ids][:, _DIVERGED, 0].sum(axis=1)
-        readings = np.empty((len(running), n, sensordata.shape[1]))
-        rows = slice(None) if every is None else ids  # (a slice: no copy for all of them)
-        for k in range(n):
-            ctrl[rows] = inputs[k]
-            batch.step(every)
-            readings[:, k] = sensordata[rows]
+        # The period's n steps in one call: each step's servo inputs set before it, the
+        # sensors of its forward pass recorded after it (what ctrl and sensordata read round
+        # n calls of batch.step gave, bit for bit, without n calls' Python).
+        readings = batch.rollout(
+            n,
+            control=inputs.transpose(1, 0, 2),
+            control_spec=_CTRL,
+            record=("sensordata",),
+            ids=every,
+        )["sensordata"]
         diverged = batch.warning[ids][:, _DIVERGED, 0].sum(axis=1) != before
         energy = MujocoSimulation.metered(readings, timestep)  # (k, 6) [J]
         for j, i in enumerate(running):

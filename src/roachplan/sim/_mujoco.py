@@ -2,8 +2,9 @@
 as the PyBullet engine (sim/_pybullet.py), its MJCF model generated from RobotConfig.
 
 The model (`build_world_model`):
-  - world: the terrain as a height field (`hfield` geom, below) and, when the world has one,
-    the ground as an infinite plane at z = ground_height. Both static, in geom group 0.
+  - world: the terrain as convex prisms (mesh geoms `terrain_0`...) where it is built of a few
+    flat convex tops, else as a height field (`hfield` geom, below), and, when the world has
+    one, the ground as an infinite plane at z = ground_height. All static, in geom group 0.
   - `body`: a free body, the box of RobotConfig's body (its frame RobotConfig's: x forward,
     y left, z up, origin at the box centre); its mass spread over the box (a body of mass 0
     is fixed in the world, as PyBullet fixes a base of mass 0). Against a height field the box
@@ -22,7 +23,9 @@ The model (`build_world_model`):
     each servo's force and each hip's speed for the energy meter.
 
 The terrain: MuJoCo collides a mesh as its convex hull, so a terrain (a bridge over a floor,
-a hole) cannot be a mesh geom. Its top surface is rasterised (planning's heightfield_from_mesh,
+a hole) cannot be one mesh geom. Where its top surface is a few flat convex faces, none over
+another (a scene built of boxes and ramps), each face and the solid under it is one convex
+prism (sim/_pieces.py; terrain_shape decides). Any other terrain's top surface is rasterised (planning's heightfield_from_mesh,
 the planner's rasteriser, with the planner's rule for surfaces overhead) into an hfield of
 FIELD_RESOLUTION. Frames: grid point (i, j) of the HeightField is at world (x0 + i r,
 y0 + j r); the hfield geom sits at the grid's centre, z at the field's lowest level, and its
