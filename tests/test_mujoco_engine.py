@@ -278,7 +278,8 @@ def test_a_terrain_of_flat_convex_tops_is_built_of_prisms_and_any_other_of_a_hei
     world has no height field, rays find each top, the floor between is the plane's. Tops
     that are no such solids are a field: an L-shaped deck, a table over the floor (a prism
     would fill the room under it), a top more than OVERHEAD over the plane, more than
-    MAX_PIECES tops (a bumpy deck)."""
+    MAX_PIECES tops (a bumpy deck), a frustum with sides too steep for tops and not walls
+    (they reach out past its top's prism)."""
     from roachplan.scenes import build_world, load_scene
 
     world = build_world(load_scene("double_bridge"))
@@ -312,6 +313,17 @@ def test_a_terrain_of_flat_convex_tops_is_built_of_prisms_and_any_other_of_a_hei
     table = _box((0.8, 0.6, 0.03), (0.0, 0.0, 0.2))
     assert shape(deck, table) is None
     assert shape(_box((0.4, 0.4, 0.5), (0.0, 0.0, 0.25))) is None  # (over OVERHEAD)
+
+    def frustum(top_scale: float) -> trimesh.Trimesh:
+        """A hexagonal frustum 10 cm tall on the floor, its top top_scale x its base."""
+        solid = trimesh.creation.cylinder(radius=0.2, height=0.1, sections=6)
+        solid.vertices[solid.vertices[:, 2] > 0, :2] *= top_scale
+        solid.apply_translation((0.0, 0.0, 0.05))
+        return solid
+
+    sloped = shape(frustum(0.8))  # (sides 68 deg steep: each a top, the solid their prisms)
+    assert sloped is not None and len(sloped) == 7
+    assert shape(frustum(0.98)) is None  # (sides 88 deg steep, no tops, and no walls)
     bumps = [_box((0.02, 0.02, 0.01), (0.03 * k, 0.0, 0.005)) for k in range(MAX_PIECES + 1)]
     assert shape(*bumps) is None and shape(*bumps[:MAX_PIECES]) is not None
     rough = build_world(load_scene("double_bridge_rough")).sim_terrain

@@ -25,9 +25,9 @@ The model (`build_world_model`):
 The terrain: MuJoCo collides a mesh as its convex hull, so a terrain (a bridge over a floor,
 a hole) cannot be one mesh geom. Where its top surface is a few flat convex faces, none over
 another (a scene built of boxes and ramps), each face and the solid under it is one convex
-prism (sim/_pieces.py; terrain_shape decides). Any other terrain's top surface is rasterised (planning's heightfield_from_mesh,
-the planner's rasteriser, with the planner's rule for surfaces overhead) into an hfield of
-FIELD_RESOLUTION. Frames: grid point (i, j) of the HeightField is at world (x0 + i r,
+prism (sim/_pieces.py; terrain_shape decides). Any other terrain's top surface is rasterised
+(planning's heightfield_from_mesh, the planner's rasteriser, with the planner's rule for
+surfaces overhead) into an hfield of FIELD_RESOLUTION. Frames: grid point (i, j) of the HeightField is at world (x0 + i r,
 y0 + j r); the hfield geom sits at the grid's centre, z at the field's lowest level, and its
 elevation row j, column i (row-major, rows along +y) is that point's height over it; MuJoCo
 joins the points into two triangles a cell and fills the solid under them down to FIELD_BASE

@@ -20,8 +20,15 @@ MAX_PIECES = 64
 """Most convex tops a terrain may have to be built of prisms; over it (a bumpy or captured
 surface: thousands of facets) it is a height field."""
 UPWARD = 0.2
-"""A triangle whose unit normal has z above this faces up: it is part of a top. (Walls are
-vertical; a top steeper than 78 deg is no ground a robot stands on.)"""
+"""A triangle whose unit normal has z above this faces up: it is part of a top (one steeper
+than 78 deg is no ground a robot stands on). A terrain with a triangle facing up less than
+this, and not vertical, is a field: its solid reaches out past the tops' prisms (a 20 cm wall
+at 80 deg, 3.5 cm)."""
+VERTICAL = 1e-6
+"""A triangle whose unit normal has |z| under this is a vertical wall."""
+MIN_TOP_AREA = 1e-6
+"""Smallest top a prism is made of [m^2] (1 mm^2); a terrain with a smaller one is a field (a
+sliver's prism is no solid MuJoCo can weigh)."""
 PLANE_TOLERANCE = 1e-6
 """Two triangles are on one plane when their unit normals and offsets [m] agree within this."""
 AREA_TOLERANCE = 1e-6
@@ -32,9 +39,9 @@ def upward_tops(
     vertices: np.ndarray, faces: np.ndarray, most: int | None = None
 ) -> list[np.ndarray] | None:
     """The terrain's tops: for each connected set of upward triangles on one plane (sharing
-    edges), its face indices ((k,) int). vertices (V, 3) [m], faces (F, 3) int. None when
-    there are more than `most` (a capture's thousands of facets are told in one sort, before
-    any are joined)."""
+    edges), its face indices ((k,) int). vertices (V, 3) [m], faces (F, 3) int. With `most`
+    given, None when there are more than that (a capture's thousands of facets are told in
+    one sort, before any are joined) or a face is steep but not vertical (UPWARD)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -43,6 +50,8 @@ def upward_tops(
     length = np.linalg.norm(normal, axis=1)
     good = length > 1e-15
     normal[good] /= length[good, None]
+    if most is not None and np.any(good & (normal[:, 2] > VERTICAL) & (normal[:, 2] <= UPWARD)):
+        return None  # (a steep face, not a wall: no top's prism holds it)
     up = np.flatnonzero(good & (normal[:, 2] > UPWARD))
     if len(up) == 0:
         return []
@@ -137,7 +146,9 @@ def convex_prisms(
     corner points ((2 k, 3) [m]: a top's outline and the same outline at z = base [m]); None
     when it is no such terrain, and a height field is the shape to use:
 
-    - more than MAX_PIECES tops, or a top that is not convex (an L-shaped deck, a hole in it);
+    - more than MAX_PIECES tops, or a top that is not convex (an L-shaped deck, a hole in it)
+      or smaller than MIN_TOP_AREA;
+    - a face steeper than a top but not a wall (a frustum's sides: UPWARD);
     - two tops over each other (a table over the floor: the field keeps the surface the planner
       stands the robot on, and a prism would fill the room under the table);
     - a top more than `overhead` [m] over the ground plane (the field takes the ground there).
@@ -160,7 +171,7 @@ def convex_prisms(
         u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
         area = 0.5 * float(np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]).sum())
         hull = _hull(corners[:, :2])
-        if area <= 0.0 or abs(_area(hull) - area) > AREA_TOLERANCE * area:
+        if area < MIN_TOP_AREA or abs(_area(hull) - area) > AREA_TOLERANCE * area:
             return None
         outlines.append(hull)
         heights.append(corners)
