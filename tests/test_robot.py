@@ -11,7 +11,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import roachplan
-from roachplan.sim import DriverConfig, RobotConfig, SimConfig, Simulation, drive_path, open_floor
+from roachplan.sim import (
+    DriverConfig,
+    RobotConfig,
+    SimConfig,
+    Simulation,
+    TurningCurve,
+    drive_path,
+    open_floor,
+)
 from roachplan.sim._calibration import walk
 
 
@@ -153,6 +161,20 @@ def test_the_inverse_from_its_table_is_the_plain_bisection_bit_for_bit():
             for k in wanted:
                 got, want = curve.ratio_for(k, max_ratio), plain(curve, k, max_ratio)
                 assert got == want or (math.isnan(got) and math.isnan(want)), (curve, k)
+    # Its last halvings are decided by a bracket of the crossing where that is shown safe:
+    # curves steep and flat, near their pole and not, asked for curvatures up to the top.
+    for _ in range(150):
+        curve = TurningCurve(
+            kappa_sat=float(rng.choice([0.0, 1e-9, rng.uniform(0, 20)])),
+            rate=float(rng.choice([1e-3, 200.0, rng.uniform(0.01, 60)])),
+            lock=float(rng.choice([0.0, 1e-12, rng.uniform(0, 3)])),
+            lock_ratio=float(1 + rng.exponential(2)),
+        )
+        for max_ratio in (3.0, curve.lock_ratio * 0.9999):
+            top = curve.curvature(max_ratio)
+            near_top = top * (1 - 10.0 ** -rng.uniform(1, 15, 5)) if math.isfinite(top) else []
+            for k in [*rng.uniform(0, min(top, 1e4), 30), 1e-300, *near_top]:
+                assert curve.ratio_for(k, max_ratio) == plain(curve, k, max_ratio), (curve, k)
 
 
 @pytest.mark.parametrize(

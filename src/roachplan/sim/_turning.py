@@ -77,20 +77,29 @@ class TurningCurve:
         # The first _TREE_DEPTH halvings from the tree (their midpoints and curvatures are the
         # same every call), the rest as they come: the driver asks this every control period.
         lo, hi, node = 0.0, math.log(max_ratio), 0
+        k_lo, k_hi = 0.0, top  # (the curvatures at lo and hi, for _bracket's first guess)
         for _ in range(_TREE_DEPTH):
             if below[node] < k:
-                lo, node = mids[node], 2 * node + 2
+                lo, k_lo, node = mids[node], below[node], 2 * node + 2
             else:
-                hi, node = mids[node], 2 * node + 1
+                hi, k_hi, node = mids[node], below[node], 2 * node + 1
+        # The rest as they come, each decided by comparing mid with a bracket of the crossing
+        # where that is shown to give the same turn, else by the curvature (inline).
+        a, b = _bracket(self, k, lo, hi, k_lo, k_hi)
         ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
         exp, log = math.exp, math.log
-        for _ in range(_HALVINGS - _TREE_DEPTH):  # (curvature(exp(mid)), inline)
+        for _ in range(_HALVINGS - _TREE_DEPTH):
             mid = 0.5 * (lo + hi)
-            x = log(exp(mid))
-            if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
+            if mid <= a:
                 lo = mid
-            else:
+            elif mid >= b:
                 hi = mid
+            else:
+                x = log(exp(mid))
+                if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
+                    lo = mid
+                else:
+                    hi = mid
         return math.exp(0.5 * (lo + hi))
 
     def min_turning_radius(self, max_ratio: float, headroom: float = PLAN_HEADROOM) -> float:
@@ -121,6 +130,53 @@ def _bisection_tree(curve: TurningCurve, max_ratio: float) -> tuple[float, list,
         below[node] = curve.curvature(math.exp(mid))  # (inf at and past the pole)
         bounds += [(lo, mid), (mid, hi)]
     return curve.curvature(max_ratio), mids, below
+
+
+_SAFETY = 100.0
+"""How many times its rounding error the curvature at a bracket's end must lie from the one
+asked for [-]."""
+
+
+def _bracket(
+    curve: TurningCurve, k: float, lo: float, hi: float, k_lo: float, k_hi: float
+) -> tuple[float, float]:
+    """(a, b) round the crossing in [lo, hi] (ln ratio; k_lo, k_hi: the curvatures there
+    [1/m]) of ratio_for's test `curvature(exp(mid)) < k`, such that the test is true at every
+    mid <= a and false at every mid >= b; (-inf, inf) where that cannot be shown, and every
+    halving then computes its test. Why: the driver asks ratio_for every control period, and
+    each of its last 26 halvings computed three transcendental functions; with the crossing
+    found first, all but the last two or three are a comparison.
+
+    Shown, not assumed: the crossing is guessed between lo and hi and refined by a Newton
+    step; the test is then computed at a and b themselves, as the halvings compute it, and
+    each curvature must clear k by _SAFETY times its rounding error. The curve rises, so at any
+    mid below a the computed curvature lies below a's plus twice that error: below k; the same
+    above b. A curve too flat there, or too near its pole, gets no bracket."""
+    ks, rate, lock, pole = curve.kappa_sat, curve.rate, curve.lock, math.log(curve.lock_ratio)
+    rise = k_hi - k_lo
+    if not (0.0 < rise < math.inf and hi < pole - 1e-3):
+        return -math.inf, math.inf  # (near the pole the curvature loses its last digits)
+    x = lo + (k - k_lo) / rise * (hi - lo)  # (within 1e-9 of the crossing: the span is 7e-5)
+    e, gap = math.exp(-rate * x), pole - x
+    slope = ks * rate * e + lock * pole / (gap * gap)  # d curvature / d ln ratio [1/m]
+    if not slope > 0.0:
+        return -math.inf, math.inf
+    x -= (ks * (1.0 - e) + lock * x / gap - k) / slope
+    # The computed curvature's rounding error: a few ulps of each term, the lock term's
+    # cancellation in pole - x (an ulp of the pole over the gap), and ln(exp(mid))'s ulp
+    # times the slope.
+    lock_term = lock * abs(x) / gap
+    margin = _SAFETY * (1e-15 * (ks + lock_term + slope) + lock_term * 2.3e-16 * pole / gap)
+    delta = 4.0 * margin / slope
+    a, b = x - delta, x + delta
+    if not lo <= a < b <= hi:  # (a curve too flat here to gain anything; or no crossing)
+        return -math.inf, math.inf
+    ya, yb = math.log(math.exp(a)), math.log(math.exp(b))
+    below_a = ks * (1.0 - math.exp(-rate * ya)) + lock * ya / (pole - ya) - k
+    above_b = ks * (1.0 - math.exp(-rate * yb)) + lock * yb / (pole - yb) - k
+    if below_a < -margin and above_b > margin:
+        return a, b
+    return -math.inf, math.inf
 
 
 CALIBRATED_TURNING = TurningCurve()
