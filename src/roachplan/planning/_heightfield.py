@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -161,8 +163,16 @@ class GridCover:
 
     def at_corners(self, per_vertex: np.ndarray) -> np.ndarray:
         """(H,) a per-vertex quantity ((V,): height [m], noise [m]) interpolated to the hits."""
-        v = per_vertex[self.faces[self.face]]  # (H, 3)
-        return v[:, 0] + self.a * (v[:, 1] - v[:, 0]) + self.c * (v[:, 2] - v[:, 0])
+        c0, c1, c2 = self._corners
+        v0 = per_vertex[c0]
+        return v0 + self.a * (per_vertex[c1] - v0) + self.c * (per_vertex[c2] - v0)
+
+    @functools.cached_property
+    def _corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(H,) each: the vertex at corner 0, 1 and 2 of each hit's face, made once (a
+        capture's rollouts interpolate a moved surface from the same cover again and again)."""
+        corners = self.faces[self.face]
+        return (corners[:, 0].copy(), corners[:, 1].copy(), corners[:, 2].copy())
 
 
 def grid_cover(
