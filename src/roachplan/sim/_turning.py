@@ -85,7 +85,7 @@ class TurningCurve:
                 hi, k_hi, node = mids[node], below[node], 2 * node + 1
         # The rest as they come, each decided by comparing mid with a bracket of the crossing
         # where that is shown to give the same turn, else by the curvature (inline).
-        a, b = _bracket(self, k, lo, hi, k_lo, k_hi)
+        a, b = _bracket(self, k, (lo, k_lo), (hi, k_hi))
         ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
         exp, log = math.exp, math.log
         for _ in range(_HALVINGS - _TREE_DEPTH):
@@ -138,12 +138,12 @@ asked for [-]."""
 
 
 def _bracket(
-    curve: TurningCurve, k: float, lo: float, hi: float, k_lo: float, k_hi: float
+    curve: TurningCurve, k: float, low: tuple[float, float], high: tuple[float, float]
 ) -> tuple[float, float]:
-    """(a, b) round the crossing in [lo, hi] (ln ratio; k_lo, k_hi: the curvatures there
-    [1/m]) of ratio_for's test `curvature(exp(mid)) < k`, such that the test is true at every
-    mid <= a and false at every mid >= b; (-inf, inf) where that cannot be shown, and every
-    halving then computes its test. Why: the driver asks ratio_for every control period, and
+    """(a, b) round the crossing in [lo, hi] (low = (lo, k_lo), high = (hi, k_hi): ln ratio
+    and the curvature there [1/m]) of ratio_for's test `curvature(exp(mid)) < k`, such that
+    the test is true at every mid <= a and false at every mid >= b; (-inf, inf) where that
+    cannot be shown, and every halving then computes its test. Why: the driver asks ratio_for every control period, and
     each of its last 26 halvings computed three transcendental functions; with the crossing
     found first, all but the last two or three are a comparison.
 
@@ -152,6 +152,7 @@ def _bracket(
     each curvature must clear k by _SAFETY times its rounding error. The curve rises, so at any
     mid below a the computed curvature lies below a's plus twice that error: below k; the same
     above b. A curve too flat there, or too near its pole, gets no bracket."""
+    (lo, k_lo), (hi, k_hi) = low, high
     ks, rate, lock, pole = curve.kappa_sat, curve.rate, curve.lock, math.log(curve.lock_ratio)
     rise = k_hi - k_lo
     if not (0.0 < rise < math.inf and hi < pole - 1e-3):
