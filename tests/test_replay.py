@@ -181,7 +181,7 @@ def test_a_trial_replays_offline_from_one_html_file(experiment, tmp_path, artifa
             for t in ("4", "5"):
                 _seek(clock, t)
                 shots.append(_steady_pixels(page))
-            if _local(*shots, box):
+            if _local(shots[0], shots[1], box):
                 break
         a, b = shots
         page.screenshot(path=artifacts / "replay-trial.png")
