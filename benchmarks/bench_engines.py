@@ -12,6 +12,8 @@ time per simulated second. Then one path the planner gives on the double bridge,
 tracking driver under each: outcome, time and energy. Last, choose's rollouts per second on 2
 workers (double_bridge, double_bridge_rough, kinect_bridge: its seed-0 plan in worlds drawn from
 its uncertainty): PyBullet, MuJoCo one at a time and MuJoCo in lockstep (sim/_lockstep.py).
+And the ceiling: the same scenes' rollouts in one process, PyBullet beside MuJoCo in lockstep
+with MuJoCo's physics timed apart: how fast MuJoCo would be if its Python took no time.
 --quick: 3 s walks, one repeat, 4 rollouts of double_bridge.
 """
 
@@ -208,6 +210,64 @@ def rollouts_per_second(scene: str, n: int, workers: int) -> None:
         )
 
 
+def ceiling(scene: str, n: int, repeat: int = 2) -> None:
+    """How far MuJoCo's rollouts could go on one core: n rollouts of the scene's seed-0 plan
+    (choose's worlds), PyBullet one at a time and MuJoCo in lockstep, interleaved `repeat`
+    times in this process (no pool: its workers share caches), with the time inside MuJoCo's
+    batch calls (its physics) timed apart. Per simulated second, so rollouts that end early
+    weigh as they simulate: PyBullet's time, MuJoCo's, MuJoCo's physics, the speed-up now, and
+    the speed-up if nothing but MuJoCo's physics took time (the most the Python could give)."""
+    from mujoco.batch import Batch
+
+    from roachplan.experiments import ExperimentSpec, plan
+    from roachplan.experiments._workers import TrialWorker
+    from roachplan.scenes import load_scene, with_engine
+
+    inside = [0.0]
+    stepping = Batch.rollout
+
+    def timed(self, *args, **kwargs):  # (MuJoCo's batch call, its time counted)
+        t = time.perf_counter()
+        try:
+            return stepping(self, *args, **kwargs)
+        finally:
+            inside[0] += time.perf_counter() - t
+
+    scenes = {e: with_engine(load_scene(scene), e) for e in ("pybullet", "mujoco")}
+    workers = {
+        e: TrialWorker(ExperimentSpec.of_scene(sc, name="bench")) for e, sc in scenes.items()
+    }
+    planned = plan(workers["pybullet"].world, seed=0)
+    calls = [(0, planned.path_xyz.tolist(), seed, planned.spins) for seed in range(1000, 1000 + n)]
+    pb_u, mj_u = scenes["pybullet"].uncertainty, scenes["mujoco"].uncertainty
+    workers["mujoco"].rollouts(calls[:2], mj_u)  # (worlds and caches made before the clock)
+    wall = {"pybullet": 0.0, "mujoco": 0.0}
+    simulated = dict.fromkeys(wall, 0.0)
+    physics = 0.0
+    Batch.rollout = timed
+    try:
+        for _ in range(repeat):
+            t = time.perf_counter()
+            recs = [workers["pybullet"].rollout(c, p, sd, pb_u, sp) for c, p, sd, sp in calls]
+            wall["pybullet"] += time.perf_counter() - t
+            simulated["pybullet"] += sum(r["drive_time"] for r in recs)
+            inside[0] = 0.0
+            t = time.perf_counter()
+            recs = workers["mujoco"].rollouts(calls, mj_u)
+            wall["mujoco"] += time.perf_counter() - t
+            simulated["mujoco"] += sum(r["drive_time"] for r in recs)
+            physics += inside[0]
+    finally:
+        Batch.rollout = stepping
+        for w in workers.values():
+            w.close()
+    pb = wall["pybullet"] / simulated["pybullet"]
+    mj, ph = wall["mujoco"] / simulated["mujoco"], physics / simulated["mujoco"]
+    print(
+        f"{scene:20s} {pb * 1e3:9.1f} {mj * 1e3:9.1f} {ph * 1e3:9.1f} {pb / mj:8.2f}x {pb / ph:8.2f}x"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="3 s walks, one repeat")
@@ -222,6 +282,14 @@ def main() -> None:
     print(f"\nchoose's rollouts, {n} per scene on 2 workers (rollouts/s; ratio to PyBullet's)")
     for scene in ROLLOUT_SCENES[:1] if args.quick else ROLLOUT_SCENES:
         rollouts_per_second(scene, n, workers=2)
+    k = 4 if args.quick else 8
+    print(f"\nthe ceiling on one core: {k} rollouts, PyBullet and MuJoCo in lockstep interleaved")
+    print("(ms of wall time per simulated second; 'ceiling': PyBullet's / MuJoCo's physics alone)")
+    print(
+        f"{'scene':20s} {'pybullet':>9s} {'mujoco':>9s} {'physics':>9s} {'now':>9s} {'ceiling':>9s}"
+    )
+    for scene in ROLLOUT_SCENES[:1] if args.quick else ROLLOUT_SCENES:
+        ceiling(scene, k)
 
 
 if __name__ == "__main__":
