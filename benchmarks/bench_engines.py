@@ -263,9 +263,8 @@ def ceiling(scene: str, n: int, repeat: int = 2) -> None:
             w.close()
     pb = wall["pybullet"] / simulated["pybullet"]
     mj, ph = wall["mujoco"] / simulated["mujoco"], physics / simulated["mujoco"]
-    print(
-        f"{scene:20s} {pb * 1e3:9.1f} {mj * 1e3:9.1f} {ph * 1e3:9.1f} {pb / mj:8.2f}x {pb / ph:8.2f}x"
-    )
+    times = f"{pb * 1e3:9.1f} {mj * 1e3:9.1f} {ph * 1e3:9.1f}"  # [ms per simulated s]
+    print(f"{scene:20s} {times} {pb / mj:8.2f}x {pb / ph:8.2f}x")
 
 
 def main() -> None:

@@ -143,9 +143,10 @@ def _bracket(
     """(a, b) round the crossing in [lo, hi] (low = (lo, k_lo), high = (hi, k_hi): ln ratio
     and the curvature there [1/m]) of ratio_for's test `curvature(exp(mid)) < k`, such that
     the test is true at every mid <= a and false at every mid >= b; (-inf, inf) where that
-    cannot be shown, and every halving then computes its test. Why: the driver asks ratio_for every control period, and
-    each of its last 26 halvings computed three transcendental functions; with the crossing
-    found first, all but the last two or three are a comparison.
+    cannot be shown, and every halving then computes its test. Why: the driver asks
+    ratio_for every control period, and each of its last 26 halvings computed three
+    transcendental functions; with the crossing found first, all but the last two or three
+    are a comparison.
 
     Shown, not assumed: the crossing is guessed between lo and hi and refined by a Newton
     step; the test is then computed at a and b themselves, as the halvings compute it, and
