@@ -84,22 +84,14 @@ class TurningCurve:
             else:
                 hi, k_hi, node = mids[node], below[node], 2 * node + 1
         # The rest as they come, each decided by comparing mid with a bracket of the crossing
-        # where that is shown to give the same turn, else by the curvature (inline).
+        # where that is shown to give the same turn, else by the curvature there.
         a, b = _bracket(self, k, (lo, k_lo), (hi, k_hi))
-        ks, rate, lock, pole = self.kappa_sat, self.rate, self.lock, math.log(self.lock_ratio)
-        exp, log = math.exp, math.log
         for _ in range(_HALVINGS - _TREE_DEPTH):
             mid = 0.5 * (lo + hi)
-            if mid <= a:
+            if mid <= a or (mid < b and self.curvature(math.exp(mid)) < k):
                 lo = mid
-            elif mid >= b:
-                hi = mid
             else:
-                x = log(exp(mid))
-                if x < pole and ks * (1.0 - exp(-rate * x)) + lock * x / (pole - x) < k:
-                    lo = mid
-                else:
-                    hi = mid
+                hi = mid
         return math.exp(0.5 * (lo + hi))
 
     def min_turning_radius(self, max_ratio: float, headroom: float = PLAN_HEADROOM) -> float:
@@ -173,10 +165,8 @@ def _bracket(
     a, b = x - delta, x + delta
     if not lo <= a < b <= hi:  # (a curve too flat here to gain anything; or no crossing)
         return -math.inf, math.inf
-    ya, yb = math.log(math.exp(a)), math.log(math.exp(b))
-    below_a = ks * (1.0 - math.exp(-rate * ya)) + lock * ya / (pole - ya) - k
-    above_b = ks * (1.0 - math.exp(-rate * yb)) + lock * yb / (pole - yb) - k
-    if below_a < -margin and above_b > margin:
+    # (the test's own computation at a and b: the curvature at exp(mid), as the halvings)
+    if curve.curvature(math.exp(a)) - k < -margin and curve.curvature(math.exp(b)) - k > margin:
         return a, b
     return -math.inf, math.inf
 
