@@ -4,7 +4,7 @@ hidden parameters, the same plans' seeds, through the real command line (`roachp
 Guarded: `--look-ahead --guard P --replans N`: the look-ahead holds the robot before a predicted
 stop and the command re-plans from where it stands, steering clear of where the rollouts failed.
 
-    .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 3] [--fitted]
+    .venv/bin/python benchmarks/bench_guard.py [--runs 20] [--guard 0.5] [--replans 6] [--fitted]
         [--friction 0.7] [--motor-mismatch 0.06] [--motor-gain 0.95] [--scene double_bridge_rough]
         [--look-ahead-engine mujoco]
 
@@ -208,7 +208,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=20, help="runs of each setting")
     ap.add_argument("--guard", type=float, default=0.5, help="the guard's threshold")
-    ap.add_argument("--replans", type=int, default=3, help="re-plans a guarded run may make")
+    ap.add_argument(
+        "--replans", type=int, default=6, help="re-plans a guarded run may make (the command's)"
+    )
     ap.add_argument(
         "--look-ahead-engine",
         default="mujoco",
