@@ -209,7 +209,10 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=20, help="runs of each setting")
     ap.add_argument("--guard", type=float, default=0.5, help="the guard's threshold")
     ap.add_argument(
-        "--replans", type=int, default=6, help="re-plans a guarded run may make (the command's)"
+        "--replans",
+        type=int,
+        default=6,
+        help="re-plans a guarded run may make (the command's default)",
     )
     ap.add_argument(
         "--look-ahead-engine",

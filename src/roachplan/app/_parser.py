@@ -822,9 +822,9 @@ def _add_robot_parser(sub) -> None:
         type=int,
         default=6,
         metavar="N",
-        help="re-plans after the guard held the robot, at most (default 6: after the second, "
-        "each is lines and turns on the spot, and on a slippery slope each such leg reached "
-        "the goal about 2 times in 5)",
+        help="re-plans after the guard held the robot, at most (default 6: after a second "
+        "drift hold each re-plan is lines and turns on the spot, and on a slippery slope such "
+        "legs reached the goal about 2 times in 5)",
     )
     p.add_argument(
         "--look-ahead-noise",
