@@ -99,6 +99,29 @@ def test_the_guard_lets_a_spin_wander_halfway_to_the_stop_and_the_robot_come_bac
     assert held([*spin, (0.05, False), (0.07, False), (0.08, False)])[-2:] == [False, True]
 
 
+def test_the_guard_holds_a_drifting_robot_by_how_soon_it_would_reach_the_stop():
+    """drift_rate: the least-squares slope of the distance off over time, through the pose
+    noise; drift_hold_at: past the allowed drift, held where the drift going on `lead` seconds
+    would come within DRIFT_MARGIN of the stop; never nearer than the allowance; a robot
+    coming back, or lead None, at the allowance."""
+    from roachplan.robot import DRIFT_MARGIN, drift_hold_at, drift_rate
+
+    t = np.arange(0.0, 0.5, 0.02)
+    noise = np.random.default_rng(5).normal(0.0, 0.002, len(t))
+    assert drift_rate(t, 0.08 + 0.05 * t + noise) == pytest.approx(0.05, abs=0.01)
+    assert drift_rate(t, 0.10 - 0.03 * t) == pytest.approx(-0.03)
+    assert drift_rate(t[:2], [0.0, 0.1]) == 0.0 and drift_rate([1.0] * 3, [0, 0.1, 0.2]) == 0.0
+    stop, allowed = 0.15, 0.075
+    slow = drift_hold_at(allowed, 0.02, lead=0.4, stop=stop)
+    assert slow == pytest.approx(stop - DRIFT_MARGIN - 0.008)
+    fast = drift_hold_at(allowed, 0.10, lead=0.4, stop=stop)
+    assert allowed < fast < slow  # (a faster drift is held nearer)
+    assert drift_hold_at(allowed, 0.5, lead=0.4, stop=stop) == allowed  # (never nearer)
+    assert drift_hold_at(allowed, -0.05, lead=0.4, stop=stop) == stop - DRIFT_MARGIN
+    assert drift_hold_at(allowed, 0.05, lead=None, stop=stop) == allowed
+    assert drift_hold_at(0.14, 0.0, lead=0.4, stop=stop) == 0.14  # (a spin's allowance)
+
+
 def test_a_drifted_robot_turns_to_rejoin_the_rest_of_its_path_ahead_without_skipping_a_spin():
     """rejoin_path: from where the robot stands, a turn on the spot to face the old path, a
     straight line to it, meeting it at the first waypoint REJOIN_MIN or twice its distance off
@@ -417,16 +440,21 @@ def test_a_look_ahead_is_drawn_as_the_stretch_it_covered_in_its_risk_colour():
 def test_the_run_s_window_estimates_are_pooled_by_the_distance_walked_in_each():
     """pooled_mismatch: a motor's mismatch holds for the run, so each look-ahead drives with
     the mean of every window's estimate so far, weighted by how far the robot walked in it
-    (a window that barely walked says little); none estimated: None."""
-    from roachplan.robot import pooled_mismatch
+    (a window that barely walked says little) and drawn towards 0 by PRIOR_WALK (one wild
+    first window is not trimmed in full); none estimated: None."""
+    from roachplan.robot import PRIOR_WALK, pooled_mismatch
 
     assert pooled_mismatch([]) is None
-    assert pooled_mismatch([(0.1, 0.5)]) == pytest.approx(0.1)
-    assert pooled_mismatch([(0.10, 0.6), (0.16, 0.2), (0.06, 0.2)]) == pytest.approx(0.104)
+    assert pooled_mismatch([(0.1, 0.5)]) == pytest.approx(0.1 * 0.5 / (0.5 + PRIOR_WALK))
+    assert pooled_mismatch([(0.4, 0.2)]) < 0.4 / 2  # (a first stretch alone: under half)
+    pooled = pooled_mismatch([(0.10, 0.6), (0.16, 0.2), (0.06, 0.2)])
+    assert pooled == pytest.approx(0.104 / (1 + PRIOR_WALK))
     rng = np.random.default_rng(0)  # (windows scattered round 0.12: the pool is nearer it)
-    windows = [(0.12 + rng.normal(0, 0.03), 0.5) for _ in range(6)]
+    windows = [(0.12 + rng.normal(0, 0.03), 0.5) for _ in range(40)]
     pooled = pooled_mismatch(windows)
-    assert pooled is not None and abs(pooled - 0.12) < 0.03 / math.sqrt(6) * 3
+    assert pooled is not None and abs(pooled - 0.12) < 0.03 / math.sqrt(40) * 3 + 0.12 * (
+        PRIOR_WALK / 20
+    )
 
 
 def test_the_motors_mismatch_is_estimated_from_how_the_robot_turned_against_its_commands():

@@ -145,6 +145,15 @@ def wait_for(stream, text: str, timeout: float) -> str:
             ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift", "near"],
             "--guard-drift near: expected a share of --max-deviation or 'none'",
         ),
+        (["robot", "--guard-drift-lead", "1"], "--guard-drift-lead is a setting of the guard;"),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift-lead", "0"],
+            "--guard-drift-lead 0: expected a number above 0 and at most 5 [s] (it is not positive)",
+        ),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift-lead", "soon"],
+            "--guard-drift-lead soon: expected a time [s] or 'none'",
+        ),
         (["robot", "--edge-keep", "wide"], "--edge-keep wide: expected a distance [m] or 'none'"),
         (["robot", "--edge-keep", "0.5"], "--edge-keep 0.5: expected a number from 0 to 0.2"),
         (["robot", "--no-trim"], "--no-trim: only the look-ahead trims the commands; add"),
@@ -341,7 +350,8 @@ def test_a_robot_commands_bad_flag_loads_nothing_heavy():
 
 def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs(tmp_path):
     """--guard-drift: the guard also holds a robot that drifts that share of max_deviation from
-    its path (here 0.15: 2.25 cm, while the look-ahead holds on no chance: --guard 0), before
+    its path (here 0.15: 2.25 cm, while the look-ahead holds on no chance: --guard 0; with no
+    lead, --guard-drift-lead none, at once: the test below has the lead), before
     the loop's own deviation stop; the command re-plans from where it stands with the scene's
     arcs twice as wide, and the legs' logs say both. The twin's motors differ (left x 1.12,
     right x 0.88): the loop divides the mismatch the look-ahead estimates out of its commands
@@ -357,7 +367,8 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
         proc = robot(
             ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
             "--look-ahead", "--look-ahead-draws", "2", "--look-ahead-horizon", "1",
-            "--guard", "0", "--guard-drift", "0.15", "--replans", "1", "--json",
+            "--guard", "0", "--guard-drift", "0.15", "--guard-drift-lead", "none",
+            "--replans", "1", "--json",
         )  # fmt: skip
         out, err = proc.communicate(timeout=240)
     summary = json.loads(out)
@@ -382,6 +393,38 @@ def test_a_robot_that_drifts_is_held_by_the_guard_and_re_planned_with_wider_arcs
     # (The summary's is the loop's at the end: a newer estimate than the last recorded one's,
     # when the leg ended while a look-ahead driven under it ran: a window more, a few points.)
     assert summary["trim"] == pytest.approx(trims[-1], abs=0.03)
+
+
+def test_a_drifting_robot_is_held_once_its_drift_would_reach_the_stop_within_the_lead(tmp_path):
+    """--guard-drift-lead: past --guard-drift (here 0.375 of a 6 cm --max-deviation: 2.25 cm)
+    the guard holds the robot only once its drift, going on the lead (2 s) at its rate over the
+    last half second, would come within DRIFT_MARGIN of the loop's stop: the detail's distance
+    off, rate and hold distance agree with drift_hold_at, and the loop's own stop never came.
+    The twin is the slippery one of the test above (it wanders 2.7-3.5 cm off within 3 s)."""
+    from roachplan.robot import drift_hold_at
+
+    with twin(*MOCAP, "--motor-mismatch", "0.12", "--friction", "0.6") as (ready, _control):
+        proc = robot(
+            ready, "--robot", str(ready["command_port"]), "--go", "--no-predict",
+            "--max-deviation", "0.06", "--look-ahead", "--look-ahead-draws", "2",
+            "--look-ahead-horizon", "1", "--guard", "0", "--guard-drift", "0.375",
+            "--guard-drift-lead", "2", "--replans", "0", "--json",
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=240)
+    summary = json.loads(out)
+    assert summary["reason"] == "drift", (err, summary.get("detail"))
+    found = re.search(
+        r"drifted ([\d.]+) m off its path, ([+-][\d.]+) cm/s \(guard drift ([\d.]+) m, held "
+        r"([\d.]+) m with a 2 s lead, before the loop's stop at 0.06 m\)",
+        summary["detail"],
+    )
+    assert found, summary["detail"]
+    off, rate, allowed, held_at = (float(v) for v in found.groups())
+    assert allowed >= 0.0225 - 1e-4 and off > held_at
+    assert held_at == pytest.approx(
+        drift_hold_at(allowed, rate / 100, lead=2.0, stop=0.06), abs=2e-3
+    )  # (the detail's figures rounded)
+    assert off < 0.06
 
 
 def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_path(
@@ -416,7 +459,7 @@ def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_pat
                 "--max-pose-age", "0.6", "--robot", str(ready["command_port"]), "-o", str(log),
                 "--go", "--no-predict", "--look-ahead", "--look-ahead-draws", "2",
                 "--look-ahead-horizon", "1", "--guard", "0", "--guard-drift", "0.15",
-                "--replans", "1", "--json",
+                "--guard-drift-lead", "none", "--replans", "1", "--json",
             ]
         )  # fmt: skip
     out, err = capsys.readouterr()

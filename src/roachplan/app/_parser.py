@@ -818,6 +818,14 @@ def _add_robot_parser(sub) -> None:
         "look-ahead's chance holds it)",
     )
     p.add_argument(
+        "--guard-drift-lead",
+        default=None,
+        metavar="S",
+        help="with --guard: a robot past --guard-drift is held only once its drift, going on S "
+        "seconds at its present rate, would reach --max-deviation (default 0.4; 'none': held "
+        "at --guard-drift)",
+    )
+    p.add_argument(
         "--replans",
         type=int,
         default=6,

@@ -175,10 +175,9 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             ),
         )
     except SettingError as exc:
-        if exc.key == "guard_drift":  # (its one validator)
-            raise refused("--guard-drift", args.guard_drift, exc.expected) from None
-        if exc.key == "edge_keep":
-            raise refused("--edge-keep", args.edge_keep, exc.expected) from None
+        if exc.key in ("guard_drift", "guard_drift_lead", "edge_keep"):  # (their validators)
+            flag = "--" + exc.key.replace("_", "-")
+            raise refused(flag, getattr(args, exc.key), exc.expected) from None
         raise
 
 
@@ -212,13 +211,23 @@ def _look_ahead_flags(args: argparse.Namespace) -> dict:
 
 
 def _guard_drift(args: argparse.Namespace) -> dict:
-    """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none'), as
-    a keyword; none when the flag is absent (the setting's default)."""
-    if args.guard_drift is not None and args.guard is None:
-        raise UsageError("--guard-drift is a setting of the guard; add --guard P")
-    return _number_or_none(
-        "guard_drift", "--guard-drift", args.guard_drift, "a share of --max-deviation"
-    )
+    """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none') and
+    guard_drift_lead from --guard-drift-lead (seconds, or 'none'), as keywords; none for a flag
+    absent (the setting's default)."""
+    for flag, value in (
+        ("--guard-drift", args.guard_drift),
+        ("--guard-drift-lead", args.guard_drift_lead),
+    ):
+        if value is not None and args.guard is None:
+            raise UsageError(f"{flag} is a setting of the guard; add --guard P")
+    return {
+        **_number_or_none(
+            "guard_drift", "--guard-drift", args.guard_drift, "a share of --max-deviation"
+        ),
+        **_number_or_none(
+            "guard_drift_lead", "--guard-drift-lead", args.guard_drift_lead, "a time [s]"
+        ),
+    }
 
 
 def _edge_keep(args: argparse.Namespace) -> dict:

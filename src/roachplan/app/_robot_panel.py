@@ -432,6 +432,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 cfg=LookAheadConfig(latency=form.latency),
                 guard=form.guard,
                 drift=defaults.guard_drift,
+                lead=defaults.guard_drift_lead,
                 trim=defaults.trim,
                 estimates=carried.estimates,
                 period=defaults.look_ahead_period,

@@ -84,6 +84,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "REJOIN_MIN": "._run",
         "replan_radius": "._run",
         "drift_allowance": "._run",
+        "drift_hold_at": "._run",
+        "drift_rate": "._run",
+        "DRIFT_MARGIN": "._run",
         "RETURN_SLACK": "._run",
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
@@ -109,6 +112,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "pooled_mismatch": "._estimate",
         "trim_commands": "._estimate",
         "straight_mismatches": "._estimate",
+        "PRIOR_WALK": "._estimate",
         "remaining_path": "._lookahead",
         "phase_at": "._lookahead",
         "PHASE_KEPT": "._lookahead",
@@ -146,6 +150,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._config import LoopConfig as LoopConfig
     from ._config import RobotSettings as RobotSettings
     from ._errors import RobotError as RobotError
+    from ._estimate import PRIOR_WALK as PRIOR_WALK
     from ._estimate import estimate_mismatch as estimate_mismatch
     from ._estimate import pooled_mismatch as pooled_mismatch
     from ._estimate import straight_mismatches as straight_mismatches
@@ -205,6 +210,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._record import scene_record as scene_record
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import AVOID_TRIES as AVOID_TRIES
+    from ._run import DRIFT_MARGIN as DRIFT_MARGIN
     from ._run import EDGE_DRIFT as EDGE_DRIFT
     from ._run import EDGE_TRIES as EDGE_TRIES
     from ._run import GUARD_HOLDS as GUARD_HOLDS
@@ -217,6 +223,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import RobotRun as RobotRun
     from ._run import clearance as clearance
     from ._run import drift_allowance as drift_allowance
+    from ._run import drift_hold_at as drift_hold_at
+    from ._run import drift_rate as drift_rate
     from ._run import drive_robot as drive_robot
     from ._run import edge_margin as edge_margin
     from ._run import plan_clear_of as plan_clear_of

@@ -74,6 +74,11 @@ class RobotSettings:
     A look-ahead's chance comes a second or more after the pose it started from, too late for
     a turn the robot cannot make; the drift is seen in the period it happens. None: only the
     look-ahead's chance holds it."""
+    guard_drift_lead: float | None = s(0.4, optional(positive("s", 5.0)))
+    """With guard_drift: a robot past it is held only once its drift, going on this long at
+    its rate over the last half second, would come within 1 cm of the loop's stop [s]
+    (robot.drift_hold_at: a robot held drifts on a median 0.13 s, a 90th percentile 0.34 s of
+    its rate; many drifting robots come back on their own); None: held at guard_drift."""
     edge_keep: float | None = s(0.04, optional(between(0.0, 0.2, "m")))
     """A plan from where the robot stands keeps this far from the drop-offs [m]: the robot may
     drift this far sideways off it anywhere (past its first 10 cm) and still stand where the

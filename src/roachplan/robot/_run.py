@@ -4,6 +4,7 @@ the robot's actual start (predict)."""
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import logging
 import math
@@ -361,6 +362,48 @@ def drift_allowance(
     return max(limit, min(allowed, off + RETURN_SLACK))
 
 
+DRIFT_MARGIN = 0.01
+"""A robot the guard holds for drifting drifts on this much further after the hold, at the
+least [m] (drift_hold_at: bench_guard's drift holds, 193 on three twins, took it a median 0.7
+cm and a 90th percentile 1.3 cm further off its path)."""
+RATE_WINDOW = 0.5
+"""drift_rate's poses: those of the last this many seconds [s] (the motion capture's 2 mm noise
+gives a slope over it about 1 cm/s of scatter)."""
+
+
+def drift_rate(times, offs) -> float:
+    """How fast the robot is drifting off its path [m/s]: the least-squares slope of its
+    distances off it, `offs` [m], over `times` [s] (a few poses': RATE_WINDOW); 0 with under 3
+    poses or no time between them."""
+    t, d = np.asarray(times, dtype=float), np.asarray(offs, dtype=float)
+    if len(t) < 3:
+        return 0.0
+    t = t - t.mean()
+    spread = float(np.dot(t, t))
+    return float(np.dot(t, d - d.mean()) / spread) if spread > 0 else 0.0
+
+
+def drift_hold_at(allowed: float, rate: float, *, lead: float | None, stop: float) -> float:
+    """How far off its path [m] the guard lets a robot drifting at `rate` [m/s] (off it: > 0)
+    be, given the drift limit it allows (`allowed` [m]: drift_allowance's): where the drift,
+    going on `lead` seconds more at that rate, plus DRIFT_MARGIN, would reach the loop's stop
+    (`stop` [m]: max_deviation), but never nearer than `allowed`; lead None: `allowed`.
+
+    A drift hold ends the leg; many robots come back on their own. On bench_guard's milder
+    held-out twin (friction 0.58, mismatch -0.08), 15 unguarded runs went past a fixed hold's
+    7.5 cm and 12 of them reached the goal, the furthest 14.4 cm off: each was still drifting
+    away at 7.5 cm (0.9-6.9 cm/s), so only how soon it would reach the stop tells them apart.
+    A robot held drifts on for a while (the stop frames' way to its motors, the gait's step
+    under way): a median 0.13 s, a 90th percentile 0.34 s of its drift rate over the last
+    half second, on 193 drift holds of three twins. Held by a lead of 0.4 s, that twin's
+    unguarded runs would have been held in 4 of the 15 that came back; with the main twin's
+    and a harsher one's, in 7 of 21 that came back and in all 18 that reached the stop, each
+    0.3 s or more before it, 8-13 cm off."""
+    if lead is None:
+        return allowed
+    return max(allowed, stop - DRIFT_MARGIN - lead * max(rate, 0.0))
+
+
 def replan_radius(radius: float, drifts: int) -> float:
     """The radius of a re-plan's arcs [m]: the scene's `radius` [m] doubled for each time the
     guard held the robot for drifting off its path so far (`drifts`), up to MAX_WIDENING
@@ -531,6 +574,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 cfg=settings.look_ahead or LookAheadConfig(),
                 guard=settings.guard,
                 drift=settings.guard_drift,
+                lead=settings.guard_drift_lead,
                 trim=settings.trim,
                 estimates=tuple(estimates),
                 period=settings.look_ahead_period,
@@ -604,6 +648,7 @@ def watch_ahead(
     recorder: RunRecorder | None,
     also: Callable[[float, LookAhead], None] | None = None,
     drift: float | None = None,
+    lead: float | None = None,
     trim: bool = False,
     estimates: tuple[tuple[float, float], ...] = (),
 ) -> LookAheadRunner:
@@ -615,7 +660,9 @@ def watch_ahead(
     RobotSettings.guard_drift), or, EDGE_DRIFT of that off it, its centre comes nearer a cell
     of the safety map where it cannot stand than one where it can (the edge of a bridge),
     held as "drift" (a robot turning on the spot at a spin: halfway from that limit to the
-    loop's stop; RETURN_SLACK). trim: the motors' mismatch each look-ahead estimates (pooled
+    loop's stop; RETURN_SLACK); with a `lead` [s] (RobotSettings.guard_drift_lead; None: at
+    that limit), past that limit only once its drift would reach the stop within the lead
+    (drift_hold_at). trim: the motors' mismatch each look-ahead estimates (pooled
     with `estimates`, the legs' before) is divided out of the loop's commands from then on
     (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
@@ -659,6 +706,7 @@ def watch_ahead(
         limit = drift * safety.max_deviation  # [m]
         allowed = [limit]  # (how far off it may be [m]: more after a spin, while it comes back)
         spin_limit = (limit + safety.max_deviation) / 2  # (a spin's wander: held before the stop)
+        recent: collections.deque = collections.deque()  # ((t [s], off [m]): drift_rate's)
 
         def drifted(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
             if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
@@ -670,12 +718,19 @@ def watch_ahead(
             allowed[0] = drift_allowance(
                 allowed[0], off, spinning=loop.spinning, limit=limit, spin_limit=spin_limit
             )
-            if off > allowed[0]:
+            t = event.sample.t_receive
+            recent.append((t, off))
+            while recent[0][0] < t - RATE_WINDOW:
+                recent.popleft()
+            rate = drift_rate(*zip(*recent))
+            held_at = drift_hold_at(allowed[0], rate, lead=lead, stop=safety.max_deviation)
+            if off > held_at:
                 loop.stop(
                     "drift",
-                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path (guard "
-                    f"drift {allowed[0]:.3g} m, before the loop's stop at "
-                    f"{safety.max_deviation:g} m)",
+                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, "
+                    f"{100 * rate:+.1f} cm/s (guard drift {allowed[0]:.3g} m"
+                    + ("" if lead is None else f", held {held_at:.3g} m with a {lead:g} s lead")
+                    + f", before the loop's stop at {safety.max_deviation:g} m)",
                 )
             elif off > EDGE_DRIFT * limit and smap.off_standable(x, y) > 0.0:
                 # (Its centre is nearer a cell where it cannot stand than one where it can: a
