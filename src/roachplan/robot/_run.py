@@ -389,16 +389,17 @@ def drift_hold_at(allowed: float, rate: float, *, lead: float | None, stop: floa
     going on `lead` seconds more at that rate, plus DRIFT_MARGIN, would reach the loop's stop
     (`stop` [m]: max_deviation), but never nearer than `allowed`; lead None: `allowed`.
 
-    A drift hold ends the leg; many robots come back on their own. On bench_guard's milder
-    held-out twin (friction 0.58, mismatch -0.08), 15 unguarded runs went past a fixed hold's
-    7.5 cm and 12 of them reached the goal, the furthest 14.4 cm off: each was still drifting
-    away at 7.5 cm (0.9-6.9 cm/s), so only how soon it would reach the stop tells them apart.
+    A drift hold ends the leg; many robots come back on their own. On bench_guard's twin with
+    friction 0.58 and mismatch -0.08, 18 of 20 unguarded runs went past a fixed hold's 7.5 cm
+    and 15 of them reached the goal, the furthest 14.4 cm off; those of the first ten were each
+    still drifting away at 7.5 cm (0.9-6.9 cm/s), so only how soon a robot would reach the stop
+    tells them apart.
     A robot held drifts on for a while (the stop frames' way to its motors, the gait's step
     under way): a median 0.13 s, a 90th percentile 0.34 s of its drift rate over the last
     half second, on 193 drift holds of three twins. Held by a lead of 0.4 s, that twin's
     unguarded runs would have been held in 4 of the 15 that came back; with the main twin's
     and a harsher one's, in 7 of 21 that came back and in all 18 that reached the stop, each
-    0.3 s or more before it, 8-13 cm off."""
+    0.27 s or more before it and 10.7-13.2 cm off."""
     if lead is None:
         return allowed
     return max(allowed, stop - DRIFT_MARGIN - lead * max(rate, 0.0))
