@@ -420,7 +420,7 @@ def test_a_drifting_robot_is_held_once_its_drift_would_reach_the_stop_within_the
     )
     assert found, summary["detail"]
     off, rate, allowed, held_at = (float(v) for v in found.groups())
-    assert allowed >= 0.0225 - 1e-4 and off > held_at
+    assert allowed >= 0.0225 - 1e-4 and off > held_at - 6e-4  # (off printed to the mm)
     assert held_at == pytest.approx(
         drift_hold_at(allowed, rate / 100, lead=2.0, stop=0.06), abs=2e-3
     )  # (the detail's figures rounded)

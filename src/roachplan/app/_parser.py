@@ -814,16 +814,16 @@ def _add_robot_parser(sub) -> None:
         default=None,
         metavar="F",
         help="with --guard: also hold the robot and re-plan once it is F times --max-deviation "
-        "off its path, before the loop stops it there (default 0.5; 'none': only the "
-        "look-ahead's chance holds it)",
+        "off its path (past that, as --guard-drift-lead says), before the loop stops it there "
+        "(default 0.5; 'none': only the look-ahead's chance holds it)",
     )
     p.add_argument(
         "--guard-drift-lead",
         default=None,
         metavar="S",
         help="with --guard: a robot past --guard-drift is held only once its drift, going on S "
-        "seconds at its present rate, would reach --max-deviation (default 0.4; 'none': held "
-        "at --guard-drift)",
+        "seconds at its present rate, would come within 1 cm of --max-deviation (default 0.4; "
+        "'none': held at --guard-drift)",
     )
     p.add_argument(
         "--replans",

@@ -69,7 +69,8 @@ class RobotSettings:
     looks ahead (look_ahead, or LookAheadConfig's defaults when that is None)."""
     guard_drift: float | None = s(0.5, optional(positive("-", 1.0)))
     """With the guard on: also hold the robot (the run ends as "drift") once it is this share of
-    the loop's max_deviation from its path (0.5: 7.5 cm of the default 15 cm), before the
+    the loop's max_deviation from its path (0.5: 7.5 cm of the default 15 cm; past it, as
+    guard_drift_lead says), before the
     loop's own stop there, so that it is re-planned from where it stands rather than stopped.
     A look-ahead's chance comes a second or more after the pose it started from, too late for
     a turn the robot cannot make; the drift is seen in the period it happens. None: only the

@@ -350,7 +350,8 @@ def drift_allowance(
     drift limit [m]; while the robot turns on the spot at a spin (`spinning`), as far as it
     has wandered plus RETURN_SLACK, up to `spin_limit` [m] (watch_ahead: halfway to the loop's
     stop); after the spin, RETURN_SLACK further than the nearest it has come back to since,
-    never under `limit`. The guard holds the robot where off is more.
+    never under `limit`. The guard holds the robot where off is more than that, or, with a
+    lead, than drift_hold_at's distance (past this allowance, in a spin too).
 
     A spin wanders from its point: up to 7.4 cm in a 55 deg spin of bench_guard's mirrored
     twin on its slippery rough bridge, 15 cm in 110 deg (to the loop's stop), where the same
@@ -363,12 +364,14 @@ def drift_allowance(
 
 
 DRIFT_MARGIN = 0.01
-"""A robot the guard holds for drifting drifts on this much further after the hold, at the
-least [m] (drift_hold_at: bench_guard's drift holds, 193 on three twins, took it a median 0.7
-cm and a 90th percentile 1.3 cm further off its path)."""
+"""About how much further a robot the guard holds for drifting drifts on after the hold, at
+any rate [m] (drift_hold_at: bench_guard's drift holds, 193 on three twins, took it a median
+0.7 cm and a 90th percentile 1.3 cm further off its path; the lead covers what grows with the
+rate)."""
 RATE_WINDOW = 0.5
-"""drift_rate's poses: those of the last this many seconds [s] (the motion capture's 2 mm noise
-gives a slope over it about 1 cm/s of scatter)."""
+"""drift_rate's poses: those of the last this many seconds [s] (long enough to average the
+motion capture's noise and the gait's sway, short enough to follow a drift that sets in; the
+stop distances drift_hold_at's lead comes from were read at this window)."""
 
 
 def drift_rate(times, offs) -> float:
@@ -714,8 +717,9 @@ def watch_ahead(
                 return
             x, y = float(event.position[0]), float(event.position[1])
             off = distance_to_path((x, y), path_xy)
-            # (drift_allowance: a spinning robot held only halfway to the loop's stop; the
-            # edge check below holds throughout)
+            # (drift_allowance: a spinning robot held only halfway to the loop's stop, and
+            # with a lead only past drift_hold_at's distance; the edge check below holds
+            # throughout)
             allowed[0] = drift_allowance(
                 allowed[0], off, spinning=loop.spinning, limit=limit, spin_limit=spin_limit
             )

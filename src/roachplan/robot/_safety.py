@@ -40,7 +40,9 @@ max_pose_age; outside_area: the robot's centre outside the planning area by more
 area_margin; off_standable: further than standable_margin from any place the robot can stand;
 deviation: further than max_deviation from the path; lookahead: the look-ahead's chance of
 going on without a stop or a fall fell under RobotSettings.guard; drift: with the guard on,
-further than RobotSettings.guard_drift from the path (held before the deviation stop); stop / cancel: the user's Stop or
+further than RobotSettings.guard_drift from the path and, with guard_drift_lead, drifting so
+that the deviation stop would come within the lead (held before it), or at the edge of the
+ground it can stand on; stop / cancel: the user's Stop or
 Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a link down)."""
 
 
