@@ -405,8 +405,8 @@ def test_a_drifting_robot_is_held_once_its_drift_would_reach_the_stop_within_the
 
     with twin(*MOCAP, "--motor-mismatch", "0.12", "--friction", "0.6") as (ready, _control):
         proc = robot(
-            ready, "--robot", str(ready["command_port"]), "--go", "--no-predict",
-            "--max-deviation", "0.06", "--look-ahead", "--look-ahead-draws", "2",
+            ready, "--robot", str(ready["command_port"]), "-o", str(tmp_path / "run.mcap"),
+            "--go", "--no-predict", "--max-deviation", "0.06", "--look-ahead", "--look-ahead-draws", "2",
             "--look-ahead-horizon", "1", "--guard", "0", "--guard-drift", "0.375",
             "--guard-drift-lead", "2", "--replans", "0", "--json",
         )  # fmt: skip
