@@ -512,7 +512,7 @@ def _arc(kappa: float, speed: float, seconds: float, t0: float = 0.0, start=(0.0
 
 def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_then_turns_on_the_spot(bridge):
     """replan_radius: the scene's radius, doubled for each drift hold so far, up to
-    MAX_WIDENING times; past that SPIN_ONLY_RADIUS, with which the drivable planner's path
+    MAX_WIDENING times; past that, or after a stall hold, SPIN_ONLY_RADIUS, with which the drivable planner's path
     is straight lines joined by turns on the spot (its heading changes only at its spins)."""
     from roachplan.experiments import plan
     from roachplan.robot import MAX_WIDENING, SPIN_ONLY_RADIUS, replan_radius
@@ -522,6 +522,8 @@ def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_then_turns_on_the_spot(
     widened = max(k for k in range(8) if 2.0**k <= MAX_WIDENING)
     assert replan_radius(0.13, widened) == pytest.approx(0.13 * 2.0**widened)
     assert replan_radius(0.13, widened + 1) == replan_radius(0.13, 5) == SPIN_ONLY_RADIUS
+    # (a robot the guard held for making no progress: lines and spins at once)
+    assert replan_radius(0.13, 0, stalled=True) == SPIN_ONLY_RADIUS
     world, _ = bridge
     planner = dataclasses.replace(world.scene.planner, turning_radius=SPIN_ONLY_RADIUS)
     lines = plan(world.with_planner(planner), seed=0)

@@ -156,8 +156,9 @@ def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
     mismatch estimates of the same robot (pose source and settings); the drift holds in a
     row, one more after a drift hold, as many after a leg routed again before Go, none after
     any other end; after a guard's hold, where its last look-ahead's rollouts failed (to keep
-    clear of), and after a drift hold, the leg (to drive on along with no re-plan). Another
-    robot carries nothing."""
+    clear of), and after a drift hold, the leg (to drive on along with no re-plan); whether
+    a stall hold ended it (lines and turns on the spot next). Another robot carries
+    nothing."""
     from types import SimpleNamespace
 
     from roachplan.app._robot_route import carried_from
@@ -177,6 +178,7 @@ def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
                 "source_key": key,
                 "went": True,
                 "drifts": 1,
+                "stalled": False,
                 "estimates": ((0.1, 2.0),),
                 "lookaheads": looked,
                 **kw,
@@ -199,6 +201,12 @@ def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
     assert said(carried_from(leg(result=ended("drift"), lookaheads=[]), key))[2] == ()
     assert said(carried_from(leg(went=False, result=None), key)) == (((0.1, 2.0),), 1, (), False)
     assert said(carried_from(leg(result=ended("drift")), ("udp-json", ()))) == ((), 0, (), False)
+    # A stall hold (no progress): the next route is lines and spins; the one after is not,
+    # unless it was routed again before Go.
+    assert carried_from(leg(result=ended("stall")), key).stalled
+    assert said(carried_from(leg(result=ended("stall")), key)) == (((0.1, 2.0),), 0, failed, False)
+    assert not carried_from(leg(result=ended("drift"), stalled=True), key).stalled
+    assert carried_from(leg(went=False, result=None, stalled=True), key).stalled
 
 
 def test_a_route_after_a_guard_hold_keeps_clear_of_its_rollouts_failures_or_drives_on():

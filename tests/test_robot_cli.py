@@ -146,6 +146,15 @@ def wait_for(stream, text: str, timeout: float) -> str:
             "--guard-drift near: expected a share of --max-deviation or 'none'",
         ),
         (["robot", "--guard-drift-lead", "1"], "--guard-drift-lead is a setting of the guard;"),
+        (["robot", "--guard-stuck", "0.5"], "--guard-stuck is a setting of the guard;"),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-stuck", "1"],
+            "--guard-stuck 1: expected a number from 0.1 to below 1 [-]",
+        ),
+        (
+            ["robot", "--look-ahead", "--guard", "0.5", "--guard-stuck", "8s"],
+            "--guard-stuck 8s: expected a share of the stuck time or 'none'",
+        ),
         (
             ["robot", "--look-ahead", "--guard", "0.5", "--guard-drift-lead", "0"],
             "--guard-drift-lead 0: expected a number above 0 and at most 5 [s] (it is not positive)",
@@ -425,6 +434,39 @@ def test_a_drifting_robot_is_held_once_its_drift_would_reach_the_stop_within_the
         drift_hold_at(allowed, rate / 100, lead=2.0, stop=0.06), abs=2e-3
     )  # (the detail's figures rounded)
     assert off < 0.06
+
+
+def test_a_robot_that_makes_no_progress_is_held_and_re_planned_with_lines_and_turns(tmp_path):
+    """--guard-stuck: the guard holds a robot that has made no progress along its path for that
+    share of the scene's stuck time (here 0.3: 3 s of 10 s), before the loop's own stuck stop;
+    the command re-plans from where it stands with straight lines and turns on the spot, and
+    the second leg's log records that plan. The twin's ground is ice (friction 0.1): in PyBullet
+    the robot slid to a stop 0.12 m along the path and walked in place until stuck."""
+    from roachplan.robot import SPIN_ONLY_RADIUS, read_run
+
+    log = tmp_path / "run.mcap"
+    with twin(*MOCAP, "--friction", "0.1") as (ready, _control):
+        proc = robot(
+            ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
+            "--no-predict", "--look-ahead", "--look-ahead-draws", "2", "--look-ahead-horizon",
+            "1", "--guard", "0", "--guard-drift", "none", "--guard-stuck", "0.3",
+            "--replans", "1", "--json",
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=240)
+    summary = json.loads(out)
+    assert len(summary["held"]) == 1, (err, summary.get("reason"), summary.get("detail"))
+    held = summary["held"][0]
+    found = re.search(
+        r"made no progress along its path for ([\d.]+) s \(guard stall 3 s, before the loop's "
+        r"stuck stop at 10 s\)",
+        held["detail"],
+    )
+    assert held["reason"] == "stall" and found, held
+    assert 3.0 <= float(found.group(1)) < 10.0
+    assert "straight lines and turns on the spot: it made no progress along its path" in err
+    second = read_run(tmp_path / "run-2.mcap")
+    assert second.plan["turning_radius"] == SPIN_ONLY_RADIUS and second.plan["spins"]
+    assert summary["turning_radius"] == SPIN_ONLY_RADIUS
 
 
 def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_path(

@@ -826,12 +826,21 @@ def _add_robot_parser(sub) -> None:
         "'none': held at --guard-drift)",
     )
     p.add_argument(
+        "--guard-stuck",
+        default=None,
+        metavar="F",
+        help="with --guard: also hold the robot and re-plan it with lines and turns on the spot "
+        "once it has made no progress along its path for F times the scene's stuck time, before "
+        "the loop stops it as stuck (from 0.1 to below 1; default 0.8: 8 s of 10 s; 'none': "
+        "the stuck stop ends the run)",
+    )
+    p.add_argument(
         "--replans",
         type=int,
         default=6,
         metavar="N",
         help="re-plans after the guard held the robot, at most (default 6: after a second "
-        "drift hold each re-plan is lines and turns on the spot, and on a slippery slope such "
+        "drift hold or a stall hold each re-plan is lines and turns on the spot, and on a slippery slope such "
         "legs reached the goal about 2 times in 5)",
     )
     p.add_argument(

@@ -166,7 +166,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             look_ahead=LookAheadConfig(**ahead) if args.look_ahead else None,
             guard=args.guard,
             trim=not args.no_trim,
-            **_guard_drift(args),
+            **_guard_flags(args),
             **_edge_keep(args),
             **(
                 {}
@@ -175,7 +175,7 @@ def robot_settings(args: argparse.Namespace, log: Path | None):
             ),
         )
     except SettingError as exc:
-        if exc.key in ("guard_drift", "guard_drift_lead", "edge_keep"):  # (their validators)
+        if exc.key in ("guard_drift", "guard_drift_lead", "guard_stuck", "edge_keep"):
             flag = "--" + exc.key.replace("_", "-")
             raise refused(flag, getattr(args, exc.key), exc.expected) from None
         raise
@@ -210,13 +210,15 @@ def _look_ahead_flags(args: argparse.Namespace) -> dict:
     return ahead
 
 
-def _guard_drift(args: argparse.Namespace) -> dict:
-    """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none') and
-    guard_drift_lead from --guard-drift-lead (seconds, or 'none'), as keywords; none for a flag
+def _guard_flags(args: argparse.Namespace) -> dict:
+    """RobotSettings' guard_drift from --guard-drift (a share of --max-deviation, or 'none'),
+    guard_drift_lead from --guard-drift-lead (seconds, or 'none') and guard_stuck from
+    --guard-stuck (a share of the scene's stuck time, or 'none'), as keywords; none for a flag
     absent (the setting's default)."""
     for flag, value in (
         ("--guard-drift", args.guard_drift),
         ("--guard-drift-lead", args.guard_drift_lead),
+        ("--guard-stuck", args.guard_stuck),
     ):
         if value is not None and args.guard is None:
             raise UsageError(f"{flag} is a setting of the guard; add --guard P")
@@ -226,6 +228,9 @@ def _guard_drift(args: argparse.Namespace) -> dict:
         ),
         **_number_or_none(
             "guard_drift_lead", "--guard-drift-lead", args.guard_drift_lead, "a time [s]"
+        ),
+        **_number_or_none(
+            "guard_stuck", "--guard-stuck", args.guard_stuck, "a share of the stuck time"
         ),
     }
 
@@ -398,14 +403,17 @@ def cmd_robot(args: argparse.Namespace) -> int:
 
 def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:
     """(the radius of a re-plan's arcs [m], what to tell of it): the scene's `radius` (None: a
-    planner without arcs) widened for each leg the guard held for drifting off its path
-    (replan_radius)."""
+    planner without arcs) widened for each leg the guard held for drifting off its path, and
+    after a leg it held for making no progress, lines and turns on the spot (replan_radius)."""
     from roachplan.robot import SPIN_ONLY_RADIUS, replan_radius
 
     drifts = sum(h.result.reason == "drift" for h in held)
-    if radius is None or not drifts:
+    stalled = held[-1].result.reason == "stall"
+    if radius is None or not (drifts or stalled):
         return radius, ""
-    wider = replan_radius(radius, drifts)
+    wider = replan_radius(radius, drifts, stalled=stalled)
+    if stalled:
+        return wider, "; straight lines and turns on the spot: it made no progress along its path"
     if wider == SPIN_ONLY_RADIUS:
         return wider, (
             f"; straight lines and turns on the spot: it drifted off arcs of {radius:.2f} m "

@@ -285,6 +285,9 @@ class RobotSession:
     drifts: int = 0
     """The guard's drift holds in a row before this leg (a Route from robot after one widens
     its arcs: robot.replan_radius)."""
+    stalled: bool = False
+    """The guard held the leg before this one for making no progress (a Route from robot
+    after it plans lines and turns on the spot: robot.replan_radius)."""
     result: Any = None
     """How the loop ended (a RunResult), once Go's drive has."""
     estimates: tuple = ()
@@ -433,6 +436,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
                 guard=form.guard,
                 drift=defaults.guard_drift,
                 lead=defaults.guard_drift_lead,
+                stuck=defaults.guard_stuck,
                 trim=defaults.trim,
                 estimates=carried.estimates,
                 period=defaults.look_ahead_period,
@@ -461,6 +465,7 @@ def do_robot_plan(app: App, cmd: RobotPlanCmd) -> None:
         watcher=watcher,
         source_key=key,
         drifts=carried.drifts,
+        stalled=carried.stalled,
         estimates=carried.estimates,
         plan=plan,
         lookaheads=watcher.results if watcher is not None else [],

@@ -45,7 +45,9 @@ def held_text(stands, route: Route, waypoints: int, prediction) -> str:
     else:
         what = f"planned {waypoints} waypoints (black)"
         if route.wider == SPIN_ONLY_RADIUS:
-            what += " of straight lines and turns on the spot (it drifted off arcs)"
+            what += " of straight lines and turns on the spot (it " + (
+                "made no progress along its path)" if route.stalled else "drifted off arcs)"
+            )
         elif route.wider is not None:
             what += f" with arcs of {route.wider:.2f} m (it drifted off narrower ones)"
         if route.avoid:
@@ -70,6 +72,9 @@ class Carried:
     """The motors' mismatch estimated so far ((mismatch, walked [m]) each)."""
     drifts: int = 0
     """The guard's drift holds in a row (robot.replan_radius widens the arcs)."""
+    stalled: bool = False
+    """The guard held the last leg for making no progress (robot.replan_radius: lines and
+    turns on the spot)."""
     avoid: tuple[tuple[float, float], ...] = ()
     """Where the last look-ahead's rollouts failed (x, y [m]), when the guard held the last
     leg: the re-plan keeps clear of them (robot.plan_clear_of's rule)."""
@@ -88,7 +93,10 @@ class Route:
     moved: float = 0.0
     """How far that start lies from where the robot stands [m] (robot.plan_start)."""
     wider: float | None = None
-    """The radius of its arcs [m] when widened after drift holds (None: the scene's)."""
+    """The radius of its arcs [m] when widened after drift holds or a stall hold (None: the
+    scene's)."""
+    stalled: bool = False
+    """Widened because the guard held the last leg for making no progress (Carried.stalled)."""
     avoid: tuple[tuple[float, float], ...] = ()
     """The places it was to keep clear of (Carried.avoid)."""
     clearance: float | None = None
@@ -109,8 +117,9 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
 
     radius = app.world.scene.planner.turning_radius
     wider = None
-    if radius is not None and carried.drifts:  # (it drifted off arcs this wide: wider ones)
-        wider = radius = replan_radius(radius, carried.drifts)
+    if radius is not None and (carried.drifts or carried.stalled):  # (it drifted off arcs
+        # this wide, or made no progress on them: wider ones, or lines and spins)
+        wider = radius = replan_radius(radius, carried.drifts, stalled=carried.stalled)
     try:
         here, moved = plan_start(app.world, stands)
         plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
@@ -133,6 +142,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
         here=here,
         moved=moved,
         wider=wider,
+        stalled=carried.stalled,
         avoid=carried.avoid,
         clearance=None if math.isinf(keeps) else keeps,
     )
@@ -142,19 +152,21 @@ def carried_from(before: RobotSession | None, key: tuple) -> Carried:
     """What a Route from robot goes on from: the last leg's, when it drove the same robot
     (pose source and settings: `key`); nothing for another robot. The mismatch estimates;
     the drift holds in a row (a drift hold's leg adds one; a leg routed again before Go
-    counts as that leg; any other end starts the count again); after a guard's hold, where
-    its last look-ahead's rollouts failed, and after a drift hold, the leg itself."""
+    counts as that leg; any other end starts the count again); whether the guard held it for
+    making no progress (a stall); after a guard's hold, where its last look-ahead's rollouts
+    failed, and after a drift hold, the leg itself."""
     from roachplan.robot import GUARD_HOLDS
 
     if before is None or before.source_key != key:
         return Carried()
     if not before.went:
-        return Carried(estimates=before.estimates, drifts=before.drifts)
+        return Carried(estimates=before.estimates, drifts=before.drifts, stalled=before.stalled)
     reason = before.result.reason if before.result is not None else None
     held = reason in GUARD_HOLDS
     return Carried(
         estimates=before.estimates,
         drifts=before.drifts + 1 if reason == "drift" else 0,
+        stalled=reason == "stall",
         avoid=tuple((x, y) for x, y, _ in before.lookaheads[-1].failures)
         if held and before.lookaheads
         else (),

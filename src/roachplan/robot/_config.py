@@ -80,6 +80,14 @@ class RobotSettings:
     its rate over the last half second, would come within 1 cm of the loop's stop [s]
     (robot.drift_hold_at: a robot held drifts on a median 0.13 s, a 90th percentile 0.34 s of
     its rate; many drifting robots come back on their own); None: held at guard_drift."""
+    guard_stuck: float | None = s(0.8, optional(between(0.1, 1.0, "-", high_included=False)))
+    """With the guard on: also hold the robot (the run ends as "stall") once it has made no
+    progress along its path for this share of the driver's stuck_time (0.8: 8 s of the
+    default 10 s), before the loop's own stuck stop, as it counts progress; the re-plan is
+    lines and turns on the spot (robot.replan_radius). A robot that walks in place at a
+    ramp's foot, asked for a turn it cannot make, is re-planned rather than stopped (of 214
+    legs of bench_guard's twins that reached the goal, 5 had gone 8 s or more without
+    progress, none 9 s). None: not held for it (the stuck stop ends the run)."""
     edge_keep: float | None = s(0.04, optional(between(0.0, 0.2, "m")))
     """A plan from where the robot stands keeps this far from the drop-offs [m]: the robot may
     drift this far sideways off it anywhere (past its first 10 cm) and still stand where the

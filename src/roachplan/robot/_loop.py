@@ -176,6 +176,10 @@ class RobotLoop:
         self._done = threading.Event()
         self.latest_world: tuple[tuple[float, float, float], tuple] | None = None
         """The newest pose, world frame (position [m], quat xyzw)."""
+        self.progress_at: float | None = None
+        """When the robot last made progress along its path, as the stuck stop counts it
+        (the follower advanced, or came stuck_distance nearer its target; Go counts) [s, the
+        loop's clock]; None before Go. Any thread may read it (the guard's stall hold)."""
 
     @property
     def pending_spins(self) -> tuple[tuple[int, float], ...]:
@@ -307,6 +311,7 @@ class RobotLoop:
                     pos, quat = world
                     if start is None:
                         start = (pos[0], pos[1], _yaw(quat))
+                        self.progress_at = go_at
                         if self.recorder is not None:
                             self.recorder.event("go", go_at, {"start": list(start)})
                     ended = follower.update(pos, quat)
@@ -316,6 +321,7 @@ class RobotLoop:
                         stop = Stop(reason="goal" if outcome == "success" else "missed", detail=why)
                     elif follower.advanced or follower.gap < best_gap - drv.stuck_distance:
                         last_progress, best_gap = elapsed, follower.gap
+                        self.progress_at = now
                     elif elapsed - last_progress >= drv.stuck_time:
                         stop = Stop(
                             reason="stuck",

@@ -327,9 +327,9 @@ RETURN_SLACK = 0.01
 """After a spin that left the robot further off its path than the guard's drift limit, the
 guard holds it once it is this much further off than the nearest it has come back to [m]
 (watch_ahead: the motion capture's noise, 2 mm, and the gait's sway sideways)."""
-GUARD_HOLDS = ("lookahead", "drift")
-"""How a run ends when the guard held the robot (a look-ahead's chance, a drift): the command
-re-plans from where it stands."""
+GUARD_HOLDS = ("lookahead", "drift", "stall")
+"""How a run ends when the guard held the robot (a look-ahead's chance, a drift, no progress):
+the command re-plans from where it stands."""
 MAX_WIDENING = 2.0
 """replan_radius widens a plan's arcs at most this many times [-]: a robot that drifted off arcs
 that wide too is re-planned along lines and turns on the spot (SPIN_ONLY_RADIUS)."""
@@ -408,17 +408,21 @@ def drift_hold_at(allowed: float, rate: float, *, lead: float | None, stop: floa
     return max(allowed, stop - DRIFT_MARGIN - lead * max(rate, 0.0))
 
 
-def replan_radius(radius: float, drifts: int) -> float:
+def replan_radius(radius: float, drifts: int, *, stalled: bool = False) -> float:
     """The radius of a re-plan's arcs [m]: the scene's `radius` [m] doubled for each time the
     guard held the robot for drifting off its path so far (`drifts`), up to MAX_WIDENING
-    times; past that SPIN_ONLY_RADIUS (lines and turns on the spot). A robot that drifted off
-    arcs of one radius is asked for wider ones, and the drivable planner turns it on the spot
-    where they do not fit. (An estimate of how tightly
+    times; past that, or after the guard held it for making no progress (`stalled`: "stall"),
+    SPIN_ONLY_RADIUS (lines and turns on the spot). A robot that drifted off arcs of one radius
+    is asked for wider ones, and the drivable planner turns it on the spot where they do not
+    fit. A robot that walked in place at a ramp's foot, its driver asking for a hard turn
+    towards its slow motor, is asked for none: in PyBullet with that twin's hidden parameters,
+    the arc of its plan there stuck 4 times in 6, a turn on the spot to the same heading and a
+    line to the same point 1 time in 6. (An estimate of how tightly
     the robot turns, from its heading against its commands in hard turns, read 0.0-0.3 of the
     turning curve on legs that reached the goal as well as on legs that drifted: the tracking
     driver's hard turns are mostly short corrections, which say little of the tightest turn.)"""
     wider = 2.0**drifts
-    return radius * wider if wider <= MAX_WIDENING else SPIN_ONLY_RADIUS
+    return radius * wider if wider <= MAX_WIDENING and not stalled else SPIN_ONLY_RADIUS
 
 
 def start_height(world: World, xy) -> float:
@@ -579,6 +583,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                 guard=settings.guard,
                 drift=settings.guard_drift,
                 lead=settings.guard_drift_lead,
+                stuck=settings.guard_stuck,
                 trim=settings.trim,
                 estimates=tuple(estimates),
                 period=settings.look_ahead_period,
@@ -653,6 +658,7 @@ def watch_ahead(
     also: Callable[[float, LookAhead], None] | None = None,
     drift: float | None = None,
     lead: float | None = None,
+    stuck: float | None = None,
     trim: bool = False,
     estimates: tuple[tuple[float, float], ...] = (),
 ) -> LookAheadRunner:
@@ -666,7 +672,10 @@ def watch_ahead(
     held as "drift" (a robot turning on the spot at a spin: halfway from that limit to the
     loop's stop; RETURN_SLACK); with a `lead` [s] (RobotSettings.guard_drift_lead; None: at
     that limit), past that limit only once its drift would reach the stop within the lead
-    (drift_hold_at). trim: the motors' mismatch each look-ahead estimates (pooled
+    (drift_hold_at); and, with the guard and `stuck` (RobotSettings.guard_stuck; None: never),
+    once it has made no progress for that share of the driver's stuck_time
+    (loop.progress_at), held as "stall".
+    trim: the motors' mismatch each look-ahead estimates (pooled
     with `estimates`, the legs' before) is divided out of the loop's commands from then on
     (loop.trim), and from the start the pool of `estimates` is. The
     command line's robot (drive_robot) and the page's Robot folder both look ahead through
@@ -751,6 +760,24 @@ def watch_ahead(
                 )
 
         loop.listeners.append(drifted)
+    if guard is not None and stuck is not None:
+        wait = stuck * loop.driver.stuck_time  # [s]
+
+        def stalled(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
+            since = loop.progress_at
+            if getattr(event, "kind", None) != "pose" or since is None or loop.stopping:
+                return
+            idle = loop.clock() - since
+            if idle >= wait:
+                x, y = float(event.position[0]), float(event.position[1])
+                loop.stop(
+                    "stall",
+                    f"the robot at ({x:.3f}, {y:.3f}) made no progress along its path for "
+                    f"{idle:.1f} s (guard stall {wait:g} s, before the loop's stuck stop at "
+                    f"{loop.driver.stuck_time:g} s)",
+                )
+
+        loop.listeners.append(stalled)
     return runner
 
 
