@@ -111,7 +111,11 @@ def one_run(args, k: int, setting: str, tmp: Path, scene: str) -> dict:
     guarded: "guarded", "guarded+fit"): the robot, on `scene`, against a fresh twin of
     args.scene with the hidden parameters; the command's JSON summary, with the wall time."""
     guarded = setting != "unguarded"
-    drift = ["--guard-drift", "none", "--no-trim"] if setting == "look-ahead only" else []
+    drift = (
+        ["--guard-drift", "none", "--guard-stuck", "none", "--no-trim"]
+        if setting == "look-ahead only"
+        else []
+    )
     with twin(args, k, args.scene) as ready:
         flags = [
             "--look-ahead", "--guard", str(args.guard), "--replans", str(args.replans),
@@ -233,8 +237,8 @@ def main() -> None:
         "--settings",
         default="unguarded,guarded",
         help="the settings run, comma-separated, of unguarded, guarded, look-ahead only "
-        "(guarded with --guard-drift none --no-trim: only the look-ahead's chance holds it, and "
-        "the commands go untrimmed), guarded+fit (as --fitted adds)",
+        "(guarded with --guard-drift none --guard-stuck none --no-trim: only the look-ahead's "
+        "chance holds it, and the commands go untrimmed), guarded+fit (as --fitted adds)",
     )
     ap.add_argument("--friction", type=float, default=0.7, help="hidden: ground friction")
     ap.add_argument(

@@ -536,6 +536,77 @@ def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_then_turns_on_the_spot(
     assert np.count_nonzero(turns > 1e-3) <= len(lines.spins)
 
 
+class _Standing:
+    """A pose source whose robot stands still at (x, y, z) [m] facing yaw [rad] (world frame
+    = mocap frame), a fresh sample at every read."""
+
+    def __init__(self, x: float, y: float, z: float, yaw: float) -> None:
+        self.position, self.seq = (x, y, z), 0
+        self.quat = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+    def latest(self):
+        from roachplan.robot import PoseSample
+
+        self.seq += 1
+        t = time.monotonic()
+        return PoseSample(
+            t_receive=t, t_source=t, seq=self.seq, position=self.position, quat=self.quat
+        )
+
+    def close(self) -> None:
+        pass
+
+
+class _Sent:
+    """A command link that keeps nothing."""
+
+    def send(self, left: float, right: float, *, stop: bool = False):
+        from roachplan.robot import CommandFrame
+
+        return CommandFrame(seq=0, t_us=0, left=left, right=right, stop=stop)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("stall", [0.4, None])
+def test_a_robot_that_makes_no_progress_is_held_as_stalled_before_the_stuck_stop(bridge, stall):
+    """RobotLoop.stall_time (the guard's stall hold, RobotSettings.guard_stuck): a robot that
+    stands still on its path is held as "stall" that long after Go, before the stuck stop at
+    the driver's stuck_time (here 1 s); not before Go, however long it waits; with none, the
+    stuck stop ends the run."""
+    from roachplan.robot import FrameTransform, RobotLoop, SafetyMap
+
+    world, planned = bridge
+    x, y, z = (float(v) for v in planned.path_xyz[0])
+    dx, dy = planned.path_xyz[1, :2] - planned.path_xyz[0, :2]
+    loop = RobotLoop(
+        path_xyz=planned.path_xyz,
+        spins=planned.spins,
+        source=_Standing(x, y, z, math.atan2(dy, dx)),
+        link=_Sent(),
+        transform=FrameTransform(),
+        safety_map=SafetyMap.from_world(world),
+        driver=dataclasses.replace(world.scene.driver, stuck_time=1.0),
+        max_motor_speed=world.robot.max_motor_speed,
+    )
+    loop.stall_time = stall
+    loop.start()
+    try:
+        assert loop.wait(1.2) is None  # (held, before Go: no stall, no stuck stop)
+        loop.go()
+        result = loop.wait(10)
+    finally:
+        loop.cancel()
+    assert result is not None and result.t_go is not None
+    waited = result.t_stop - result.t_go  # [s]
+    if stall is None:
+        assert result.reason == "stuck" and waited >= 1.0, result
+    else:
+        assert result.reason == "stall" and 0.4 <= waited < 1.0, (result, waited)
+        assert "guard stall 0.4 s, before the loop's stuck stop at 1 s" in result.detail
+
+
 def test_trimmed_commands_make_mismatched_motors_run_as_the_driver_asked():
     """trim_commands: a robot whose motors run at left x 1.12, right x 0.88 is sent left / 1.12,
     right / 0.88, so its motors run at what the driver asked; where that would pass the motors'

@@ -157,8 +157,8 @@ def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
     row, one more after a drift hold, as many after a leg routed again before Go, none after
     any other end; after a guard's hold, where its last look-ahead's rollouts failed (to keep
     clear of), and after a drift hold, the leg (to drive on along with no re-plan); whether
-    a stall hold ended it (lines and turns on the spot next). Another robot carries
-    nothing."""
+    a stall hold ended it or one before it in a row (lines and turns on the spot next).
+    Another robot carries nothing."""
     from types import SimpleNamespace
 
     from roachplan.app._robot_route import carried_from
@@ -201,12 +201,13 @@ def test_a_route_from_robot_goes_on_from_the_last_leg_of_the_same_robot_only():
     assert said(carried_from(leg(result=ended("drift"), lookaheads=[]), key))[2] == ()
     assert said(carried_from(leg(went=False, result=None), key)) == (((0.1, 2.0),), 1, (), False)
     assert said(carried_from(leg(result=ended("drift")), ("udp-json", ()))) == ((), 0, (), False)
-    # A stall hold (no progress): the next route is lines and spins; the one after is not,
-    # unless it was routed again before Go.
+    # A stall hold (no progress): lines and spins from then on, while the guard holds the
+    # legs in a row (or a leg is routed again before Go); any other end starts afresh.
     assert carried_from(leg(result=ended("stall")), key).stalled
     assert said(carried_from(leg(result=ended("stall")), key)) == (((0.1, 2.0),), 0, failed, False)
-    assert not carried_from(leg(result=ended("drift"), stalled=True), key).stalled
+    assert carried_from(leg(result=ended("drift"), stalled=True), key).stalled
     assert carried_from(leg(went=False, result=None, stalled=True), key).stalled
+    assert not carried_from(leg(result=ended("stop"), stalled=True), key).stalled
 
 
 def test_a_route_after_a_guard_hold_keeps_clear_of_its_rollouts_failures_or_drives_on():

@@ -792,8 +792,8 @@ def _add_robot_parser(sub) -> None:
         default=None,
         metavar="P",
         help="with --look-ahead: hold the robot when a look-ahead's chance of going on without "
-        "a stop or a fall is below P, re-plan from where it stands, and go on at Enter (--go: "
-        "at once)",
+        "a stop or a fall is below P (or it drifts, or makes no progress: --guard-drift, "
+        "--guard-stuck), re-plan from where it stands, and go on at Enter (--go: at once)",
     )
     p.add_argument(
         "--no-trim",
@@ -815,7 +815,7 @@ def _add_robot_parser(sub) -> None:
         metavar="F",
         help="with --guard: also hold the robot and re-plan once it is F times --max-deviation "
         "off its path (past that, as --guard-drift-lead says), before the loop stops it there "
-        "(default 0.5; 'none': only the look-ahead's chance holds it)",
+        "(default 0.5; 'none': not held for drifting)",
     )
     p.add_argument(
         "--guard-drift-lead",
@@ -840,8 +840,8 @@ def _add_robot_parser(sub) -> None:
         default=6,
         metavar="N",
         help="re-plans after the guard held the robot, at most (default 6: after a second "
-        "drift hold or a stall hold each re-plan is lines and turns on the spot, and on a slippery slope such "
-        "legs reached the goal about 2 times in 5)",
+        "drift hold or a stall hold each re-plan is lines and turns on the spot, and on a "
+        "slippery slope such legs reached the goal about 2 times in 5)",
     )
     p.add_argument(
         "--look-ahead-noise",

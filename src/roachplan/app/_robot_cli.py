@@ -404,11 +404,11 @@ def cmd_robot(args: argparse.Namespace) -> int:
 def _replan_arcs(radius: float | None, held: list) -> tuple[float | None, str]:
     """(the radius of a re-plan's arcs [m], what to tell of it): the scene's `radius` (None: a
     planner without arcs) widened for each leg the guard held for drifting off its path, and
-    after a leg it held for making no progress, lines and turns on the spot (replan_radius)."""
+    once it held one for making no progress, lines and turns on the spot (replan_radius)."""
     from roachplan.robot import SPIN_ONLY_RADIUS, replan_radius
 
     drifts = sum(h.result.reason == "drift" for h in held)
-    stalled = held[-1].result.reason == "stall"
+    stalled = any(h.result.reason == "stall" for h in held)
     if radius is None or not (drifts or stalled):
         return radius, ""
     wider = replan_radius(radius, drifts, stalled=stalled)

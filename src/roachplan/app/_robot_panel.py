@@ -113,8 +113,9 @@ class RobotPanel:
                 min=0.0,
                 max=1.0,
                 step=0.05,
-                hint="With Look ahead: hold the robot when the chance falls under this (0: "
-                "never); Route from robot then re-plans from where it stands",
+                hint="With Look ahead: hold the robot when the chance falls under this, or it "
+                "drifts off its path, or makes no progress for 8 s (0: never); Route from robot "
+                "then re-plans from where it stands",
             )
             self.max_pose_age = gui.add_number(
                 "Max pose age [ms]",
@@ -286,8 +287,9 @@ class RobotSession:
     """The guard's drift holds in a row before this leg (a Route from robot after one widens
     its arcs: robot.replan_radius)."""
     stalled: bool = False
-    """The guard held the leg before this one for making no progress (a Route from robot
-    after it plans lines and turns on the spot: robot.replan_radius)."""
+    """The guard held a leg before this one, of those it held in a row, for making no
+    progress (a Route from robot after it plans lines and turns on the spot:
+    robot.replan_radius)."""
     result: Any = None
     """How the loop ended (a RunResult), once Go's drive has."""
     estimates: tuple = ()

@@ -73,8 +73,8 @@ class Carried:
     drifts: int = 0
     """The guard's drift holds in a row (robot.replan_radius widens the arcs)."""
     stalled: bool = False
-    """The guard held the last leg for making no progress (robot.replan_radius: lines and
-    turns on the spot)."""
+    """The guard held the last leg, or one before it of the legs it held in a row, for making
+    no progress (robot.replan_radius: lines and turns on the spot)."""
     avoid: tuple[tuple[float, float], ...] = ()
     """Where the last look-ahead's rollouts failed (x, y [m]), when the guard held the last
     leg: the re-plan keeps clear of them (robot.plan_clear_of's rule)."""
@@ -109,9 +109,9 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
     """The plan from the robot standing at `stands` (x, y [m], yaw [rad]) to goal, as the
     command line's re-plan: from the nearest pose the planner takes (robot.plan_start: a
     robot the guard held with a foot over an edge), its arcs widened after drift holds in a
-    row (robot.replan_radius), clear of where the last look-ahead's rollouts failed; after a
-    drift hold with no plan found, the rest of the old path from where the robot stands
-    (robot.rejoin_plan)."""
+    row, lines and turns on the spot after a stall hold (robot.replan_radius), clear of where
+    the last look-ahead's rollouts failed; after a drift hold with no plan found, the rest of
+    the old path from where the robot stands (robot.rejoin_plan)."""
     from roachplan.processes import ChildError
     from roachplan.robot import RobotError, plan_start, rejoin_plan, replan_radius
 
@@ -152,8 +152,9 @@ def carried_from(before: RobotSession | None, key: tuple) -> Carried:
     """What a Route from robot goes on from: the last leg's, when it drove the same robot
     (pose source and settings: `key`); nothing for another robot. The mismatch estimates;
     the drift holds in a row (a drift hold's leg adds one; a leg routed again before Go
-    counts as that leg; any other end starts the count again); whether the guard held it for
-    making no progress (a stall); after a guard's hold, where its last look-ahead's rollouts
+    counts as that leg; any other end starts the count again); whether the guard held it, or
+    a leg before it held in a row, for making no progress (a stall: lines and turns on the
+    spot from then on); after a guard's hold, where its last look-ahead's rollouts
     failed, and after a drift hold, the leg itself."""
     from roachplan.robot import GUARD_HOLDS
 
@@ -166,7 +167,7 @@ def carried_from(before: RobotSession | None, key: tuple) -> Carried:
     return Carried(
         estimates=before.estimates,
         drifts=before.drifts + 1 if reason == "drift" else 0,
-        stalled=reason == "stall",
+        stalled=reason == "stall" or (held and before.stalled),
         avoid=tuple((x, y) for x, y, _ in before.lookaheads[-1].failures)
         if held and before.lookaheads
         else (),

@@ -73,8 +73,8 @@ class RobotSettings:
     guard_drift_lead says), before the
     loop's own stop there, so that it is re-planned from where it stands rather than stopped.
     A look-ahead's chance comes a second or more after the pose it started from, too late for
-    a turn the robot cannot make; the drift is seen in the period it happens. None: only the
-    look-ahead's chance holds it."""
+    a turn the robot cannot make; the drift is seen in the period it happens. None: not held
+    for drifting."""
     guard_drift_lead: float | None = s(0.4, optional(positive("s", 5.0)))
     """With guard_drift: a robot past it is held only once its drift, going on this long at
     its rate over the last half second, would come within 1 cm of the loop's stop [s]

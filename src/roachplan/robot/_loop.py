@@ -176,10 +176,12 @@ class RobotLoop:
         self._done = threading.Event()
         self.latest_world: tuple[tuple[float, float, float], tuple] | None = None
         """The newest pose, world frame (position [m], quat xyzw)."""
-        self.progress_at: float | None = None
-        """When the robot last made progress along its path, as the stuck stop counts it
-        (the follower advanced, or came stuck_distance nearer its target; Go counts) [s, the
-        loop's clock]; None before Go. Any thread may read it (the guard's stall hold)."""
+        self.stall_time: float | None = None
+        """The guard's stall hold (robot.watch_ahead, RobotSettings.guard_stuck): with no
+        progress along the path for this long [s] (as the stuck stop counts progress: the
+        follower advanced, came stuck_distance nearer its target, or stuck_angle nearer a
+        spin's heading), the run ends as "stall", before the stuck stop at the driver's
+        stuck_time; None: no such hold. Set before start()."""
 
     @property
     def pending_spins(self) -> tuple[tuple[int, float], ...]:
@@ -275,6 +277,7 @@ class RobotLoop:
         stop: Stop | None = None
         t_stop = math.inf
         last_progress, best_gap = 0.0, math.inf
+        stall = self.stall_time
         tick = self.clock()
         while True:
             now = self.clock()
@@ -311,7 +314,6 @@ class RobotLoop:
                     pos, quat = world
                     if start is None:
                         start = (pos[0], pos[1], _yaw(quat))
-                        self.progress_at = go_at
                         if self.recorder is not None:
                             self.recorder.event("go", go_at, {"start": list(start)})
                     ended = follower.update(pos, quat)
@@ -321,7 +323,14 @@ class RobotLoop:
                         stop = Stop(reason="goal" if outcome == "success" else "missed", detail=why)
                     elif follower.advanced or follower.gap < best_gap - drv.stuck_distance:
                         last_progress, best_gap = elapsed, follower.gap
-                        self.progress_at = now
+                    elif stall is not None and elapsed - last_progress >= stall:
+                        stop = Stop(
+                            reason="stall",
+                            detail=f"the robot at ({pos[0]:.3f}, {pos[1]:.3f}) made no progress "
+                            f"along its path for {elapsed - last_progress:.1f} s, "
+                            f"{follower.where()} (guard stall {stall:g} s, before the loop's "
+                            f"stuck stop at {drv.stuck_time:g} s)",
+                        )
                     elif elapsed - last_progress >= drv.stuck_time:
                         stop = Stop(
                             reason="stuck",

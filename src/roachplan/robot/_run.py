@@ -674,7 +674,7 @@ def watch_ahead(
     that limit), past that limit only once its drift would reach the stop within the lead
     (drift_hold_at); and, with the guard and `stuck` (RobotSettings.guard_stuck; None: never),
     once it has made no progress for that share of the driver's stuck_time
-    (loop.progress_at), held as "stall".
+    (loop.stall_time), held as "stall".
     trim: the motors' mismatch each look-ahead estimates (pooled
     with `estimates`, the legs' before) is divided out of the loop's commands from then on
     (loop.trim), and from the start the pool of `estimates` is. The
@@ -760,24 +760,8 @@ def watch_ahead(
                 )
 
         loop.listeners.append(drifted)
-    if guard is not None and stuck is not None:
-        wait = stuck * loop.driver.stuck_time  # [s]
-
-        def stalled(event) -> None:  # (a loop listener: in the loop's thread, at each pose)
-            since = loop.progress_at
-            if getattr(event, "kind", None) != "pose" or since is None or loop.stopping:
-                return
-            idle = loop.clock() - since
-            if idle >= wait:
-                x, y = float(event.position[0]), float(event.position[1])
-                loop.stop(
-                    "stall",
-                    f"the robot at ({x:.3f}, {y:.3f}) made no progress along its path for "
-                    f"{idle:.1f} s (guard stall {wait:g} s, before the loop's stuck stop at "
-                    f"{loop.driver.stuck_time:g} s)",
-                )
-
-        loop.listeners.append(stalled)
+    if guard is not None and stuck is not None:  # (the loop counts the progress)
+        loop.stall_time = stuck * loop.driver.stuck_time
     return runner
 
 

@@ -44,7 +44,8 @@ going on without a stop or a fall fell under RobotSettings.guard; drift: with th
 further than RobotSettings.guard_drift from the path and, with guard_drift_lead, drifting so
 that the deviation stop would come within the lead (held before it), or at the edge of the
 ground it can stand on; stall: with the guard on, no progress for RobotSettings.guard_stuck of
-the driver's stuck_time (held before the stuck stop); stop / cancel: the user's Stop or Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a link down)."""
+the driver's stuck_time (held before the stuck stop); stop / cancel: the user's Stop or
+Cancel; signal: SIGINT (Ctrl-C) or SIGTERM; error: an exception in the loop (a link down)."""
 
 
 @dataclass(frozen=True, kw_only=True)
