@@ -96,7 +96,8 @@ class Route:
     """The radius of its arcs [m] when widened after drift holds or a stall hold (None: the
     scene's)."""
     stalled: bool = False
-    """Widened because the guard held the last leg for making no progress (Carried.stalled)."""
+    """Lines and turns on the spot because the guard held the last leg, or one before it in a
+    row, for making no progress (Carried.stalled)."""
     avoid: tuple[tuple[float, float], ...] = ()
     """The places it was to keep clear of (Carried.avoid)."""
     clearance: float | None = None
