@@ -512,8 +512,9 @@ def _arc(kappa: float, speed: float, seconds: float, t0: float = 0.0, start=(0.0
 
 def test_a_re_plan_after_drift_holds_asks_for_wider_arcs_then_turns_on_the_spot(bridge):
     """replan_radius: the scene's radius, doubled for each drift hold so far, up to
-    MAX_WIDENING times; past that, or after a stall hold, SPIN_ONLY_RADIUS, with which the drivable planner's path
-    is straight lines joined by turns on the spot (its heading changes only at its spins)."""
+    MAX_WIDENING times; past that, or after a stall hold, SPIN_ONLY_RADIUS, with which the
+    drivable planner's path is straight lines joined by turns on the spot (its heading changes
+    only at its spins)."""
     from roachplan.experiments import plan
     from roachplan.robot import MAX_WIDENING, SPIN_ONLY_RADIUS, replan_radius
 
