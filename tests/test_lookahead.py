@@ -661,3 +661,117 @@ def test_the_mismatch_is_estimated_on_the_stretches_the_driver_asked_to_walk_str
     spin[on_spot, 1:3] = (10.0, -10.0)
     kept = straight_mismatches(spun, spin, curve, top)
     assert len(kept) == 2 and all(e == pytest.approx(d, abs=0.005) for e, _ in kept)
+
+
+def _edge_x(world, y: float, yaw: float, room: float = 0.01) -> float:
+    """x [m] of the pose (x, y, yaw) on the double bridge's left bridge, walking from its middle
+    towards the gap in 2 mm steps, nearest the gap whose footprint `room` further on still
+    stands (the planner's validity checks)."""
+    from roachplan.planning import check_states
+
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    for x in np.arange(-0.77, -0.45, 0.002):
+        if not check_states(hf, fp, cfg, np.array([[x + room, y, yaw]])).valid[0]:
+            return float(x)
+    raise AssertionError("no edge found")
+
+
+def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
+    """step_in: a robot standing at the left bridge's edge, heading along it and 10 deg towards
+    the gap, walks first to a pose within STEP_REACH whose footprint keeps 4 cm either side of
+    its heading, by a straight line that stands, turning less than it would to face straight
+    away from the edge; a robot in the bridge's middle needs no step. stepped_plan: the plan
+    from that pose, driven from the robot: a turn on the spot there to face the pose, the line,
+    then the plan (the tracking driver takes it). at_edge: 1 cm further towards the gap the
+    robot at the edge would not stand; 1 cm the other way, and from the step's pose 4 cm
+    either way, it would."""
+    from roachplan.planning import check_states
+    from roachplan.robot import STEP_REACH, at_edge, plan_clear_of, step_in, stepped_plan
+    from roachplan.sim import DriverConfig, make_follower
+
+    world, _ = bridge
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    yaw = math.radians(80.0)  # (along the bridge, 10 deg towards the gap at +x)
+    x = _edge_x(world, 0.0, yaw)
+    here = (x, 0.0, yaw)
+    assert at_edge(world, here, (1.0, 0.0)) and not at_edge(world, here, (-1.0, 0.0))
+    sx, sy, heading = step_in(world, here, 0.04)
+    assert 0.0 < math.dist((sx, sy), here[:2]) <= STEP_REACH + 1e-9
+    assert sx < x  # (away from the gap)
+    assert heading == pytest.approx(math.atan2(sy, sx - x))  # (facing it from the robot)
+    turn = abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi)
+    assert turn < math.radians(80.0)  # (less than facing straight away from the edge, 170 deg)
+    left = np.array([-math.sin(heading), math.cos(heading)])
+    for m in (0.01, 0.02, 0.03, 0.04):
+        for side in (1.0, -1.0):
+            px, py = np.array([sx, sy]) + side * m * left
+            assert check_states(hf, fp, cfg, np.array([[px, py, heading]])).valid[0]
+    assert not at_edge(world, (sx, sy, heading), (1.0, 0.0), room=0.04)
+    assert step_in(world, (-0.75, 0.0, math.pi / 2), 0.04) is None  # (mid-bridge)
+    planned, _ = plan_clear_of(world, (sx, sy, heading), 0, keep=0.04)
+    assert planned.found
+    z = float(hf.sample(np.array(here[:2])))
+    driven = stepped_plan(planned, (x, 0.0, z))
+    assert np.allclose(driven.path_xyz[:2], [[x, 0.0, z]] * 2)
+    assert np.array_equal(driven.path_xyz[2:], planned.path_xyz)
+    assert driven.spins[0] == (0, pytest.approx(heading))
+    assert driven.spins[1:] == tuple((i + 2, h) for i, h in planned.spins)
+    assert len(driven.states) == len(planned.states) + 2
+    make_follower(driven.path_xyz, DriverConfig(), driven.spins)  # (a path the driver takes)
+
+
+@pytest.mark.parametrize("toward_gap", [True, False])
+def test_a_robot_drifted_to_within_a_centimetre_of_an_edge_is_held(bridge, toward_gap):
+    """watch_ahead's edge hold (EDGE_OFF, EDGE_ROOM): a robot standing 2.5 cm off a path along
+    the left bridge, at the bridge's edge on the gap's side of it (its footprint 1 cm further
+    would not stand), is held as "drift" at once after Go; standing as far off on the other
+    side, in the bridge, it is not held (the stuck stop, here after 1 s, ends the run). The
+    drift limit (7.5 cm) is far; the look-ahead's guard never holds (0)."""
+    from roachplan.robot import (
+        EDGE_OFF,
+        FrameTransform,
+        LookAheadConfig,
+        RobotLoop,
+        SafetyConfig,
+        SafetyMap,
+        watch_ahead,
+    )
+
+    world, _ = bridge
+    hf = world.heightfield
+    edge = _edge_x(world, 0.0, math.pi / 2)
+    off = EDGE_OFF + 0.005
+    line = edge - off  # (the path's x: 2.5 cm in from the edge)
+    ys = np.linspace(-0.4, 0.45, 35)
+    xy = np.column_stack([np.full(len(ys), line), ys])
+    path = np.column_stack([xy, hf.sample(xy)])
+    x = edge if toward_gap else line - off
+    z = float(hf.sample(np.array([x, 0.0]))) + world.robot.standing_height
+    loop = RobotLoop(
+        path_xyz=path,
+        spins=(),
+        source=_Standing(x, 0.0, z, math.pi / 2),
+        link=_Sent(),
+        transform=FrameTransform(),
+        safety_map=SafetyMap.from_world(world),
+        driver=dataclasses.replace(world.scene.driver, stuck_time=1.0),
+        max_motor_speed=world.robot.max_motor_speed,
+    )
+    watcher = watch_ahead(
+        world, path, (), loop, cfg=LookAheadConfig(draws=2, horizon=0.5), guard=0.0,
+        period=60.0, seed=0, safety=SafetyConfig(), recorder=None, drift=0.5,
+    )  # fmt: skip
+    loop.start()
+    try:
+        loop.go()
+        watcher.start()
+        result = loop.wait(10)
+    finally:
+        loop.cancel()
+        watcher.close()
+    assert result is not None
+    if toward_gap:
+        assert result.reason == "drift" and "edge" in result.detail, result
+        assert result.t_stop - result.t_go < 0.5, result
+    else:
+        assert result.reason == "stuck", result

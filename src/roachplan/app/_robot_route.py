@@ -40,6 +40,11 @@ def held_text(stands, route: Route, waypoints: int, prediction) -> str:
         notes += (
             f" (planned from {100 * route.moved:.1f} cm away: the planner refuses where it stands)"
         )
+    if route.step_in is not None:
+        notes += (
+            f" (first {100 * math.dist(route.here[:2], route.step_in[:2]):.0f} cm in from the "
+            "edge it stands at: a turn on the spot and a line)"
+        )
     if route.drove_on is not None:
         what = f"no re-plan ({route.drove_on}): on along the rest of the path it drifted off"
     else:
@@ -104,6 +109,9 @@ class Route:
     """How far its path keeps from them [m] (robot.clearance; None: none to keep from)."""
     drove_on: str | None = None
     """Why no re-plan was found, when the robot drives on along the old path instead."""
+    step_in: tuple[float, float, float] | None = None
+    """The pose (x, y [m], heading [rad]) it walks to, in from an edge it stands at, before the
+    plan (robot.step_in; None: it stands clear of every edge)."""
 
 
 def route_from(app: App, stands, goal, carried: Carried) -> Route:
@@ -111,19 +119,37 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
     command line's re-plan: from the nearest pose the planner takes (robot.plan_start: a
     robot the guard held with a foot over an edge), its arcs widened after drift holds in a
     row, lines and turns on the spot after a stall hold (robot.replan_radius), clear of where
-    the last look-ahead's rollouts failed; after a drift hold with no plan found, the rest of
-    the old path from where the robot stands (robot.rejoin_plan)."""
+    the last look-ahead's rollouts failed, walking in first from an edge it stands at
+    (robot.step_in); after a drift hold with no plan found, the rest of the old path from
+    where the robot stands (robot.rejoin_plan)."""
     from roachplan.processes import ChildError
-    from roachplan.robot import RobotError, plan_start, rejoin_plan, replan_radius
+    from roachplan.robot import (
+        RobotError,
+        RobotSettings,
+        plan_start,
+        rejoin_plan,
+        replan_radius,
+        step_in,
+        stepped_plan,
+    )
 
     radius = app.world.scene.planner.turning_radius
     wider = None
     if radius is not None and (carried.drifts or carried.stalled):  # (it drifted off arcs
         # this wide, or made no progress on them: wider ones, or lines and spins)
         wider = radius = replan_radius(radius, carried.drifts, stalled=carried.stalled)
+    keep = RobotSettings().edge_keep  # (the command line's: the page has no box for it)
     try:
         here, moved = plan_start(app.world, stands)
-        plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
+        # (within edge_keep of an edge: planned from where it steps in to, walked there)
+        inner = None if keep is None else step_in(app.world, here, keep)
+        plan, keeps = plan_from(
+            app, inner or here, goal, turning_radius=radius, avoid=carried.avoid
+        )
+        if inner is not None:
+            ground = float(app.world.heightfield.sample(np.asarray(here[:2], dtype=float)))
+            plan = stepped_plan(plan, (here[0], here[1], ground))
+            app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
     except (RobotError, PlanningError, ChildError) as exc:
         old = carried.drifted
         if old is None or old.plan is None:
@@ -142,6 +168,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
         plan=plan,
         here=here,
         moved=moved,
+        step_in=inner,
         wider=wider,
         stalled=carried.stalled,
         avoid=carried.avoid,
@@ -312,6 +339,7 @@ def leg_recorder(
             # (as the command line's: how far that start lies from where the robot stood [m],
             # where it stood, the radius of the plan's arcs [m]; null: no arcs)
             "start_moved": math.dist(here[:2], stands[:2]),
+            "step_in": list(route.step_in) if route and route.step_in else None,
             "robot_pose": list(stands),
             "goal": list(goal),
             "turning_radius": plan.turning_radius,

@@ -91,7 +91,14 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "GUARD_HOLDS": "._run",
         "MAX_WIDENING": "._run",
         "SPIN_ONLY_RADIUS": "._run",
-        "EDGE_DRIFT": "._run",
+        "EDGE_OFF": "._edges",
+        "EDGE_ROOM": "._edges",
+        "STEP_REACH": "._edges",
+        "at_edge": "._edges",
+        "step_in": "._edges",
+        "lead_in": "._run",
+        "stepped_plan": "._run",
+        "nearest_on_path": "._safety",
         "START_REACH": "._run",
         "MIN_TRY": "._run",
         "clearance": "._run",
@@ -99,7 +106,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "AVOID_RADIUS": "._run",
         "AVOID_TRIES": "._run",
         "EDGE_TRIES": "._run",
-        "edge_margin": "._run",
+        "edge_margin": "._edges",
         "plan_keeps": "._run",
         "predict": "._run",
         "LookAhead": "._lookahead",
@@ -149,6 +156,12 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._compare import replay_windows as replay_windows
     from ._config import LoopConfig as LoopConfig
     from ._config import RobotSettings as RobotSettings
+    from ._edges import EDGE_OFF as EDGE_OFF
+    from ._edges import EDGE_ROOM as EDGE_ROOM
+    from ._edges import STEP_REACH as STEP_REACH
+    from ._edges import at_edge as at_edge
+    from ._edges import edge_margin as edge_margin
+    from ._edges import step_in as step_in
     from ._errors import RobotError as RobotError
     from ._estimate import PRIOR_WALK as PRIOR_WALK
     from ._estimate import estimate_mismatch as estimate_mismatch
@@ -211,7 +224,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import AVOID_RADIUS as AVOID_RADIUS
     from ._run import AVOID_TRIES as AVOID_TRIES
     from ._run import DRIFT_MARGIN as DRIFT_MARGIN
-    from ._run import EDGE_DRIFT as EDGE_DRIFT
     from ._run import EDGE_TRIES as EDGE_TRIES
     from ._run import GUARD_HOLDS as GUARD_HOLDS
     from ._run import MAX_WIDENING as MAX_WIDENING
@@ -226,7 +238,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import drift_hold_at as drift_hold_at
     from ._run import drift_rate as drift_rate
     from ._run import drive_robot as drive_robot
-    from ._run import edge_margin as edge_margin
+    from ._run import lead_in as lead_in
     from ._run import plan_clear_of as plan_clear_of
     from ._run import plan_keeps as plan_keeps
     from ._run import plan_start as plan_start
@@ -235,6 +247,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._run import rejoin_plan as rejoin_plan
     from ._run import replan_radius as replan_radius
     from ._run import start_height as start_height
+    from ._run import stepped_plan as stepped_plan
     from ._run import wait_first_pose as wait_first_pose
     from ._run import watch_ahead as watch_ahead
     from ._safety import SafetyConfig as SafetyConfig
@@ -243,6 +256,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
     from ._safety import StopReason as StopReason
     from ._safety import check_pose as check_pose
     from ._safety import distance_to_path as distance_to_path
+    from ._safety import nearest_on_path as nearest_on_path
     from ._transform import FrameTransform as FrameTransform
     from ._transform import measure_transform as measure_transform
     from ._transform import yaw_of as yaw_of

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._config import RobotSettings
+from ._edges import EDGE_OFF, EDGE_ROOM, at_edge, edge_margin, step_in
 from ._errors import RobotError
 from ._estimate import pooled_mismatch
 from ._links import CommandLink, open_link
@@ -26,7 +27,7 @@ from ._lookahead import LookAhead, LookAheadConfig, LookAheadRunner, remaining_p
 from ._loop import LoopEvent, RobotLoop, RunResult
 from ._pose import PoseSample, PoseSource, open_pose_source
 from ._record import RunRecorder, scene_record
-from ._safety import SafetyMap, distance_to_path
+from ._safety import SafetyMap, distance_to_path, nearest_on_path
 from ._transform import FrameTransform, measure_transform, yaw_of
 
 if TYPE_CHECKING:
@@ -84,44 +85,6 @@ for one at all."""
 EDGE_TRIES = 12
 """...and for one that keeps RobotSettings.edge_keep from the drop-offs besides (a plan takes
 0.1-0.2 s on the double bridge, and 3 of its first 12 seeds keep 4 cm at every waypoint)."""
-EDGE_STEP = 0.01
-"""edge_margin's offsets are whole multiples of this [m]."""
-
-
-def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> float:
-    """How far the robot could drift sideways off a path ((N, >=2) world frame [m]) and still
-    stand where the planner would let it (its validity checks: feet on ground, no pit under the
-    body), up to `keep` [m]: the least over the path's waypoints of the largest offset, to
-    either side of its heading there (the direction to the next waypoint) and in EDGE_STEP
-    steps, at which the footprint and every smaller offset pass; `keep` where every waypoint
-    passes it. The first `skip` [m] of the path are not measured (a robot the guard held at a
-    bridge's edge starts there: no path from it keeps clear). A path along a bridge's inner
-    edge, or cutting its corner, keeps 0-3 cm: a robot drifting the 4 cm the guard's edge hold
-    allows (EDGE_DRIFT) fell off."""
-    from roachplan.planning import check_states
-
-    xy = np.asarray(path_xyz, dtype=float)[:, :2]
-    if len(xy) >= 2:  # (a spin repeats its waypoint: it has no heading of its own)
-        xy = xy[np.concatenate([[True], np.linalg.norm(np.diff(xy, axis=0), axis=1) > 1e-9])]
-    if len(xy) < 2 or keep <= 0:
-        return float(keep)
-    step = np.diff(xy, axis=0)
-    yaw = np.arctan2(step[:, 1], step[:, 0])
-    yaw = np.append(yaw, yaw[-1])
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(step, axis=1))])
-    xy, yaw = xy[along >= skip], yaw[along >= skip]
-    if not len(xy):
-        return float(keep)
-    offsets = EDGE_STEP * np.arange(1, max(math.floor(keep / EDGE_STEP + 1e-9), 1) + 1)
-    normal = np.column_stack([-np.sin(yaw), np.cos(yaw)])  # (N, 2): the heading's left
-    states = np.concatenate(
-        [np.column_stack([xy + side * m * normal, yaw]) for m in offsets for side in (1.0, -1.0)]
-    )
-    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
-    ok = check_states(hf, fp, validity, states).valid.reshape(len(offsets), 2, len(xy)).all(axis=1)
-    passed = np.cumprod(ok, axis=0).sum(axis=0)  # (N,): offsets passed in a row from the first
-    least = int(passed.min())
-    return float(keep) if least == len(offsets) else float(offsets[0] * least)
 
 
 def plan_keeps(clear: float, margin: float, radius: float, keep: float | None) -> float:
@@ -283,13 +246,27 @@ def rejoin_path(
     join = int(np.searchsorted(along, max(ahead, 2.0 * off)))
     join = min([join, len(rest) - 1, *(i for i, _ in kept)])
     join = max(join, 1) if len(rest) > 1 else 0
-    dx, dy = rest[join, :2] - here[:2]
-    # (a spin at here unless the meeting point is too near for a line to face)
-    turn = ((0, math.atan2(dy, dx)),) if math.hypot(dx, dy) >= 0.01 else ()
+    return lead_in(rest[join:], tuple((i - join, h) for i, h in kept if i >= join), here)
+
+
+LEAD_MIN = 0.01
+"""lead_in turns the robot on the spot to face a path's first waypoint only that far from it or
+further [m] (nearer, there is no line to face)."""
+
+
+def lead_in(path_xyz, spins, here_xyz) -> tuple[np.ndarray, tuple[tuple[int, float], ...]]:
+    """A path ((N, 3) world frame [m]) and its spins ((waypoint index, heading [rad]) each)
+    driven from here_xyz [m] instead of its start: a turn on the spot at here to face its first
+    waypoint, a straight line there, then the path, spins re-indexed ((M, 3): here twice, a
+    spin's next waypoint repeating its place; once, with no turn, where the first waypoint is
+    under LEAD_MIN away). rejoin_path's way back to an old path, and a re-plan's walk away from
+    an edge (step_in) to where the plan starts."""
+    path = np.asarray(path_xyz, dtype=float)
+    here = np.asarray(here_xyz, dtype=float)[:3]
+    dx, dy = path[0, :2] - here[:2]
+    turn = ((0, math.atan2(dy, dx)),) if math.hypot(dx, dy) >= LEAD_MIN else ()
     lead = 1 + len(turn)  # (here once, or twice: a spin's next waypoint repeats its place)
-    # row i >= join of rest is row i - join + lead of the new path
-    moved = tuple((i - join + lead, h) for i, h in kept if i >= join)
-    return np.vstack([here] * lead + [rest[join:]]), (*turn, *moved)
+    return np.vstack([here] * lead + [path]), (*turn, *((i + lead, h) for i, h in spins))
 
 
 def rejoin_plan(
@@ -320,9 +297,23 @@ def rejoin_plan(
     )
 
 
-EDGE_DRIFT = 0.5
-"""The guard holds a robot at the edge of the ground it can stand on once it is this share of
-its drift limit off its path [-] (watch_ahead)."""
+def stepped_plan(plan: PlanResult, here_xyz) -> PlanResult:
+    """A plan found from step_in's pose, driven from where the robot stands (here_xyz [m],
+    world frame): lead_in's turn on the spot and straight line to the plan's start first."""
+    path, spins = lead_in(plan.path_xyz, plan.spins, here_xyz)
+    lead = len(path) - len(plan.path_xyz)
+    x, y = float(path[0, 0]), float(path[0, 1])
+    heading = spins[0][1] if lead == 2 else float(plan.states[0, 2])
+    return dataclasses.replace(
+        plan,
+        states=np.vstack([[[x, y, heading]] * lead, plan.states]),
+        path_xyz=path,
+        spins=spins,
+        message=f"{plan.message} (first {math.dist(path[0, :2], path[lead, :2]):.2f} m in "
+        "from the edge it stood at)",
+    )
+
+
 RETURN_SLACK = 0.01
 """After a spin that left the robot further off its path than the guard's drift limit, the
 guard holds it once it is this much further off than the nearest it has come back to [m]
@@ -496,10 +487,14 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         kept = None  # (how far the path keeps from avoid's points [m]; None: none to keep from)
         radius = None if plan is None else plan.turning_radius  # (its arcs' [m]; None: none)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
+        inner = None  # (where it steps in to from an edge before the plan: step_in; None: no)
         keep = settings.edge_keep  # (how far its path keeps from the drop-offs [m]; None: any)
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
             here, moved = plan_start(world, stands)
+            # (within edge_keep of an edge: planned from where it steps in to, walked there)
+            if keep is not None:
+                inner = step_in(world, here, keep)
             if moved > 0:
                 _log.warning(
                     "the planner refuses the robot's pose as a start: planning from "
@@ -514,12 +509,24 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             # (every try of this leg's plan within the planner's budget: a held robot waits
             # for a re-plan that finds nothing that long, not 8 tries of it)
             deadline = time.monotonic() + scene.planner.time_limit
+            start = inner or here
             plan, clear = plan_clear_of(
-                world.with_planner(planner), here, seed, avoid, deadline=deadline, keep=keep
+                world.with_planner(planner), start, seed, avoid, deadline=deadline, keep=keep
             )
             if not plan.found and planner != scene.planner:  # (wider arcs: none; the scene's)
-                plan, clear = plan_clear_of(world, here, seed, avoid, deadline=deadline, keep=keep)
+                plan, clear = plan_clear_of(world, start, seed, avoid, deadline=deadline, keep=keep)
                 planner = scene.planner
+            if plan.found and inner is not None:
+                ground = float(world.heightfield.sample(np.array(here[:2])))
+                plan = stepped_plan(plan, (here[0], here[1], ground))
+                _log.warning(
+                    "the robot stands within %.0f cm of an edge: it turns on the spot and "
+                    "walks %.1f cm in a line to (%.3f, %.3f) first, and the plan starts there",
+                    keep * 100,
+                    math.dist(here[:2], inner[:2]) * 100,
+                    inner[0],
+                    inner[1],
+                )
             radius = planner.turning_radius
             kept = None if math.isinf(clear) else clear
             if not plan.found:
@@ -545,6 +552,10 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     "start": list(here),
                     # (how far that start lies from where the robot stood [m]: plan_start)
                     "start_moved": moved,
+                    # (the pose (x, y [m], heading [rad]) it walked to from an edge it stood
+                    # at, turning on the spot and in a line, before the plan: step_in; null:
+                    # none)
+                    "step_in": None if inner is None else list(inner),
                     "robot_pose": list(stands),
                     "goal": list(scene.goal),
                     # (a re-plan's: where the look-ahead's rollouts failed, and how far its
@@ -667,9 +678,9 @@ def watch_ahead(
     result); under `guard` [0, 1] (None: none), the robot held: the loop stopped as
     "lookahead", the chance and the rollouts' ends in its detail; and, with the guard, once the
     robot drives further than `drift` times safety.max_deviation from the path (None: never;
-    RobotSettings.guard_drift), or, EDGE_DRIFT of that off it, its centre comes nearer a cell
-    of the safety map where it cannot stand than one where it can (the edge of a bridge),
-    held as "drift" (a robot turning on the spot at a spin: halfway from that limit to the
+    RobotSettings.guard_drift), or, EDGE_OFF off it, its footprint EDGE_ROOM further from the
+    path would not stand (at_edge: the edge of a bridge on the side it drifted to), held as
+    "drift" (a robot turning on the spot at a spin: halfway from that limit to the
     loop's stop; RETURN_SLACK); with a `lead` [s] (RobotSettings.guard_drift_lead; None: at
     that limit), past that limit only once its drift would reach the stop within the lead
     (drift_hold_at); and, with the guard and `stuck` (RobotSettings.guard_stuck; None: never),
@@ -725,7 +736,7 @@ def watch_ahead(
             if getattr(event, "kind", None) != "pose" or not runner.started or loop.stopping:
                 return
             x, y = float(event.position[0]), float(event.position[1])
-            off = distance_to_path((x, y), path_xy)
+            (nx, ny), off = nearest_on_path((x, y), path_xy)
             # (drift_allowance: a spinning robot held only halfway to the loop's stop, and
             # with a lead only past drift_hold_at's distance; the edge check below holds
             # throughout)
@@ -746,17 +757,17 @@ def watch_ahead(
                     + ("" if lead is None else f", held {held_at:.3g} m with a {lead:g} s lead")
                     + f", before the loop's stop at {safety.max_deviation:g} m)",
                 )
-            elif off > EDGE_DRIFT * limit and smap.off_standable(x, y) > 0.0:
-                # (Its centre is nearer a cell where it cannot stand than one where it can: a
-                # path along a bridge's edge runs 4 cm inside that, and a robot 7.5 cm off it
-                # fell off the bridge; the loop's own stop allows standable_margin more. Not
-                # on the path itself: the map's 4 cm cells round a bridge's corner off, where
-                # plans checked pose by pose pass, and the robot was held there 1-3 cm off.)
+            elif off > EDGE_OFF and at_edge(world, (x, y, yaw_of(event.quat)), (x - nx, y - ny)):
+                # (The robot's own footprint, checked as the planner checks a pose: held while
+                # EDGE_ROOM is left before the edge on the side it drifted to. The safety
+                # map's 4 cm cells put that edge 2-6 cm from a bridge's rim, and robots held
+                # there slid off during the stop.)
                 loop.stop(
                     "drift",
-                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, to the "
-                    f"edge of the ground it can stand on (guard drift, before the loop's stop "
-                    f"{safety.standable_margin:g} m past it)",
+                    f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, to "
+                    f"within {EDGE_ROOM:g} m of the edge of the ground it can stand on (guard "
+                    f"edge hold, {EDGE_OFF:g} m off its path, before the loop's stop "
+                    f"{safety.standable_margin:g} m past the safety map's edge)",
                 )
 
         loop.listeners.append(drifted)

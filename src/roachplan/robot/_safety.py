@@ -128,14 +128,24 @@ class SafetyMap:
 
 def distance_to_path(xy, path_xy: np.ndarray) -> float:
     """Distance from xy [m] to the polyline path_xy ((N, 2) [m])."""
+    return nearest_on_path(xy, path_xy)[1]
+
+
+def nearest_on_path(xy, path_xy: np.ndarray) -> tuple[np.ndarray, float]:
+    """(the point of the polyline path_xy ((N, 2) [m]) nearest xy [m] ((2,) [m]), its distance
+    from xy [m])."""
     p = np.asarray(xy, dtype=float)[:2]
+    if len(path_xy) < 2:
+        q = np.asarray(path_xy[0], dtype=float)[:2]
+        return q, float(np.linalg.norm(q - p))
     a, b = path_xy[:-1], path_xy[1:]
     d = b - a
     length2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-18)
     u = np.clip(np.einsum("ij,ij->i", p - a, d) / length2, 0.0, 1.0)
-    if len(a) == 0:
-        return float(np.linalg.norm(path_xy[0] - p))
-    return float(np.min(np.linalg.norm(a + d * u[:, None] - p, axis=1)))
+    near = a + d * u[:, None]
+    dist = np.linalg.norm(near - p, axis=1)
+    k = int(np.argmin(dist))
+    return near[k], float(dist[k])
 
 
 def check_pose(
