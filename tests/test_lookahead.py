@@ -665,8 +665,8 @@ def test_the_mismatch_is_estimated_on_the_stretches_the_driver_asked_to_walk_str
 
 def _edge_x(world, y: float, yaw: float, room: float = 0.01) -> float:
     """x [m] of the pose (x, y, yaw) on the double bridge's left bridge, walking from its middle
-    towards the gap in 2 mm steps, nearest the gap whose footprint `room` further on still
-    stands (the planner's validity checks)."""
+    towards the gap in 2 mm steps: the first whose footprint `room` further on would not stand
+    (the planner's validity checks)."""
     from roachplan.planning import check_states
 
     hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
@@ -700,19 +700,32 @@ def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
     assert sx < x  # (away from the gap)
     assert heading == pytest.approx(math.atan2(sy, sx - x))  # (facing it from the robot)
     turn = abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi)
-    assert turn < math.radians(80.0)  # (less than facing straight away from the edge, 170 deg)
+    assert turn < math.radians(80.0)  # (less than facing straight away from the gap, 100 deg)
     left = np.array([-math.sin(heading), math.cos(heading)])
     for m in (0.01, 0.02, 0.03, 0.04):
         for side in (1.0, -1.0):
             px, py = np.array([sx, sy]) + side * m * left
             assert check_states(hf, fp, cfg, np.array([[px, py, heading]])).valid[0]
     assert not at_edge(world, (sx, sy, heading), (1.0, 0.0), room=0.04)
+    # No direction of a smaller turn (every 10 deg) has a pose within reach that keeps 4 cm
+    # either side with a line to it that stands (checked here apart from step_in).
+    for a in np.radians(np.arange(-180.0, 180.0, 10.0)):
+        if abs((a - yaw + math.pi) % (2 * math.pi) - math.pi) >= turn - 1e-6:
+            continue
+        u, n = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+        for r in np.arange(0.01, STEP_REACH + 1e-9, 0.01):
+            p = np.array([x, 0.0]) + r * u
+            poses = [p + m * n * side for m in (0.0, 0.01, 0.02, 0.03, 0.04) for side in (1, -1)]
+            poses += [np.array([x, 0.0]) + f * r * u for f in (0.25, 0.5, 0.75)]
+            states = np.column_stack([np.array(poses), np.full(len(poses), a)])
+            assert not check_states(hf, fp, cfg, states).valid.all(), (math.degrees(a), r)
     assert step_in(world, (-0.75, 0.0, math.pi / 2), 0.04) is None  # (mid-bridge)
     planned, _ = plan_clear_of(world, (sx, sy, heading), 0, keep=0.04)
     assert planned.found
     z = float(hf.sample(np.array(here[:2])))
-    driven = stepped_plan(planned, (x, 0.0, z))
+    driven = stepped_plan(planned, (x, 0.0, z), yaw)
     assert np.allclose(driven.path_xyz[:2], [[x, 0.0, z]] * 2)
+    assert np.allclose(driven.states[:2], [[x, 0.0, yaw], [x, 0.0, heading]])  # (then turned)
     assert np.array_equal(driven.path_xyz[2:], planned.path_xyz)
     assert driven.spins[0] == (0, pytest.approx(heading))
     assert driven.spins[1:] == tuple((i + 2, h) for i, h in planned.spins)

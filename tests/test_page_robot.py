@@ -273,3 +273,50 @@ def test_a_route_after_a_guard_hold_keeps_clear_of_its_rollouts_failures_or_driv
     assert plan["planner"] == "rejoin"
     assert np.allclose(third.path[-1], second.path[-1])  # (the old path's end)
     assert math.dist(third.path[0][:2], plan["robot_pose"][:2]) < 1e-9  # (from where it stood)
+
+
+def test_a_route_from_a_robot_at_a_bridge_edge_steps_in_first():
+    """Route from robot for a robot the twin stands at the left bridge's edge (heading 10 deg
+    towards the gap; its frame typed in the transform box: it is not at the start marker): as
+    the command line's, the plan starts with a turn on the spot and a line in from the edge to
+    the pose robot.step_in gives (the report says how far; the leg's /plan record has the
+    pose), then the plan from there."""
+    from roachplan.app._commands import RobotPlanCmd
+    from roachplan.app._server import RoachApp
+    from roachplan.planning import check_states
+    from roachplan.robot import read_run
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene("double_bridge"))
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    yaw = math.radians(80.0)
+    x = next(  # (as the command line's test: 1.5 cm short of where the footprint would fail)
+        float(v) - 0.005
+        for v in np.arange(-0.77, -0.45, 0.002)
+        if not check_states(hf, fp, cfg, np.array([[v + 0.01, 0.0, yaw]])).valid[0]
+    )
+    with twin(*MOCAP, f"--start={x:.3f},0,80") as (ready, _control):
+        app = RoachApp(world, host="127.0.0.1", port=free_port())
+        try:
+            panel = app.robot_panel
+            panel.source_address.value = f"127.0.0.1:{ready['natnet_port']}"
+            panel.sink_address.value = f"127.0.0.1:{ready['command_port']}"
+            panel.transform.value = MOCAP[-1]
+            panel.max_pose_age.value = 600  # (a loaded machine's stream: test_robot_folder's)
+            app.loop.put(RobotPlanCmd(None))
+            deadline = time.monotonic() + 120
+            while app.core.robot is None:
+                assert time.monotonic() < deadline, app.status.content
+                time.sleep(0.1)
+            leg, report = app.core.robot, panel.report.content
+        finally:
+            app.stop()
+    found = re.search(r"first (\d+) cm in from the edge it stands at", report)
+    assert found and 0 < int(found.group(1)) <= 15, report
+    plan = read_run(leg.log).plan
+    step = plan["step_in"]
+    assert step is not None and step[0] < plan["robot_pose"][0]  # (away from the gap at +x)
+    path = np.asarray(leg.path, dtype=float)
+    assert np.allclose(path[:2, :2], [plan["start"][:2]] * 2)
+    assert math.dist(path[2, :2], step[:2]) < 1e-6
+    assert plan["spins"][0] == [0, pytest.approx(step[2])]

@@ -469,6 +469,51 @@ def test_a_robot_that_makes_no_progress_is_held_and_re_planned_with_lines_and_tu
     assert summary["turning_radius"] == SPIN_ONLY_RADIUS
 
 
+def test_a_robot_standing_at_a_bridge_edge_steps_in_before_its_plan_and_reaches_the_goal(
+    tmp_path,
+):
+    """A robot the twin stands at the left bridge's edge (heading along it, 10 deg towards the
+    gap; its footprint 1.5 cm further would not stand), its frame given (--transform: it is not
+    at the scene's start): the command plans from the pose step_in gives, and the robot turns on
+    the spot and walks a line there first (said on the command line, in the /plan record, and in
+    the path's first waypoints and spin); it reaches the goal, nearing that pose on the way."""
+    from roachplan.planning import check_states
+    from roachplan.robot import STEP_REACH, read_run
+    from roachplan.scenes import build_world, load_scene
+
+    world = build_world(load_scene("double_bridge"))
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    yaw = math.radians(80.0)
+    x = next(  # (walking towards the gap: 1.5 cm short of where the footprint would not stand)
+        float(v) - 0.005
+        for v in np.arange(-0.77, -0.45, 0.002)
+        if not check_states(hf, fp, cfg, np.array([[v + 0.01, 0.0, yaw]])).valid[0]
+    )
+    log = tmp_path / "run.mcap"
+    start = f"--start={x:.3f},0,80"
+    with twin(*MOCAP, start) as (ready, _control):
+        proc = robot(
+            ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
+            "--no-predict", "--transform", MOCAP[-1], "--look-ahead", "--look-ahead-draws",
+            "2", "--guard", "0.5", "--replans", "0", "--json",
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=180)
+    assert proc.returncode == 0, err
+    assert "the robot stands within 4 cm of an edge: it turns on the spot and walks" in err
+    run = read_run(log)
+    step = run.plan["step_in"]
+    stands = run.plan["robot_pose"]
+    assert step is not None and 0 < math.dist(step[:2], stands[:2]) <= STEP_REACH + 1e-9
+    assert step[0] < stands[0]  # (away from the gap, at +x)
+    path = np.asarray(run.plan["path"])
+    assert np.allclose(path[:2, :2], [run.plan["start"][:2]] * 2)
+    assert run.plan["spins"][0] == [0, pytest.approx(step[2])]
+    assert math.dist(path[2, :2], step[:2]) < 1e-6  # (the plan starts there)
+    assert run.result is not None and run.result["reason"] == "goal", run.result
+    poses = np.asarray(run.poses["world_p"])[:, :2]
+    assert np.min(np.linalg.norm(poses - step[:2], axis=1)) < 0.03
+
+
 def test_a_drifted_robot_whose_re_plan_finds_no_path_drives_on_along_its_old_path(
     tmp_path, monkeypatch, capsys
 ):

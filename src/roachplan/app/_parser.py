@@ -806,16 +806,18 @@ def _add_robot_parser(sub) -> None:
         default=None,
         metavar="M",
         help="plans from where the robot stands keep M m from the drop-offs: the robot may "
-        "drift that far sideways anywhere and still stand (default 0.04; 'none': the "
-        "planner's first valid plan)",
+        "drift that far sideways anywhere and still stand; a robot standing nearer one turns "
+        "and walks in first (default 0.04; 'none': the planner's first valid plan, from where "
+        "it stands)",
     )
     p.add_argument(
         "--guard-drift",
         default=None,
         metavar="F",
         help="with --guard: also hold the robot and re-plan once it is F times --max-deviation "
-        "off its path (past that, as --guard-drift-lead says), before the loop stops it there "
-        "(default 0.5; 'none': not held for drifting)",
+        "off its path (past that, as --guard-drift-lead says), before the loop stops it there, "
+        "or 2 cm off it with 1 cm left before an edge (default 0.5; 'none': not held for "
+        "drifting, nor at an edge)",
     )
     p.add_argument(
         "--guard-drift-lead",

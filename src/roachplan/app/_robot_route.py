@@ -1,8 +1,9 @@
 """Route from robot (the page's Robot folder): the plan from where the robot stands, as the
 command line's re-plan makes it (robot.plan_start, robot.replan_radius, clear of where the
-last look-ahead's rollouts failed, or on along the old path after a drift hold), what a leg
-carries from the last one of the same robot, the simulation's prediction of the plan, and the
-leg's log with its plan. Each runs on the app's command loop (do_robot_plan calls them)."""
+last look-ahead's rollouts failed, in from an edge it stands at first (robot.step_in), or on
+along the old path after a drift hold), what a leg carries from the last one of the same
+robot, the simulation's prediction of the plan, and the leg's log with its plan. Each runs on
+the app's command loop (do_robot_plan calls them)."""
 
 from __future__ import annotations
 
@@ -141,14 +142,22 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
     keep = RobotSettings().edge_keep  # (the command line's: the page has no box for it)
     try:
         here, moved = plan_start(app.world, stands)
-        # (within edge_keep of an edge: planned from where it steps in to, walked there)
+        # (within edge_keep of an edge: planned from where it steps in to, walked there from
+        # where it stands; none found from there, from here)
         inner = None if keep is None else step_in(app.world, here, keep)
-        plan, keeps = plan_from(
-            app, inner or here, goal, turning_radius=radius, avoid=carried.avoid
-        )
+        try:
+            plan, keeps = plan_from(
+                app, inner or here, goal, turning_radius=radius, avoid=carried.avoid
+            )
+        except PlanningError as exc:
+            if inner is None or str(exc).endswith("cancelled"):  # (Cancel: no second plan)
+                raise
+            inner = None
+            plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
         if inner is not None:
-            ground = float(app.world.heightfield.sample(np.asarray(here[:2], dtype=float)))
-            plan = stepped_plan(plan, (here[0], here[1], ground))
+            ground = float(app.world.heightfield.sample(np.asarray(stands[:2], dtype=float)))
+            plan = stepped_plan(plan, (stands[0], stands[1], ground), stands[2])
+            app.plan_endpoints = (here, goal)  # (Drive's: the robot's start, not the step's)
             app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
     except (RobotError, PlanningError, ChildError) as exc:
         old = carried.drifted

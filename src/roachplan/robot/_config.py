@@ -92,9 +92,10 @@ class RobotSettings:
     """A plan from where the robot stands keeps this far from the drop-offs [m]: the robot may
     drift this far sideways off it anywhere (past its first 10 cm) and still stand where the
     planner lets it (robot.edge_margin); of up to EDGE_TRIES plans (seeds), the first that
-    does, else the one that keeps farthest. 4 cm: where the guard's edge hold stops a robot
-    (EDGE_DRIFT of its 7.5 cm drift limit); plans along a bridge's inner edge kept 0-3 cm, and
-    a robot that drifted 4 cm fell off. None: any valid plan (the planner's first)."""
+    does, else the one that keeps farthest. A robot standing within this of an edge walks in
+    first (robot.step_in). 4 cm: where the guard's first edge hold stopped a robot (half its
+    7.5 cm drift limit); plans along a bridge's inner edge kept 0-3 cm, and a robot that
+    drifted 4 cm fell off. None: any valid plan (the planner's first), and no step in."""
     trim: bool = s(True, boolean())
     """With the look-ahead: divide the motors' mismatch it estimates from the robot's own walk
     (pooled_mismatch) out of the commands sent, from each look-ahead on (RobotLoop.trim): a

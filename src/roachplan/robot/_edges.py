@@ -53,8 +53,9 @@ def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> f
     body), up to `keep` [m]: the least over the path's waypoints of the largest offset, to
     either side of its heading there (the direction to the next waypoint) and in EDGE_STEP
     steps, at which the footprint and every smaller offset pass; `keep` where every waypoint
-    passes it. The first `skip` [m] of the path are not measured (a robot the guard held at a
-    bridge's edge starts there, and step_in's walk away from the edge is shorter than this). A
+    passes it. The first `skip` [m] of the path are not measured (a plan from a robot the guard
+    held at a bridge's edge starts near it; drive_robot measures a plan from step_in's pose
+    before the walk to it is put in front). A
     path along a bridge's inner edge, or cutting its corner, keeps 0-3 cm: a robot drifting
     the 4 cm the guard's edge hold once allowed fell off."""
     xy = np.asarray(path_xyz, dtype=float)[:, :2]
@@ -90,8 +91,9 @@ def at_edge(world: World, pose, toward, *, room: float = EDGE_ROOM) -> bool:
     """Whether the robot at pose (x, y [m], yaw [rad]) would no longer stand, its footprint
     moved `room` [m] in the direction `toward` ((dx, dy), any length: from the nearest point
     of its path to it) with its heading kept: the edge of the ground it can stand on (the
-    planner's validity checks, feet on ground and no pit under the body) lies within `room`
-    on the side it drifted to. The guard's edge hold (watch_ahead: with EDGE_OFF).
+    planner's validity checks, feet on ground and no pit under the body: a drop-off, or
+    ground too steep or rough for it) lies within `room` on the side it drifted to. The guard's
+    edge hold (watch_ahead: with EDGE_OFF).
 
     Scripted drives in PyBullet (a robot walking a straight path along a bridge that keeps 2
     or 4 cm from its edge, heading 0-12 deg towards it and veering to it, 96 drives): unheld,

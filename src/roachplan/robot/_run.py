@@ -264,7 +264,8 @@ def lead_in(path_xyz, spins, here_xyz) -> tuple[np.ndarray, tuple[tuple[int, flo
     path = np.asarray(path_xyz, dtype=float)
     here = np.asarray(here_xyz, dtype=float)[:3]
     dx, dy = path[0, :2] - here[:2]
-    turn = ((0, math.atan2(dy, dx)),) if math.hypot(dx, dy) >= LEAD_MIN else ()
+    # (the tolerance: step_in's nearest ring lies LEAD_MIN away, give or take a rounding)
+    turn = ((0, math.atan2(dy, dx)),) if math.hypot(dx, dy) >= LEAD_MIN - 1e-9 else ()
     lead = 1 + len(turn)  # (here once, or twice: a spin's next waypoint repeats its place)
     return np.vstack([here] * lead + [path]), (*turn, *((i + lead, h) for i, h in spins))
 
@@ -297,16 +298,18 @@ def rejoin_plan(
     )
 
 
-def stepped_plan(plan: PlanResult, here_xyz) -> PlanResult:
-    """A plan found from step_in's pose, driven from where the robot stands (here_xyz [m],
-    world frame): lead_in's turn on the spot and straight line to the plan's start first."""
-    path, spins = lead_in(plan.path_xyz, plan.spins, here_xyz)
+def stepped_plan(plan: PlanResult, stands_xyz, yaw: float) -> PlanResult:
+    """A plan found from step_in's pose, driven from where the robot stands (stands_xyz [m]
+    world frame, on the terrain surface; yaw [rad] its heading): lead_in's turn on the spot
+    and straight line to the plan's start first. Its first state is the robot's pose; with a
+    turn, the second faces the plan's start."""
+    path, spins = lead_in(plan.path_xyz, plan.spins, stands_xyz)
     lead = len(path) - len(plan.path_xyz)
     x, y = float(path[0, 0]), float(path[0, 1])
-    heading = spins[0][1] if lead == 2 else float(plan.states[0, 2])
+    head = [[x, y, yaw]] + ([[x, y, spins[0][1]]] if lead == 2 else [])
     return dataclasses.replace(
         plan,
-        states=np.vstack([[[x, y, heading]] * lead, plan.states]),
+        states=np.vstack([head, plan.states]),
         path_xyz=path,
         spins=spins,
         message=f"{plan.message} (first {math.dist(path[0, :2], path[lead, :2]):.2f} m in "
@@ -488,6 +491,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
         radius = None if plan is None else plan.turning_radius  # (its arcs' [m]; None: none)
         moved = 0.0  # (how far the plan's start lies from where the robot stands [m])
         inner = None  # (where it steps in to from an edge before the plan: step_in; None: no)
+        measured = None if plan is None else plan.path_xyz  # (the path edge_margin measures)
         keep = settings.edge_keep  # (how far its path keeps from the drop-offs [m]; None: any)
         if plan is None:
             seed = scene.seed if settings.seed is None else settings.seed
@@ -509,21 +513,29 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             # (every try of this leg's plan within the planner's budget: a held robot waits
             # for a re-plan that finds nothing that long, not 8 tries of it)
             deadline = time.monotonic() + scene.planner.time_limit
-            start = inner or here
-            plan, clear = plan_clear_of(
-                world.with_planner(planner), start, seed, avoid, deadline=deadline, keep=keep
-            )
-            if not plan.found and planner != scene.planner:  # (wider arcs: none; the scene's)
-                plan, clear = plan_clear_of(world, start, seed, avoid, deadline=deadline, keep=keep)
-                planner = scene.planner
-            if plan.found and inner is not None:
-                ground = float(world.heightfield.sample(np.array(here[:2])))
-                plan = stepped_plan(plan, (here[0], here[1], ground))
+            # (from the step's pose, else, none found from it, from here: the wider arcs
+            # first, then the scene's)
+            chosen = scene.planner
+            for start in (inner, here) if inner is not None else (here,):
+                for chosen in dict.fromkeys((planner, scene.planner)):
+                    plan, clear = plan_clear_of(
+                        world.with_planner(chosen), start, seed, avoid, deadline=deadline, keep=keep
+                    )
+                    if plan.found:
+                        break
+                if plan.found:
+                    break
+            planner = chosen
+            inner = inner if plan.found and start == inner else None
+            measured = plan.path_xyz  # (edge_margin's: the plan as chosen, before the step)
+            if inner is not None:
+                ground = float(world.heightfield.sample(np.array(stands[:2])))
+                plan = stepped_plan(plan, (stands[0], stands[1], ground), stands[2])
                 _log.warning(
                     "the robot stands within %.0f cm of an edge: it turns on the spot and "
                     "walks %.1f cm in a line to (%.3f, %.3f) first, and the plan starts there",
                     keep * 100,
-                    math.dist(here[:2], inner[:2]) * 100,
+                    math.dist(stands[:2], inner[:2]) * 100,
                     inner[0],
                     inner[1],
                 )
@@ -535,7 +547,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
                     f"{math.degrees(stands[2]):.0f} deg): {plan.message}"
                 )
         path, spins = np.asarray(plan.path_xyz, dtype=float), tuple(plan.spins)
-        margin = None if keep is None else edge_margin(world, path, keep)
+        margin = None if keep is None else edge_margin(world, measured, keep)
         if settings.log is not None:
             recorder = RunRecorder(settings.log)
             t = time.monotonic()
@@ -766,7 +778,7 @@ def watch_ahead(
                     "drift",
                     f"the robot at ({x:.3f}, {y:.3f}) drifted {off:.3f} m off its path, to "
                     f"within {EDGE_ROOM:g} m of the edge of the ground it can stand on (guard "
-                    f"edge hold, {EDGE_OFF:g} m off its path, before the loop's stop "
+                    f"edge hold, past {EDGE_OFF:g} m off its path, before the loop's stop "
                     f"{safety.standable_margin:g} m past the safety map's edge)",
                 )
 
