@@ -61,6 +61,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_choose.py
 	$(BIN)/python benchmarks/bench_engines.py
 	$(BIN)/python benchmarks/bench_fidelity.py
+	$(BIN)/python benchmarks/bench_edges.py
 	$(BIN)/python benchmarks/bench_guard.py
 	$(BIN)/python benchmarks/bench_page_robot.py
 	$(BIN)/python benchmarks/load_test.py

@@ -192,7 +192,7 @@ def step_trial(job):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--part", choices=("holds", "steps", "both"), default="both")
     args = ap.parse_args()

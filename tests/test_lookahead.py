@@ -695,7 +695,9 @@ def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
     x = _edge_x(world, 0.0, yaw)
     here = (x, 0.0, yaw)
     assert at_edge(world, here, (1.0, 0.0)) and not at_edge(world, here, (-1.0, 0.0))
-    sx, sy, heading = step_in(world, here, 0.04)
+    stepped = step_in(world, here, 0.04)
+    assert stepped is not None
+    sx, sy, heading = stepped
     assert 0.0 < math.dist((sx, sy), here[:2]) <= STEP_REACH + 1e-9
     assert sx < x  # (away from the gap)
     assert heading == pytest.approx(math.atan2(sy, sx - x))  # (facing it from the robot)
@@ -785,6 +787,6 @@ def test_a_robot_drifted_to_within_a_centimetre_of_an_edge_is_held(bridge, towar
     assert result is not None
     if toward_gap:
         assert result.reason == "drift" and "edge" in result.detail, result
-        assert result.t_stop - result.t_go < 0.5, result
+        assert result.t_go is not None and result.t_stop - result.t_go < 0.5, result
     else:
         assert result.reason == "stuck", result

@@ -515,20 +515,24 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             deadline = time.monotonic() + scene.planner.time_limit
             # (from the step's pose, else, none found from it, from here: the wider arcs
             # first, then the scene's)
-            chosen = scene.planner
+            tried: tuple[PlanResult, float] | None = None
+            start, chosen = here, scene.planner
             for start in (inner, here) if inner is not None else (here,):
                 for chosen in dict.fromkeys((planner, scene.planner)):
-                    plan, clear = plan_clear_of(
+                    tried = plan_clear_of(
                         world.with_planner(chosen), start, seed, avoid, deadline=deadline, keep=keep
                     )
-                    if plan.found:
+                    if tried[0].found:
                         break
-                if plan.found:
+                if tried is not None and tried[0].found:
                     break
+            assert tried is not None  # (one try at least)
+            plan, clear = tried
             planner = chosen
             inner = inner if plan.found and start == inner else None
             measured = plan.path_xyz  # (edge_margin's: the plan as chosen, before the step)
             if inner is not None:
+                assert keep is not None  # (step_in ran)
                 ground = float(world.heightfield.sample(np.array(stands[:2])))
                 plan = stepped_plan(plan, (stands[0], stands[1], ground), stands[2])
                 _log.warning(
