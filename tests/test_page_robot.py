@@ -317,6 +317,6 @@ def test_a_route_from_a_robot_at_a_bridge_edge_steps_in_first():
     step = plan["step_in"]
     assert step is not None and step[0] < plan["robot_pose"][0]  # (away from the gap at +x)
     path = np.asarray(leg.path, dtype=float)
-    assert np.allclose(path[:2, :2], [plan["start"][:2]] * 2)
+    assert np.allclose(path[:2, :2], [plan["robot_pose"][:2]] * 2)  # (from where it stands)
     assert math.dist(path[2, :2], step[:2]) < 1e-6
     assert plan["spins"][0] == [0, pytest.approx(step[2])]

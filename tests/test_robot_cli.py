@@ -506,7 +506,7 @@ def test_a_robot_standing_at_a_bridge_edge_steps_in_before_its_plan_and_reaches_
     assert step is not None and 0 < math.dist(step[:2], stands[:2]) <= STEP_REACH + 1e-9
     assert step[0] < stands[0]  # (away from the gap, at +x)
     path = np.asarray(run.plan["path"])
-    assert np.allclose(path[:2, :2], [run.plan["start"][:2]] * 2)
+    assert np.allclose(path[:2, :2], [stands[:2]] * 2)  # (the walk in starts where it stands)
     assert run.plan["spins"][0] == [0, pytest.approx(step[2])]
     assert math.dist(path[2, :2], step[:2]) < 1e-6  # (the plan starts there)
     assert run.result is not None and run.result["reason"] == "goal", run.result

@@ -43,7 +43,7 @@ def held_text(stands, route: Route, waypoints: int, prediction) -> str:
         )
     if route.step_in is not None:
         notes += (
-            f" (first {100 * math.dist(route.here[:2], route.step_in[:2]):.0f} cm in from the "
+            f" (first {100 * math.dist(stands[:2], route.step_in[:2]):.0f} cm in from the "
             "edge it stands at: a turn on the spot and a line)"
         )
     if route.drove_on is not None:
