@@ -96,9 +96,10 @@ def at_edge(world: World, pose, toward, *, room: float = EDGE_ROOM) -> bool:
     edge hold (watch_ahead: with EDGE_OFF).
 
     Scripted drives in PyBullet (a robot walking a straight path along a bridge that keeps 2
-    or 4 cm from its edge, heading 0-12 deg towards it and veering to it, 96 drives): unheld,
-    27 fell; held where this says (and 2 cm off), none fell, and 9 of the 36 held would not
-    have fallen. Held where the 4 cm safety map's edge is (the hold before it), 22 fell."""
+    or 4 cm from its edge, heading 0-12 deg towards it and veering to it, 96 drives a rule;
+    benchmarks/bench_edges.py): with the drift hold only, 27 fell; held where this says (and
+    2 cm off), none fell, and 9 of the 36 held would not have fallen. Held where the 4 cm
+    safety map's edge is (the hold before it), 22 fell."""
     dx, dy = float(toward[0]), float(toward[1])
     norm = math.hypot(dx, dy)
     if norm <= 0.0:
@@ -135,6 +136,8 @@ def step_in(
     again. Stepping to the nearest such pose instead, turning to face it on the spot, the turn
     took robots the 2 cm the edge hold allows (8 of 24 held again), and a plan with arcs from
     a pose facing the edge was mostly not found."""
+    from roachplan.planning import check_states
+
     x, y, yaw = (float(v) for v in here)
     if keep <= 0:
         return None
@@ -145,8 +148,6 @@ def step_in(
     angles = np.linspace(-math.pi, math.pi, _STEP_DIRECTIONS, endpoint=False)
     r, a = (v.ravel() for v in np.meshgrid(rings, angles, indexing="ij"))
     xy = np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
-    from roachplan.planning import check_states
-
     hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
     there = check_states(hf, fp, validity, np.column_stack([xy, a]))
     # (on the surface it stands on, as plan_start's: not the floor below a bridge's edge)
