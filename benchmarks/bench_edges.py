@@ -179,8 +179,7 @@ def step_trial(job):
     if not plan.found:
         return job, "no plan", False
     if inner is not None:
-        ground = float(world.heightfield.sample(np.array([x, -0.1])))
-        plan = stepped_plan(plan, (x, -0.1, ground), yaw)
+        plan = stepped_plan(world, plan, (x, -0.1, yaw))
     sim = _sim(world, side, resid)
     try:
         sim.reset(x, -0.1, yaw, surface=float(world.heightfield.sample(np.array([x, -0.1]))))

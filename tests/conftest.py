@@ -76,6 +76,21 @@ ARTIFACTS = ROOT / "test-artifacts"
 ROACHPLAN = [sys.executable, "-m", "roachplan"]
 
 
+def bridge_edge_x(world, y: float, yaw: float, room: float = 0.01) -> float:
+    """x [m] of the pose (x, y, yaw) on the double bridge's left bridge, walking from its middle
+    towards the gap in 2 mm steps: the first whose footprint `room` further on would not stand
+    (the planner's validity checks)."""
+    import numpy as np
+
+    from roachplan.planning import check_states
+
+    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
+    for x in np.arange(-0.77, -0.45, 0.002):
+        if not check_states(hf, fp, cfg, np.array([[x + room, y, yaw]])).valid[0]:
+            return float(x)
+    raise AssertionError("no edge found")
+
+
 def roachplan(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run the `roachplan` command line from the repository root, as a fork of a process that
     has imported it (tests/cli_forks.py): its own output, exit status and the test's

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from conftest import bridge_edge_x
 from roachplan.robot import (
     LookAheadConfig,
     SafetyConfig,
@@ -663,19 +664,6 @@ def test_the_mismatch_is_estimated_on_the_stretches_the_driver_asked_to_walk_str
     assert len(kept) == 2 and all(e == pytest.approx(d, abs=0.005) for e, _ in kept)
 
 
-def _edge_x(world, y: float, yaw: float, room: float = 0.01) -> float:
-    """x [m] of the pose (x, y, yaw) on the double bridge's left bridge, walking from its middle
-    towards the gap in 2 mm steps: the first whose footprint `room` further on would not stand
-    (the planner's validity checks)."""
-    from roachplan.planning import check_states
-
-    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
-    for x in np.arange(-0.77, -0.45, 0.002):
-        if not check_states(hf, fp, cfg, np.array([[x + room, y, yaw]])).valid[0]:
-            return float(x)
-    raise AssertionError("no edge found")
-
-
 def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
     """step_in: a robot standing at the left bridge's edge, heading along it and 10 deg towards
     the gap, walks first to a pose within STEP_REACH whose footprint keeps 4 cm either side of
@@ -692,7 +680,7 @@ def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
     world, _ = bridge
     hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
     yaw = math.radians(80.0)  # (along the bridge, 10 deg towards the gap at +x)
-    x = _edge_x(world, 0.0, yaw)
+    x = bridge_edge_x(world, 0.0, yaw)
     here = (x, 0.0, yaw)
     assert at_edge(world, here, (1.0, 0.0)) and not at_edge(world, here, (-1.0, 0.0))
     stepped = step_in(world, here, 0.04)
@@ -725,7 +713,7 @@ def test_a_robot_at_a_bridge_edge_steps_in_before_its_re_plan(bridge):
     planned, _ = plan_clear_of(world, (sx, sy, heading), 0, keep=0.04)
     assert planned.found
     z = float(hf.sample(np.array(here[:2])))
-    driven = stepped_plan(planned, (x, 0.0, z), yaw)
+    driven = stepped_plan(world, planned, here)
     assert np.allclose(driven.path_xyz[:2], [[x, 0.0, z]] * 2)
     assert np.allclose(driven.states[:2], [[x, 0.0, yaw], [x, 0.0, heading]])  # (then turned)
     assert np.array_equal(driven.path_xyz[2:], planned.path_xyz)
@@ -754,7 +742,7 @@ def test_a_robot_drifted_to_within_a_centimetre_of_an_edge_is_held(bridge, towar
 
     world, _ = bridge
     hf = world.heightfield
-    edge = _edge_x(world, 0.0, math.pi / 2)
+    edge = bridge_edge_x(world, 0.0, math.pi / 2)
     off = EDGE_OFF + 0.005
     line = edge - off  # (the path's x: 2.5 cm in from the edge)
     ys = np.linspace(-0.4, 0.45, 35)

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from conftest import free_port
+from conftest import bridge_edge_x, free_port
 from test_app import CHROMIUM, browser_pages
 from test_robot_cli import MOCAP, twin
 
@@ -283,18 +283,13 @@ def test_a_route_from_a_robot_at_a_bridge_edge_steps_in_first():
     pose), then the plan from there."""
     from roachplan.app._commands import RobotPlanCmd
     from roachplan.app._server import RoachApp
-    from roachplan.planning import check_states
     from roachplan.robot import read_run
     from roachplan.scenes import build_world, load_scene
 
     world = build_world(load_scene("double_bridge"))
-    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
     yaw = math.radians(80.0)
-    x = next(  # (as the command line's test: 1.5 cm short of where the footprint would fail)
-        float(v) - 0.005
-        for v in np.arange(-0.77, -0.45, 0.002)
-        if not check_states(hf, fp, cfg, np.array([[v + 0.01, 0.0, yaw]])).valid[0]
-    )
+    # (walking towards the gap: 1.5 cm short of where the footprint would not stand)
+    x = bridge_edge_x(world, 0.0, yaw) - 0.005
     with twin(*MOCAP, f"--start={x:.3f},0,80") as (ready, _control):
         app = RoachApp(world, host="127.0.0.1", port=free_port())
         try:

@@ -22,7 +22,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import ROACHPLAN, ROOT, roachplan
+from conftest import ROACHPLAN, ROOT, bridge_edge_x, roachplan
 
 pytestmark = pytest.mark.alone  # (the control loop keeps real time)
 
@@ -477,18 +477,13 @@ def test_a_robot_standing_at_a_bridge_edge_steps_in_before_its_plan_and_reaches_
     at the scene's start): the command plans from the pose step_in gives, and the robot turns on
     the spot and walks a line there first (said on the command line, in the /plan record, and in
     the path's first waypoints and spin); it reaches the goal, nearing that pose on the way."""
-    from roachplan.planning import check_states
     from roachplan.robot import STEP_REACH, read_run
     from roachplan.scenes import build_world, load_scene
 
     world = build_world(load_scene("double_bridge"))
-    hf, fp, cfg = world.heightfield, world.footprint, world.scene.planner.validity
     yaw = math.radians(80.0)
-    x = next(  # (walking towards the gap: 1.5 cm short of where the footprint would not stand)
-        float(v) - 0.005
-        for v in np.arange(-0.77, -0.45, 0.002)
-        if not check_states(hf, fp, cfg, np.array([[v + 0.01, 0.0, yaw]])).valid[0]
-    )
+    # (walking towards the gap: 1.5 cm short of where the footprint would not stand)
+    x = bridge_edge_x(world, 0.0, yaw) - 0.005
     log = tmp_path / "run.mcap"
     start = f"--start={x:.3f},0,80"
     with twin(*MOCAP, start) as (ready, _control):

@@ -155,8 +155,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
             inner = None
             plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
         if inner is not None:
-            ground = float(app.world.heightfield.sample(np.asarray(stands[:2], dtype=float)))
-            plan = stepped_plan(plan, (stands[0], stands[1], ground), stands[2])
+            plan = stepped_plan(app.world, plan, stands)
             app.plan_endpoints = (here, goal)  # (Drive's: the robot's start, not the step's)
             app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
     except (RobotError, PlanningError, ChildError) as exc:

@@ -37,12 +37,17 @@ def _sideways(xy, yaw, offsets) -> np.ndarray:
     )
 
 
+def _offsets(keep: float) -> np.ndarray:
+    """The sideways offsets measured up to `keep` [m]: EDGE_STEP, 2 EDGE_STEP, ... (one at
+    least) [m]."""
+    return EDGE_STEP * np.arange(1, max(math.floor(keep / EDGE_STEP + 1e-9), 1) + 1)
+
+
 def _keeps(world: World, xy, yaw, keep: float) -> np.ndarray:
-    """(N,) int: how many of the offsets EDGE_STEP, 2 EDGE_STEP, ... up to `keep` [m] the
-    poses (xy (N, 2) [m], yaw (N,) [rad]) can be moved to either side, every smaller one
-    passing too, and still stand (all of them: the pose keeps `keep`)."""
-    offsets = EDGE_STEP * np.arange(1, max(math.floor(keep / EDGE_STEP + 1e-9), 1) + 1)
-    moved = _sideways(xy, yaw, offsets)
+    """(N,) int: how many of the offsets up to `keep` [m] (_offsets) the poses (xy (N, 2) [m],
+    yaw (N,) [rad]) can be moved to either side, every smaller one passing too, and still
+    stand (all of them, len(_offsets(keep)): the pose keeps `keep`)."""
+    moved = _sideways(xy, yaw, _offsets(keep))
     ok = _stands(world, moved.reshape(-1, 3)).reshape(moved.shape[:3]).all(axis=1)
     return np.cumprod(ok, axis=0).sum(axis=0)
 
@@ -70,7 +75,7 @@ def edge_margin(world: World, path_xyz, keep: float, *, skip: float = 0.10) -> f
     xy, yaw = xy[along >= skip], yaw[along >= skip]
     if not len(xy):
         return float(keep)
-    n = max(math.floor(keep / EDGE_STEP + 1e-9), 1)
+    n = len(_offsets(keep))
     least = int(_keeps(world, xy, yaw, keep).min())
     return float(keep) if least == n else float(EDGE_STEP * least)
 
@@ -109,6 +114,24 @@ def at_edge(world: World, pose, toward, *, room: float = EDGE_ROOM) -> bool:
     return not bool(_stands(world, moved)[0])
 
 
+def stands_on(world: World, poses, ground: float) -> np.ndarray:
+    """(N,) bool: the poses ((N, 3) x, y [m], yaw [rad]) the planner takes, inside the planning
+    area, on the surface at height `ground` [m] (their support plane within the planner's
+    body_band of it: not the floor below a bridge's edge; nan: any surface). plan_start's
+    and step_in's candidates."""
+    from roachplan.planning import check_states
+
+    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
+    poses = np.asarray(poses, dtype=float)
+    checked = check_states(hf, fp, validity, poses)
+    ok = checked.valid.copy()
+    if math.isfinite(ground):
+        ok &= np.abs(checked.z_surface - ground) <= validity.body_band
+    (xa, ya), (xb, yb) = world.bounds
+    ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb) & (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
+    return ok
+
+
 STEP_REACH = 0.15
 """How far step_in may walk a robot from where it stands [m] (a body length and a half)."""
 _STEP_DIRECTIONS = 36
@@ -136,29 +159,21 @@ def step_in(
     again. Stepping to the nearest such pose instead, turning to face it on the spot, the turn
     took robots the 2 cm the edge hold allows (8 of 24 held again), and a plan with arcs from
     a pose facing the edge was mostly not found."""
-    from roachplan.planning import check_states
-
     x, y, yaw = (float(v) for v in here)
     if keep <= 0:
         return None
-    n = max(math.floor(keep / EDGE_STEP + 1e-9), 1)
+    n = len(_offsets(keep))
     if int(_keeps(world, np.array([[x, y]]), np.array([yaw]), keep)[0]) == n:
         return None
     rings = EDGE_STEP * np.arange(1, math.floor(reach / EDGE_STEP + 1e-9) + 1)
     angles = np.linspace(-math.pi, math.pi, _STEP_DIRECTIONS, endpoint=False)
     r, a = (v.ravel() for v in np.meshgrid(rings, angles, indexing="ij"))
     xy = np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
-    hf, fp, validity = world.heightfield, world.footprint, world.scene.planner.validity
-    there = check_states(hf, fp, validity, np.column_stack([xy, a]))
-    # (on the surface it stands on, as plan_start's: not the floor below a bridge's edge)
-    ok = there.valid & (
-        np.abs(there.z_surface - float(hf.sample(np.array([x, y])))) <= validity.body_band
-    )
+    ground = float(world.heightfield.sample(np.array([x, y])))
+    ok = stands_on(world, np.column_stack([xy, a]), ground)  # (on its own surface)
     ok &= _keeps(world, xy, a, keep) == n
     for f in _STEP_LINE:
         ok &= _stands(world, np.column_stack([x + f * r * np.cos(a), y + f * r * np.sin(a), a]))
-    (xa, ya), (xb, yb) = world.bounds
-    ok &= (xy[:, 0] >= xa) & (xy[:, 0] <= xb) & (xy[:, 1] >= ya) & (xy[:, 1] <= yb)
     if not ok.any():
         return None
     turn = np.abs((a - yaw + math.pi) % (2 * math.pi) - math.pi)

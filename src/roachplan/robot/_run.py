@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import itertools
 import logging
 import math
 import signal
@@ -19,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._config import RobotSettings
-from ._edges import EDGE_OFF, EDGE_ROOM, at_edge, edge_margin, step_in
+from ._edges import EDGE_OFF, EDGE_ROOM, at_edge, edge_margin, stands_on, step_in
 from ._errors import RobotError
 from ._estimate import pooled_mismatch
 from ._links import CommandLink, open_link
@@ -144,11 +145,7 @@ def plan_start(
         )
     )
     poses = np.column_stack([x + r * np.cos(angle), y + r * np.sin(angle), yaw + turn])
-    checked = check_states(hf, fp, validity, poses)
-    ok = checked.valid.copy()
-    if math.isfinite(ground):  # (the same surface: not a floor 5 cm below the edge)
-        ok &= np.abs(checked.z_surface - ground) <= validity.body_band
-    ok &= (poses[:, 0] >= xa) & (poses[:, 0] <= xb) & (poses[:, 1] >= ya) & (poses[:, 1] <= yb)
+    ok = stands_on(world, poses, ground)  # (the same surface: not a floor 5 cm below the edge)
     if ok.any():
         first = int(np.argmax(ok))
         px, py, pyaw = poses[first].tolist()
@@ -298,14 +295,15 @@ def rejoin_plan(
     )
 
 
-def stepped_plan(plan: PlanResult, stands_xyz, yaw: float) -> PlanResult:
-    """A plan found from step_in's pose, driven from where the robot stands (stands_xyz [m]
-    world frame, on the terrain surface; yaw [rad] its heading): lead_in's turn on the spot
-    and straight line to the plan's start first. Its first state is the robot's pose; with a
-    turn, the second faces the plan's start."""
-    path, spins = lead_in(plan.path_xyz, plan.spins, stands_xyz)
+def stepped_plan(world: World, plan: PlanResult, stands) -> PlanResult:
+    """A plan found from step_in's pose, driven from where the robot stands (stands: x, y [m],
+    yaw [rad], world frame; the path's first waypoint on the terrain's surface there):
+    lead_in's turn on the spot and straight line to the plan's start first. Its first state
+    is the robot's pose; with a turn, the second faces the plan's start."""
+    x, y, yaw = (float(v) for v in stands)
+    ground = float(world.heightfield.sample(np.array([x, y])))
+    path, spins = lead_in(plan.path_xyz, plan.spins, (x, y, ground))
     lead = len(path) - len(plan.path_xyz)
-    x, y = float(path[0, 0]), float(path[0, 1])
     head = [[x, y, yaw]] + ([[x, y, spins[0][1]]] if lead == 2 else [])
     return dataclasses.replace(
         plan,
@@ -517,14 +515,12 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             # first, then the scene's)
             tried: tuple[PlanResult, float] | None = None
             start, chosen = here, scene.planner
-            for start in (inner, here) if inner is not None else (here,):
-                for chosen in dict.fromkeys((planner, scene.planner)):
-                    tried = plan_clear_of(
-                        world.with_planner(chosen), start, seed, avoid, deadline=deadline, keep=keep
-                    )
-                    if tried[0].found:
-                        break
-                if tried is not None and tried[0].found:
+            starts = (inner, here) if inner is not None else (here,)
+            for start, chosen in itertools.product(starts, dict.fromkeys((planner, scene.planner))):
+                tried = plan_clear_of(
+                    world.with_planner(chosen), start, seed, avoid, deadline=deadline, keep=keep
+                )
+                if tried[0].found:
                     break
             assert tried is not None  # (one try at least)
             plan, clear = tried
@@ -533,8 +529,7 @@ def drive_robot(  # noqa: PLR0912, PLR0915 - the run's steps in order; to split
             measured = plan.path_xyz  # (edge_margin's: the plan as chosen, before the step)
             if inner is not None:
                 assert keep is not None  # (step_in ran)
-                ground = float(world.heightfield.sample(np.array(stands[:2])))
-                plan = stepped_plan(plan, (stands[0], stands[1], ground), stands[2])
+                plan = stepped_plan(world, plan, stands)
                 _log.warning(
                     "the robot stands within %.0f cm of an edge: it turns on the spot and "
                     "walks %.1f cm in a line to (%.3f, %.3f) first, and the plan starts there",
