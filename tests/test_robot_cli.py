@@ -438,10 +438,11 @@ def test_a_drifting_robot_is_held_once_its_drift_would_reach_the_stop_within_the
 
 def test_a_robot_that_makes_no_progress_is_held_and_re_planned_with_lines_and_turns(tmp_path):
     """--guard-stuck: the guard holds a robot that has made no progress along its path for that
-    share of the scene's stuck time (here 0.3: 3 s of 10 s), before the loop's own stuck stop;
+    share of the scene's stuck time (here 0.1: 1 s of 10 s), before the loop's own stuck stop;
     the command re-plans from where it stands with straight lines and turns on the spot, and
-    the second leg's log records that plan. The twin's ground is ice (friction 0.1): in PyBullet
-    the robot slid to a stop 0.12 m along the path and walked in place until stuck."""
+    the second leg's log records that plan. The twin's ground is ice (friction 0.1): the robot
+    walks in place and slides, at times sideways (in 4 of 8 runs it slid 0.15 m off its path
+    within 8 s with 3 s windows), hence the short window and the looser deviation stop."""
     from roachplan.robot import SPIN_ONLY_RADIUS, read_run
 
     log = tmp_path / "run.mcap"
@@ -449,20 +450,20 @@ def test_a_robot_that_makes_no_progress_is_held_and_re_planned_with_lines_and_tu
         proc = robot(
             ready, "--robot", str(ready["command_port"]), "-o", str(log), "--go",
             "--no-predict", "--look-ahead", "--look-ahead-draws", "2", "--look-ahead-horizon",
-            "1", "--guard", "0", "--guard-drift", "none", "--guard-stuck", "0.3",
-            "--replans", "1", "--json",
+            "1", "--guard", "0", "--guard-drift", "none", "--guard-stuck", "0.1",
+            "--max-deviation", "0.3", "--replans", "1", "--json",
         )  # fmt: skip
         out, err = proc.communicate(timeout=240)
     summary = json.loads(out)
     assert len(summary["held"]) == 1, (err, summary.get("reason"), summary.get("detail"))
     held = summary["held"][0]
     found = re.search(
-        r"made no progress along its path for ([\d.]+) s, .+ \(guard stall 3 s, before the loop's "
+        r"made no progress along its path for ([\d.]+) s, .+ \(guard stall 1 s, before the loop's "
         r"stuck stop at 10 s\)",
         held["detail"],
     )
     assert held["reason"] == "stall" and found, held
-    assert 3.0 <= float(found.group(1)) < 10.0
+    assert 1.0 <= float(found.group(1)) < 10.0
     assert "straight lines and turns on the spot: it made no progress along its path" in err
     second = read_run(tmp_path / "run-2.mcap")
     assert second.plan["turning_radius"] == SPIN_ONLY_RADIUS and second.plan["spins"]
