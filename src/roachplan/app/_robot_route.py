@@ -24,6 +24,10 @@ if TYPE_CHECKING:
     from ._robot_panel import RobotForm, RobotSession
 
 
+class RouteCancelled(PlanningError):
+    """Route from robot's plan job was cancelled (Cancel): no second plan is tried after it."""
+
+
 def held_text(stands, route: Route, waypoints: int, prediction) -> str:
     """What Route from robot says once the robot is held: where it stands (x, y [m], yaw
     [rad]), the route (how far its start was moved, its widened arcs, how far it keeps from
@@ -150,14 +154,13 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
                 app, inner or here, goal, turning_radius=radius, avoid=carried.avoid
             )
         except PlanningError as exc:
-            if inner is None or str(exc).endswith("cancelled"):  # (Cancel: no second plan)
+            if inner is None or isinstance(exc, RouteCancelled):
                 raise
             inner = None
             plan, keeps = plan_from(app, here, goal, turning_radius=radius, avoid=carried.avoid)
         if inner is not None:
             plan = stepped_plan(app.world, plan, stands)
-            app.plan_endpoints = (here, goal)  # (Drive's: the robot's start, not the step's)
-            app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
+            show_plan(app, plan, here, goal)  # (Drive's start: the robot's, not the step's)
     except (RobotError, PlanningError, ChildError) as exc:
         old = carried.drifted
         if old is None or old.plan is None:
@@ -169,8 +172,7 @@ def route_from(app: App, stands, goal, carried: Carried) -> Route:
             seed=old.plan.seed,
             turning_radius=old.plan.turning_radius,
         )
-        app.plan_endpoints = (tuple(stands), goal)
-        app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
+        show_plan(app, plan, stands, goal)
         return Route(plan=plan, here=tuple(stands), drove_on=str(exc))
     return Route(
         plan=plan,
@@ -209,6 +211,14 @@ def carried_from(before: RobotSession | None, key: tuple) -> Carried:
         else (),
         drifted=before if reason == "drift" else None,
     )
+
+
+def show_plan(app: App, plan: PlanResult, start, goal) -> None:
+    """A plan route_from made of a planned one (the walk in from an edge first, or the rest of
+    the old path) as the app's only plan, drawn black, Drive's from start (x, y [m], yaw [rad])
+    to goal."""
+    app.plan_endpoints = (tuple(start), goal)
+    app.set_plans([LabelledPlan(route=app.world.route(plan.path_xyz[:, :2]), plan=plan)])
 
 
 def plan_from(
@@ -267,7 +277,8 @@ def plan_from(
     app.next_seed += 1
     if end == "cancelled" or not found:
         why = failure(job) or ("cancelled" if end == "cancelled" else "no path found")
-        raise PlanningError(f"no plan from where the robot stands: {why}")
+        error = RouteCancelled if end == "cancelled" else PlanningError
+        raise error(f"no plan from where the robot stands: {why}")
     app.plan_endpoints = (here, goal)
     best, keeps, _ = max(found, key=lambda f: f[2])  # (the first of equals: the first found)
     app.set_plans([best])  # (black; Drive simulates it too)
